@@ -1,0 +1,130 @@
+"""The occluder's topology and its silhouette under the sun (NumPy, discrete).
+
+An ``Occluder`` holds a cleaned triangle mesh in its own frame and its edge
+table, built once. ``silhouette`` picks, for a given (concrete) pose and light
+direction, the edges where the mesh folds away from the light:
+
+- edges shared by a lit face (n . L < -tol) and a face that is not lit, and
+- boundary edges of open meshes (one face),
+
+and returns for each the data the differentiable part needs: its two vertex
+indices, the sign that makes its normal point out of the shadow volume, and
+the seed's per-edge normal N = normalize(N1 + N2) for the ``paper`` rule.
+Faces within ``tol`` of parallel to the light count as not lit; their own
+shadow is a line of zero area, so the hard shadow does not depend on the tie.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import trimesh
+
+from .meshes import clean_mesh
+
+__all__ = ["Occluder", "Silhouette", "silhouette", "posed_vertices"]
+
+PARALLEL_TOL = 1e-7   # |n . L| below this: a face seen exactly edge-on from the sun
+PARALLEL_EDGE_TOL = 1e-6  # |t x L| below this: an edge along the light projects to a point
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Occluder:
+    """A mesh ready for shadow casting (mesh frame, metres).
+
+    vertices (V, 3); faces (F, 3); face_normals (F, 3) unit; edges (E, 2)
+    sorted vertex pairs; edge_faces (E, M) face indices padded with -1;
+    watertight: every edge has exactly two faces.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    face_normals: np.ndarray
+    edges: np.ndarray
+    edge_faces: np.ndarray
+    watertight: bool
+
+    @classmethod
+    def from_trimesh(cls, mesh: trimesh.Trimesh, source: str = "mesh") -> "Occluder":
+        mesh = clean_mesh(mesh, source)
+        v = np.asarray(mesh.vertices, dtype=np.float64)
+        f = np.asarray(mesh.faces, dtype=np.int64)
+        tri = v[f]
+        normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+        face_edges = np.sort(np.stack([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]], 1).reshape(-1, 2), axis=1)
+        edges, inverse, counts = np.unique(face_edges, axis=0, return_inverse=True, return_counts=True)
+        inverse = inverse.ravel()
+        order = np.argsort(inverse, kind="stable")
+        face_of = order // 3
+        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        width = int(counts.max())
+        edge_faces = -np.ones((len(edges), width), dtype=np.int64)
+        slot = np.arange(len(order)) - np.repeat(starts, counts)
+        edge_faces[inverse[order], slot] = face_of
+        return cls(v, f, normals, edges, edge_faces, bool(np.all(counts == 2)))
+
+    @property
+    def n_faces(self) -> int:
+        return len(self.faces)
+
+
+def posed_vertices(vertices: np.ndarray, position, rotation: np.ndarray, scale: float) -> np.ndarray:
+    """NumPy twin of ``Pose.apply`` for the discrete steps."""
+    return (scale * vertices) @ np.asarray(rotation).T + np.asarray(position)
+
+
+@dataclasses.dataclass(frozen=True)
+class Silhouette:
+    """Silhouette edges for one pose and light (world frame).
+
+    vertex_ids (S, 2); outward_sign (S,) +-1 so that sign * (t x L) points out
+    of the shadow volume; paper_normal_local (S, 3) normalize(N1 + N2) in the
+    mesh frame; lit (F,) the lit-face mask used.
+    """
+
+    vertex_ids: np.ndarray
+    outward_sign: np.ndarray
+    paper_normal_local: np.ndarray
+    lit: np.ndarray
+
+
+def silhouette(occ: Occluder, world_vertices: np.ndarray, rotation: np.ndarray,
+               light: np.ndarray) -> Silhouette:
+    """Silhouette and boundary edges of the posed mesh under light direction ``light`` (3,)."""
+    light = np.asarray(light, dtype=np.float64)
+    normals_w = occ.face_normals @ np.asarray(rotation).T
+    ndotl = normals_w @ light
+    lit = ndotl < -PARALLEL_TOL
+    ef = occ.edge_faces
+    valid = ef >= 0
+    lit_e = np.where(valid, lit[np.maximum(ef, 0)], False)
+    n_valid = valid.sum(1)
+    n_lit = lit_e.sum(1)
+    is_sil = ((n_lit > 0) & (n_lit < n_valid)) | (n_valid == 1)
+    a = world_vertices[occ.edges[:, 0]]
+    b = world_vertices[occ.edges[:, 1]]
+    t = b - a
+    t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-300)
+    cvec = np.cross(t, light)
+    c = np.linalg.norm(cvec, axis=1)
+    is_sil &= c > PARALLEL_EDGE_TOL
+    idx = np.nonzero(is_sil)[0]
+    ef_s, lit_s, valid_s = ef[idx], lit_e[idx], valid[idx]
+    # The face that is "the object" beside the edge, seen from the light: a lit face, or the only one.
+    first_lit = np.argmax(lit_s, axis=1)
+    has_lit = lit_s.any(1)
+    inner_face = np.where(has_lit, ef_s[np.arange(len(idx)), first_lit], ef_s[:, 0])
+    first_unlit = np.argmax(valid_s & ~lit_s, axis=1)
+    has_unlit = (valid_s & ~lit_s).any(1)
+    other_face = np.where(has_unlit, ef_s[np.arange(len(idx)), first_unlit], inner_face)
+    centroid = world_vertices[occ.faces[inner_face]].mean(1)
+    mid = 0.5 * (a[idx] + b[idx])
+    inward = centroid - mid
+    n = cvec[idx] / c[idx, None]
+    sign = np.where(np.einsum("ij,ij->i", n, inward) > 0, -1.0, 1.0)
+    paper = occ.face_normals[inner_face] + np.where((other_face != inner_face)[:, None],
+                                                    occ.face_normals[other_face], 0.0)
+    paper /= np.maximum(np.linalg.norm(paper, axis=1, keepdims=True), 1e-12)
+    return Silhouette(occ.edges[idx], sign, paper, lit)

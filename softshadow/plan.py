@@ -1,0 +1,239 @@
+"""Plans: the discrete choices for a set of receiver points, made once in NumPy.
+
+A plan fixes, for a concrete pose and sun, which silhouette edges exist,
+which edge governs each receiver point, whether the point is in the hard
+shadow, and whether it lies in a penumbra band (where the differentiable
+formula is evaluated). ``plan_alpha`` then evaluates alpha in JAX, and is
+differentiable in k, the sun angles and the pose as long as those discrete
+choices hold (they are piecewise constant, so gradients there are exact).
+Re-plan when the sun or pose moves by more than a penumbra width.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Bool, Float, Int
+
+from .camera import GroundGrid
+from .occluder import PARALLEL_TOL, Occluder, posed_vertices, silhouette
+from .params import Pose, Sun
+from .penumbra import edge_alpha
+from .raster import ShadowRaster, project_to_ground, rasterise_shadow
+from .sun import check_sun_above_horizon
+
+__all__ = ["EdgeSet", "PointPlan", "plan_points", "plan_grid", "plan_alpha", "edge_band_widths",
+           "bucket_size"]
+
+MAX_RASTER_SIDE = 2048
+
+
+def bucket_size(n: int, minimum: int = 64) -> int:
+    """Round a count up to a power of two (>= minimum) so that jit sees few distinct shapes."""
+    return max(minimum, 1 << int(np.ceil(np.log2(max(n, 1)))))
+
+
+class EdgeSet(eqx.Module):
+    """Silhouette edges in the mesh frame, padded to a bucket size.
+
+    vertices_local (s, 2, 3) metres; outward_sign (s,); paper_normal_local (s, 3).
+    """
+
+    vertices_local: Float[Array, "s 2 3"]
+    outward_sign: Float[Array, " s"]
+    paper_normal_local: Float[Array, "s 3"]
+
+
+class PointPlan(eqx.Module):
+    """Per-point discrete choices. edge_id (n,); hard (n,) 0/1; active (n,) in a penumbra band."""
+
+    edges: EdgeSet
+    edge_id: Int[Array, " n"]
+    hard: Float[Array, " n"]
+    active: Bool[Array, " n"]
+
+
+def _concrete_geometry(occ: Occluder, pose: Pose, sun: Sun):
+    el = float(sun.elevation_deg)
+    check_sun_above_horizon(el)
+    rotation = np.asarray(pose.rotation, dtype=np.float64)
+    world = posed_vertices(occ.vertices, np.asarray(pose.position, np.float64), rotation,
+                           float(pose.scale))
+    light = np.asarray(sun.light, dtype=np.float64)
+    return world, rotation, light
+
+
+def _fill_mask(occ: Occluder, rotation: np.ndarray, light: np.ndarray, lit: np.ndarray) -> np.ndarray:
+    """Faces whose projections make the hard shadow: lit faces of a closed mesh, all of an open one."""
+    if occ.watertight:
+        return lit
+    ndotl = (occ.face_normals @ rotation.T) @ light
+    return np.abs(ndotl) > PARALLEL_TOL
+
+
+def edge_band_widths(world_a: np.ndarray, world_b: np.ndarray, outward: np.ndarray,
+                     light: np.ndarray, range_k: float) -> np.ndarray:
+    """Ground width (m) of each edge's penumbra wedge at k, the larger of its two ends (S,)."""
+    widths = np.zeros(len(world_a))
+    for p in (world_a, world_b):
+        outer = project_to_ground(p, _normalise(light + range_k * outward))
+        inner = project_to_ground(p, _normalise(light - range_k * outward))
+        widths = np.maximum(widths, np.linalg.norm(outer - inner, axis=-1))
+    return widths
+
+
+def _normalise(v):
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def _edge_data(occ, world, rotation, light, rule):
+    sil = silhouette(occ, world, rotation, light)
+    ids = sil.vertex_ids
+    a, b = world[ids[:, 0]], world[ids[:, 1]]
+    t = _normalise(b - a) if len(ids) else np.zeros((0, 3))
+    n = sil.outward_sign[:, None] * _normalise(np.cross(t, light)) if len(ids) else np.zeros((0, 3))
+    direction = n if rule == "edge" else sil.paper_normal_local @ rotation.T
+    return sil, a, b, direction
+
+
+def _pack_edges(occ: Occluder, sil) -> EdgeSet:
+    s = len(sil.vertex_ids)
+    size = bucket_size(s, 16)
+    verts = np.zeros((size, 2, 3))
+    verts[:, 1, 0] = 1.0  # padding edges are unit segments, never referenced
+    sign = np.ones(size)
+    paper = np.zeros((size, 3))
+    paper[:, 2] = 1.0
+    if s:
+        verts[:s] = occ.vertices[sil.vertex_ids]
+        sign[:s] = sil.outward_sign
+        paper[:s] = sil.paper_normal_local
+    return EdgeSet(jnp.asarray(verts), jnp.asarray(sign), jnp.asarray(paper))
+
+
+def _raster_for(occ, world, light, sil, fill, region_lo, region_hi, pixel_m, pad_m):
+    """Raster over [lo, hi] (world xy) padded by pad_m, at pixel_m, intersected with the shadow's reach."""
+    ground = project_to_ground(world, light)
+    reach_lo = np.minimum(ground.min(0), world[:, :2].min(0)) - pad_m
+    reach_hi = np.maximum(ground.max(0), world[:, :2].max(0)) + pad_m
+    lo = np.maximum(region_lo - pad_m, reach_lo)
+    hi = np.minimum(region_hi + pad_m, reach_hi)
+    if np.any(hi <= lo):
+        return None
+    size = hi - lo
+    pixel_m = max(pixel_m, float(size.max()) / MAX_RASTER_SIDE)
+    width = int(np.ceil(size[0] / pixel_m)) + 1
+    height = int(np.ceil(size[1] / pixel_m)) + 1
+    grid = GroundGrid(pixel_m, (float(lo[0]), float(hi[1])), width, height)
+    return rasterise_shadow(grid, world, occ.faces, fill, sil.vertex_ids, light)
+
+
+def plan_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k_max: float,
+                rule: str = "edge", pixel_m: float | None = None,
+                margin_px: float = 2.5, pad_to: int | None = None) -> PointPlan:
+    """Discrete choices for receiver points (N, 3) on the ground plane z = 0.
+
+    range_k_max: the largest k the plan must hold for (sets the band width).
+    pixel_m: raster resolution (default: the points' extent / 1024).
+    pad_to: pad the point arrays to this length (default: a power-of-two bucket).
+    """
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    world, rotation, light = _concrete_geometry(occ, pose, sun)
+    sil, a, b, direction = _edge_data(occ, world, rotation, light, rule)
+    n = len(points)
+    size = pad_to or bucket_size(n)
+    edge_id = np.zeros(size, np.int32)
+    hard = np.zeros(size)
+    active = np.zeros(size, bool)
+    if n and len(sil.vertex_ids):
+        widths = edge_band_widths(a, b, direction, light, range_k_max)
+        lo, hi = points[:, :2].min(0), points[:, :2].max(0)
+        if pixel_m is None:
+            pixel_m = max(float((hi - lo).max()) / 1024, 1e-4)
+        pad_m = 1.5 * float(widths.max()) + (margin_px + 2) * pixel_m
+        fill = _fill_mask(occ, rotation, light, sil.lit)
+        raster = _raster_for(occ, world, light, sil, fill, lo, hi, pixel_m, pad_m)
+        if raster is not None:
+            h, label, dist = raster.lookup(points)
+            ok = label >= 0
+            band = 1.5 * widths[np.maximum(label, 0)] + margin_px * raster.grid.pixel_m
+            edge_id[:n] = np.maximum(label, 0)
+            hard[:n] = h
+            active[:n] = ok & (dist <= band)
+    return PointPlan(_pack_edges(occ, sil), jnp.asarray(edge_id), jnp.asarray(hard),
+                     jnp.asarray(active))
+
+
+@dataclasses.dataclass(frozen=True)
+class GridPlan:
+    """Discrete choices on a whole ground map: the hard shadow and the band pixels to evaluate.
+
+    hard (H, W) float; band_index (m,) flat pixel indices padded with H*W;
+    band_points (m, 3); plan: the PointPlan of the band pixels; raster: the
+    padded ShadowRaster (for drawing silhouettes and debugging).
+    """
+
+    grid: GroundGrid
+    hard: np.ndarray
+    band_index: np.ndarray
+    band_points: np.ndarray
+    plan: PointPlan
+    raster: ShadowRaster | None
+    n_band: int
+
+
+def plan_grid(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, range_k_max: float,
+              rule: str = "edge", margin_px: float = 2.5) -> GridPlan:
+    """Discrete choices for every pixel of a ground map; only band pixels go to JAX."""
+    world, rotation, light = _concrete_geometry(occ, pose, sun)
+    sil, a, b, direction = _edge_data(occ, world, rotation, light, rule)
+    h, w = grid.height, grid.width
+    hard = np.zeros((h, w))
+    band_idx = np.zeros(0, np.int64)
+    raster = None
+    edge_label = np.zeros(0, np.int32)
+    if len(sil.vertex_ids):
+        widths = edge_band_widths(a, b, direction, light, range_k_max)
+        pad = int(min(np.ceil(1.5 * widths.max() / grid.pixel_m) + margin_px + 3, 512))
+        padded = GroundGrid(grid.pixel_m, (grid.origin_m[0] - pad * grid.pixel_m,
+                                           grid.origin_m[1] + pad * grid.pixel_m), w + 2 * pad, h + 2 * pad)
+        fill = _fill_mask(occ, rotation, light, sil.lit)
+        raster = rasterise_shadow(padded, world, occ.faces, fill, sil.vertex_ids, light)
+        crop = (slice(pad, pad + h), slice(pad, pad + w))
+        hard = raster.hard[crop].astype(np.float64)
+        label = raster.edge_label[crop]
+        dist = raster.boundary_dist_px[crop]
+        band = (label >= 0) & (dist <= 1.5 * widths[np.maximum(label, 0)] / grid.pixel_m + margin_px)
+        band_idx = np.flatnonzero(band)
+        edge_label = label.ravel()[band_idx]
+    m = len(band_idx)
+    size = bucket_size(m, 256)
+    index = np.full(size, h * w, np.int64)
+    index[:m] = band_idx
+    rows, cols = np.divmod(band_idx, w)
+    pts = np.zeros((size, 3))
+    pts[:m] = grid.to_world(cols, rows)
+    edge_id = np.zeros(size, np.int32)
+    edge_id[:m] = edge_label
+    active = np.zeros(size, bool)
+    active[:m] = True
+    plan = PointPlan(_pack_edges(occ, sil), jnp.asarray(edge_id), jnp.zeros(size), jnp.asarray(active))
+    return GridPlan(grid, hard, index, pts, plan, raster, m)
+
+
+def plan_alpha(points: Float[Array, "n 3"], plan: PointPlan, pose: Pose, sun: Sun, range_k,
+               rule: str = "edge", profile: str = "linear") -> Float[Array, " n"]:
+    """Alpha (n,) at the plan's points: the penumbra formula in bands, the hard shadow elsewhere."""
+    edges = plan.edges
+    ev = pose.apply(edges.vertices_local)
+    paper = pose.apply_direction(edges.paper_normal_local) if rule == "paper" else None
+    alpha = edge_alpha(points, plan.edge_id, ev, edges.outward_sign, sun.light, range_k, rule,
+                       profile, paper)
+    return jnp.where(plan.active, alpha, plan.hard)
+
+
+plan_alpha_jit = jax.jit(plan_alpha, static_argnames=("rule", "profile"))
