@@ -35,7 +35,8 @@ class Occluder:
 
     vertices (V, 3); faces (F, 3); face_normals (F, 3) unit; edges (E, 2)
     sorted vertex pairs; edge_faces (E, M) face indices padded with -1;
-    watertight: every edge has exactly two faces.
+    watertight: closed and consistently oriented (every edge has two faces running
+    along it in opposite directions), so the lit faces alone make the hard shadow.
     """
 
     vertices: np.ndarray
@@ -43,6 +44,8 @@ class Occluder:
     face_normals: np.ndarray
     edges: np.ndarray
     edge_faces: np.ndarray
+    face_edge_index: np.ndarray
+    face_edge_dir: np.ndarray
     watertight: bool
 
     @classmethod
@@ -53,7 +56,9 @@ class Occluder:
         tri = v[f]
         normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
         normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-        face_edges = np.sort(np.stack([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]], 1).reshape(-1, 2), axis=1)
+        directed = np.stack([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]], 1).reshape(-1, 2)
+        face_edges = np.sort(directed, axis=1)
+        face_dir = np.where(directed[:, 0] == face_edges[:, 0], 1, -1).reshape(-1, 3)
         edges, inverse, counts = np.unique(face_edges, axis=0, return_inverse=True, return_counts=True)
         inverse = inverse.ravel()
         order = np.argsort(inverse, kind="stable")
@@ -63,7 +68,9 @@ class Occluder:
         edge_faces = -np.ones((len(edges), width), dtype=np.int64)
         slot = np.arange(len(order)) - np.repeat(starts, counts)
         edge_faces[inverse[order], slot] = face_of
-        return cls(v, f, normals, edges, edge_faces, bool(np.all(counts == 2)))
+        net = np.bincount(inverse, weights=face_dir.ravel(), minlength=len(edges))
+        closed_oriented = bool(np.all(counts == 2) and not np.any(net))
+        return cls(v, f, normals, edges, edge_faces, inverse.reshape(-1, 3), face_dir, closed_oriented)
 
     @property
     def n_faces(self) -> int:
@@ -81,13 +88,17 @@ class Silhouette:
 
     vertex_ids (S, 2); outward_sign (S,) +-1 so that sign * (t x L) points out
     of the shadow volume; paper_normal_local (S, 3) normalize(N1 + N2) in the
-    mesh frame; lit (F,) the lit-face mask used.
+    mesh frame; lit (F,) the lit-face mask used; fill_edges: for each layer of
+    faces whose union is the hard shadow (the lit faces; for open meshes also the
+    faces turned away), its boundary as (edges (B, 2) in sorted vertex order,
+    winding weights (B,)): the net count of faces running along each edge.
     """
 
     vertex_ids: np.ndarray
     outward_sign: np.ndarray
     paper_normal_local: np.ndarray
     lit: np.ndarray
+    fill_edges: tuple[tuple[np.ndarray, np.ndarray], ...] = ()
 
 
 def silhouette(occ: Occluder, world_vertices: np.ndarray, rotation: np.ndarray,
@@ -127,4 +138,11 @@ def silhouette(occ: Occluder, world_vertices: np.ndarray, rotation: np.ndarray,
     paper = occ.face_normals[inner_face] + np.where((other_face != inner_face)[:, None],
                                                     occ.face_normals[other_face], 0.0)
     paper /= np.maximum(np.linalg.norm(paper, axis=1, keepdims=True), 1e-12)
-    return Silhouette(occ.edges[idx], sign, paper, lit)
+    layers = [lit] if occ.watertight else [lit, (~lit) & (np.abs(ndotl) > PARALLEL_TOL)]
+    fill = []
+    for faces in layers:
+        net = np.bincount(occ.face_edge_index[faces].ravel(), weights=occ.face_edge_dir[faces].ravel(),
+                          minlength=len(occ.edges))
+        keep = np.nonzero(net)[0]
+        fill.append((occ.edges[keep], net[keep]))
+    return Silhouette(occ.edges[idx], sign, paper, lit, tuple(fill))

@@ -85,11 +85,17 @@ def profile_alpha(u, profile: str = "linear"):
 
 def penumbra_coordinate(points: Float[Array, "n 3"], a: Float[Array, "n 3"], b: Float[Array, "n 3"],
                         outward_sign: Float[Array, " n"], light: Float[Array, "3"], range_k,
-                        rule: str = "edge", paper_normal: Float[Array, "n 3"] | None = None):
-    """Normalised penumbra coordinate u (n,) of each point against its own edge (a, b).
+                        inside: Float[Array, " n"], rule: str = "edge",
+                        paper_normal: Float[Array, "n 3"] | None = None):
+    """Normalised penumbra coordinate u (n,) of each point against its own edge segment (a, b).
 
     u = +1 on the expanded silhouette, -1 on the contracted one, |u| > 1 outside
-    the penumbra (saturated to +-1e6 upstream of the edge or for k = 0).
+    the penumbra. Its size comes from the edge's plane where the point, seen
+    along the light, lies beside the segment (the CONVENTIONS definition), and
+    from the angular distance to the end vertex beyond the ends (so convex
+    corners are rounded); its sign comes from ``inside`` (1 in the hard shadow,
+    0 outside), so a concave corner never lights up the umbra and k = 0 gives
+    exactly the hard shadow.
     """
     t = b - a
     t = t / jnp.maximum(_norm(t), 1e-12)[:, None]
@@ -116,22 +122,47 @@ def penumbra_coordinate(points: Float[Array, "n 3"], a: Float[Array, "n 3"], b: 
         t_in = k * nn / jnp.maximum(c - k * nm, 1e-9)
     else:
         raise ValueError(f"unknown expansion rule {rule!r}; choose one of {RULES}")
-    upstream = den <= 1e-9 * scale
-    tan_x = _safe_div(num, den, 1e-9 * scale)
+    # Angular distance (as a tangent, in units of 1/c) from the sun centre to the edge: to the
+    # edge's plane where the point lies beside the segment seen along L, else to the end vertex.
+    tan_plane = jnp.abs(_safe_div(num, den, 1e-9 * scale))
+    seg = b - a
+    seg_perp = seg - jnp.sum(seg * light, -1, keepdims=True) * light
+    w_perp = w - jnp.sum(w * light, -1, keepdims=True) * light
+    along = _safe_div(jnp.sum(w_perp * seg_perp, -1), jnp.sum(seg_perp * seg_perp, -1), 1e-24)
+    beyond = (along < 0.0) | (along > 1.0)
+    end_vec = jnp.where((along > 1.0)[:, None], points - b, w)
+    end_perp = end_vec - jnp.sum(end_vec * light, -1, keepdims=True) * light
+    end_depth = jnp.sum(end_vec * light, -1)
+    end_scale = _norm(end_vec) + 1e-12
+    tan_end = _safe_div(_norm(end_perp), end_depth * c, 1e-9 * end_scale)
+    depth = jnp.where(beyond, end_depth, den)
+    upstream = depth <= 1e-9 * jnp.where(beyond, end_scale, scale)
+    magnitude = jnp.where(upstream, 1e6, jnp.minimum(jnp.where(beyond, tan_end, tan_plane), 1e6))
+    # The side comes from the hard shadow, so k = 0 gives exactly the hard shadow.
+    tan_x = jnp.where(inside > 0.5, -magnitude, magnitude)
     u = (2.0 * tan_x - t_out + t_in) / (t_out + t_in)
-    saturated = jnp.where(num > 0, 1e6, jnp.where(num < 0, -1e6, 0.0))
-    return jnp.where(upstream, saturated, jnp.clip(u, -1e6, 1e6))
+    return jnp.clip(u, -1e6, 1e6)
 
 
-def edge_alpha(points, edge_ids: Int[Array, " n"], edge_vertices_world: Float[Array, "s 2 3"],
-               outward_sign: Float[Array, " s"], light, range_k, rule: str = "edge",
-               profile: str = "linear", paper_normal_world: Float[Array, "s 3"] | None = None):
-    """Alpha (n,) at points (n, 3), each against silhouette edge ``edge_ids[i]``."""
-    ev = edge_vertices_world[edge_ids]
-    pn = None if paper_normal_world is None else paper_normal_world[edge_ids]
-    u = penumbra_coordinate(points, ev[:, 0], ev[:, 1], outward_sign[edge_ids], light, range_k,
-                            rule, pn)
-    return profile_alpha(u, profile)
+def edge_alpha(points, edge_ids: Int[Array, "n K"], edge_vertices_world: Float[Array, "s 2 3"],
+               outward_sign: Float[Array, " s"], light, range_k, inside: Float[Array, " n"],
+               rule: str = "edge", profile: str = "linear",
+               paper_normal_world: Float[Array, "s 3"] | None = None):
+    """Alpha (n,) at points (n, 3) against their candidate edges ``edge_ids`` (n, K).
+
+    Each point takes the candidate nearest in penumbra units (smallest |u|): the
+    silhouette that the sun disk sees first. The choice is piecewise constant,
+    so gradients flow through the chosen edge exactly.
+    """
+    n_pts, n_cand = edge_ids.shape
+    ev = edge_vertices_world[edge_ids.reshape(-1)]
+    pn = None if paper_normal_world is None else paper_normal_world[edge_ids.reshape(-1)]
+    rep = lambda x: jnp.repeat(x, n_cand, axis=0)
+    u = penumbra_coordinate(rep(points), ev[:, 0], ev[:, 1], outward_sign[edge_ids.reshape(-1)],
+                            light, range_k, rep(inside), rule, pn).reshape(n_pts, n_cand)
+    best = jnp.argmin(jnp.abs(u), axis=1)
+    u_best = jnp.take_along_axis(u, best[:, None], axis=1)[:, 0]
+    return profile_alpha(u_best, profile)
 
 
 def shade(alpha, rho):

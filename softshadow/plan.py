@@ -20,16 +20,18 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from .camera import GroundGrid
-from .occluder import PARALLEL_TOL, Occluder, posed_vertices, silhouette
+from .occluder import Occluder, posed_vertices, silhouette
 from .params import Pose, Sun
 from .penumbra import edge_alpha
-from .raster import ShadowRaster, project_to_ground, rasterise_shadow
+from .raster import (ShadowRaster, candidate_labels, project_to_ground, rasterise_shadow,
+                     winding_at_points)
 from .sun import check_sun_above_horizon
 
 __all__ = ["EdgeSet", "PointPlan", "plan_points", "plan_grid", "plan_alpha", "edge_band_widths",
            "bucket_size"]
 
 MAX_RASTER_SIDE = 2048
+N_CANDIDATES = 4
 
 
 def bucket_size(n: int, minimum: int = 64) -> int:
@@ -49,10 +51,14 @@ class EdgeSet(eqx.Module):
 
 
 class PointPlan(eqx.Module):
-    """Per-point discrete choices. edge_id (n,); hard (n,) 0/1; active (n,) in a penumbra band."""
+    """Per-point discrete choices.
+
+    edge_id (n, K) candidate governing edges; hard (n,) 0/1 in the hard shadow;
+    active (n,) in a penumbra band (elsewhere alpha is ``hard``).
+    """
 
     edges: EdgeSet
-    edge_id: Int[Array, " n"]
+    edge_id: Int[Array, "n K"]
     hard: Float[Array, " n"]
     active: Bool[Array, " n"]
 
@@ -65,14 +71,6 @@ def _concrete_geometry(occ: Occluder, pose: Pose, sun: Sun):
                            float(pose.scale))
     light = np.asarray(sun.light, dtype=np.float64)
     return world, rotation, light
-
-
-def _fill_mask(occ: Occluder, rotation: np.ndarray, light: np.ndarray, lit: np.ndarray) -> np.ndarray:
-    """Faces whose projections make the hard shadow: lit faces of a closed mesh, all of an open one."""
-    if occ.watertight:
-        return lit
-    ndotl = (occ.face_normals @ rotation.T) @ light
-    return np.abs(ndotl) > PARALLEL_TOL
 
 
 def edge_band_widths(world_a: np.ndarray, world_b: np.ndarray, outward: np.ndarray,
@@ -115,7 +113,16 @@ def _pack_edges(occ: Occluder, sil) -> EdgeSet:
     return EdgeSet(jnp.asarray(verts), jnp.asarray(sign), jnp.asarray(paper))
 
 
-def _raster_for(occ, world, light, sil, fill, region_lo, region_hi, pixel_m, pad_m):
+def _exact_hard(world, light, sil, points) -> np.ndarray:
+    """Hard shadow (N,) 0/1 at points by winding number against the projected fill edges."""
+    ground = project_to_ground(world, light)
+    inside = np.zeros(len(points), bool)
+    for edges, weights in sil.fill_edges:
+        inside |= winding_at_points(points[:, :2], ground[edges[:, 0]], ground[edges[:, 1]], weights)
+    return inside.astype(np.float64)
+
+
+def _raster_for(world, light, sil, region_lo, region_hi, pixel_m, pad_m):
     """Raster over [lo, hi] (world xy) padded by pad_m, at pixel_m, intersected with the shadow's reach."""
     ground = project_to_ground(world, light)
     reach_lo = np.minimum(ground.min(0), world[:, :2].min(0)) - pad_m
@@ -129,7 +136,7 @@ def _raster_for(occ, world, light, sil, fill, region_lo, region_hi, pixel_m, pad
     width = int(np.ceil(size[0] / pixel_m)) + 1
     height = int(np.ceil(size[1] / pixel_m)) + 1
     grid = GroundGrid(pixel_m, (float(lo[0]), float(hi[1])), width, height)
-    return rasterise_shadow(grid, world, occ.faces, fill, sil.vertex_ids, light)
+    return rasterise_shadow(grid, world, light, sil)
 
 
 def plan_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k_max: float,
@@ -146,7 +153,7 @@ def plan_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k
     sil, a, b, direction = _edge_data(occ, world, rotation, light, rule)
     n = len(points)
     size = pad_to or bucket_size(n)
-    edge_id = np.zeros(size, np.int32)
+    edge_id = np.zeros((size, N_CANDIDATES), np.int32)
     hard = np.zeros(size)
     active = np.zeros(size, bool)
     if n and len(sil.vertex_ids):
@@ -155,14 +162,20 @@ def plan_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k
         if pixel_m is None:
             pixel_m = max(float((hi - lo).max()) / 1024, 1e-4)
         pad_m = 1.5 * float(widths.max()) + (margin_px + 2) * pixel_m
-        fill = _fill_mask(occ, rotation, light, sil.lit)
-        raster = _raster_for(occ, world, light, sil, fill, lo, hi, pixel_m, pad_m)
+        raster = _raster_for(world, light, sil, lo, hi, pixel_m, pad_m)
         if raster is not None:
             h, label, dist = raster.lookup(points)
             ok = label >= 0
             band = 1.5 * widths[np.maximum(label, 0)] + margin_px * raster.grid.pixel_m
-            edge_id[:n] = np.maximum(label, 0)
+            cr = np.clip(np.rint(raster.grid.to_pixel(points)).astype(np.int64), 0,
+                         [raster.grid.width - 1, raster.grid.height - 1])
+            edge_id[:n] = np.maximum(candidate_labels(raster.edge_label, cr[:, 1], cr[:, 0],
+                                                      max_candidates=N_CANDIDATES), 0)
             hard[:n] = h
+            # Near the boundary a raster pixel is too coarse for the side: test exactly.
+            near = np.nonzero(dist <= 2.0 * raster.grid.pixel_m)[0]
+            if len(near):
+                hard[near] = _exact_hard(world, light, sil, points[near])
             active[:n] = ok & (dist <= band)
     return PointPlan(_pack_edges(occ, sil), jnp.asarray(edge_id), jnp.asarray(hard),
                      jnp.asarray(active))
@@ -201,15 +214,16 @@ def plan_grid(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, range_k_max
         pad = int(min(np.ceil(1.5 * widths.max() / grid.pixel_m) + margin_px + 3, 512))
         padded = GroundGrid(grid.pixel_m, (grid.origin_m[0] - pad * grid.pixel_m,
                                            grid.origin_m[1] + pad * grid.pixel_m), w + 2 * pad, h + 2 * pad)
-        fill = _fill_mask(occ, rotation, light, sil.lit)
-        raster = rasterise_shadow(padded, world, occ.faces, fill, sil.vertex_ids, light)
+        raster = rasterise_shadow(padded, world, light, sil)
         crop = (slice(pad, pad + h), slice(pad, pad + w))
         hard = raster.hard[crop].astype(np.float64)
         label = raster.edge_label[crop]
         dist = raster.boundary_dist_px[crop]
         band = (label >= 0) & (dist <= 1.5 * widths[np.maximum(label, 0)] / grid.pixel_m + margin_px)
         band_idx = np.flatnonzero(band)
-        edge_label = label.ravel()[band_idx]
+        rows_b, cols_b = np.divmod(band_idx, w)
+        edge_label = candidate_labels(raster.edge_label, rows_b + pad, cols_b + pad,
+                                      max_candidates=N_CANDIDATES)
     m = len(band_idx)
     size = bucket_size(m, 256)
     index = np.full(size, h * w, np.int64)
@@ -217,11 +231,14 @@ def plan_grid(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, range_k_max
     rows, cols = np.divmod(band_idx, w)
     pts = np.zeros((size, 3))
     pts[:m] = grid.to_world(cols, rows)
-    edge_id = np.zeros(size, np.int32)
-    edge_id[:m] = edge_label
+    edge_id = np.zeros((size, N_CANDIDATES), np.int32)
+    edge_id[:m] = np.maximum(edge_label, 0) if m else 0
     active = np.zeros(size, bool)
     active[:m] = True
-    plan = PointPlan(_pack_edges(occ, sil), jnp.asarray(edge_id), jnp.zeros(size), jnp.asarray(active))
+    hard_band = np.zeros(size)
+    hard_band[:m] = hard.ravel()[band_idx]
+    plan = PointPlan(_pack_edges(occ, sil), jnp.asarray(edge_id), jnp.asarray(hard_band),
+                     jnp.asarray(active))
     return GridPlan(grid, hard, index, pts, plan, raster, m)
 
 
@@ -231,8 +248,8 @@ def plan_alpha(points: Float[Array, "n 3"], plan: PointPlan, pose: Pose, sun: Su
     edges = plan.edges
     ev = pose.apply(edges.vertices_local)
     paper = pose.apply_direction(edges.paper_normal_local) if rule == "paper" else None
-    alpha = edge_alpha(points, plan.edge_id, ev, edges.outward_sign, sun.light, range_k, rule,
-                       profile, paper)
+    alpha = edge_alpha(points, plan.edge_id, ev, edges.outward_sign, sun.light, range_k,
+                       plan.hard, rule, profile, paper)
     return jnp.where(plan.active, alpha, plan.hard)
 
 
