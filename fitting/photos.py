@@ -232,8 +232,18 @@ def _read_tiff(path: Path) -> np.ndarray:
     return arr
 
 
+def _libraw_message(exc: Exception) -> str:
+    arg = exc.args[0] if exc.args else ""
+    text = arg.decode("utf-8", "replace") if isinstance(arg, bytes) else str(arg)
+    return text or type(exc).__name__
+
+
 def _read_raw(path: Path, half_size: bool) -> np.ndarray:
     import rawpy
+    with open(path, "rb") as fh:
+        head = fh.read(512)
+    if _looks_like_text(head):
+        raise PhotoError(path, "not an image (the file holds text)")
     try:
         with rawpy.imread(str(path)) as raw:
             return raw.postprocess(gamma=(1, 1), no_auto_bright=True, use_camera_wb=True,
@@ -241,9 +251,9 @@ def _read_raw(path: Path, half_size: bool) -> np.ndarray:
     except rawpy.LibRawFileUnsupportedError as exc:
         raise PhotoError(path, "not a RAW image LibRaw can read") from exc
     except (rawpy.LibRawIOError, rawpy.LibRawDataError) as exc:
-        raise PhotoError(path, f"truncated or corrupt RAW ({exc})") from exc
+        raise PhotoError(path, f"truncated or corrupt RAW ({_libraw_message(exc)})") from exc
     except rawpy.LibRawError as exc:
-        raise PhotoError(path, f"cannot decode RAW ({type(exc).__name__}: {exc})") from exc
+        raise PhotoError(path, f"cannot decode RAW ({type(exc).__name__}: {_libraw_message(exc)})") from exc
 
 
 def _half(x: np.ndarray) -> np.ndarray:
