@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import datetime as _dt
+import math
 from typing import Mapping
 
 from softshadow.scene_io import SceneSpec, parse_time
@@ -60,7 +61,7 @@ def time_of_day_seconds(when: _dt.datetime) -> float:
 
 
 def _hhmm(seconds: float) -> str:
-    minutes = int(round(seconds / 60.0)) % (24 * 60)
+    minutes = int(math.floor(seconds / 60.0 + 0.5)) % (24 * 60)  # nearest minute, halves up
     return f"{minutes // 60:02d}:{minutes % 60:02d}"
 
 
