@@ -19,9 +19,8 @@ from fitting.exif import (FULL_FRAME_DIAGONAL_MM, intrinsics_from_exif, photo_ti
 from fitting.photos import (IMAGE_EXTENSIONS, RAW_EXTENSIONS, PhotoError, apply_orientation,
                             linear_to_srgb, list_photos, read_photo, srgb_to_linear)
 
+# The project's shared real data (../shared/data next to the repository); absent in CI.
 RAW_DIR = Path(__file__).resolve().parents[2] / "shared" / "data" / "raw"
-if not RAW_DIR.is_dir():
-    RAW_DIR = Path("/work/shared/data/raw")
 RAW_FILES = ["RAW_KODAK_DC50.KDC", "QT150_27.QTK"]
 
 
