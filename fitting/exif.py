@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import re
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -116,7 +117,9 @@ def read_exif(path) -> dict:
     path = Path(path)
     for reader in (_from_piexif, _from_pillow):
         try:
-            tags = reader(path)
+            with warnings.catch_warnings():  # Pillow warns on damaged EXIF; damage is not fatal here
+                warnings.simplefilter("ignore")
+                tags = reader(path)
         except Exception:  # not an EXIF container for this reader, or damaged
             continue
         if tags:

@@ -180,6 +180,8 @@ def _read_pillow(path: Path, data: bytes, kind: str) -> np.ndarray:
             return np.asarray(im)
     except PhotoError:
         raise
+    except Image.UnidentifiedImageError as exc:
+        raise PhotoError(path, f"corrupt {label} (no decodable image data)") from exc
     except OSError as exc:
         if "truncated" in str(exc).lower():
             raise PhotoError(path, f"truncated {label}") from exc
@@ -209,10 +211,14 @@ def _read_tiff(path: Path) -> np.ndarray:
     import tifffile
     try:
         with tifffile.TiffFile(path) as tif:
+            if len(tif.pages) == 0:
+                raise PhotoError(path, "corrupt TIFF (no image in the file)")
             page = tif.pages[0]
             arr = page.asarray()
             axes = page.axes
             photometric = int(page.photometric)
+    except PhotoError:
+        raise
     except Exception as exc:
         msg = str(exc)
         if "failed to read" in msg or "not enough data" in msg.lower() or isinstance(exc, EOFError):
@@ -291,6 +297,8 @@ def read_photo(path, half_size: bool = False, assume_16bit: str = "linear") -> P
         if kind is None:
             raise PhotoError(path, "not an image (the file holds text)" if _looks_like_text(data[:512])
                              else "not an image (content is not JPEG, PNG or TIFF)")
+        if kind == "png" and data[12:16] != b"IHDR":
+            raise PhotoError(path, "corrupt PNG (no IHDR header)")
         if kind == "tiff":
             codes = _read_tiff(path)
         elif kind == "png" and _png_bit_depth(data) == 16:

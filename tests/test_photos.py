@@ -230,6 +230,20 @@ def test_text_renamed_jpg(tmp_path):
         read_photo(tmp_path / "notes.nef")
 
 
+def test_garbage_behind_image_signatures(tmp_path):
+    junk = bytes(range(256)) * 8
+    (tmp_path / "g.jpg").write_bytes(b"\xff\xd8\xff\xe0" + junk)
+    (tmp_path / "g.png").write_bytes(b"\x89PNG\r\n\x1a\n" + junk)
+    (tmp_path / "g.tif").write_bytes(b"II*\x00" + junk)
+    expected = {"g.jpg": "corrupt JPEG (no decodable image data)",
+                "g.png": "corrupt PNG (no IHDR header)",
+                "g.tif": "corrupt TIFF (no image in the file)"}
+    for name, reason in expected.items():
+        with pytest.raises(PhotoError) as info:
+            read_photo(tmp_path / name)
+        assert info.value.reason == reason and str(info.value) == f"{name}: {reason}"
+
+
 def test_empty_missing_and_unsupported(tmp_path):
     (tmp_path / "empty.jpg").write_bytes(b"")
     with pytest.raises(PhotoError, match=r"^empty\.jpg: empty file \(0 bytes\)$"):
