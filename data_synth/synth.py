@@ -1,0 +1,276 @@
+"""``synthesize``: render a preset into a photo folder (images, scene.toml, truth.json).
+
+Folder format per CONVENTIONS ("Photo folders", "scene.toml",
+"softshadow synth"). truth.json holds, per group, the physical truth of the
+light (range_k = tan(sun radius), rho = E_sky / (E_sun_h + E_sky) on open
+ground), the group's sun, and its photos; plus per-photo details (exact time
+and sun, camera, exposure, sensor) and the files written.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime as _dt
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from softshadow.camera import GroundGrid, PinholeCamera
+from softshadow.meshes import builtin_mesh
+from softshadow.params import brightness_to_paper, rotation_matrix_xyz
+from softshadow.scene_io import CameraSpec, ObjectSpec, PhotoSpec, SceneSpec, SiteSpec, dump_scene
+
+from .camera_pipeline import camera_pipeline, fit_handheld_camera, topdown_grid
+from .image_io import EXTENSIONS, FORMATS, PhotoMetadata, write_corrupt_jpeg, write_photo
+from .presets import PresetPlan, PhotoPlan, build_preset
+from .receivers import PlaneReceiver, bank_terrain
+from .renderers import RENDERERS, RenderQuality, SynthScene, make_renderer
+from .textures import GroundAppearance, procedural_texture
+from .tracing import pinhole_rays, topdown_rays
+
+__all__ = ["synthesize", "posed_mesh", "OutputExistsError"]
+
+
+class OutputExistsError(FileExistsError):
+    """The output folder is not empty and overwriting was not allowed."""
+
+
+def posed_mesh(name: str, position, rotation_deg, scale: float) -> trimesh.Trimesh:
+    """A built-in mesh placed in the world as softshadow.params.Pose does:
+    x_world = R(rotation_deg) (scale x_mesh) + position."""
+    mesh = builtin_mesh(name)
+    R = np.asarray(rotation_matrix_xyz(np.asarray(rotation_deg, dtype=np.float64)), dtype=np.float64)
+    v = (float(scale) * np.asarray(mesh.vertices)) @ R.T + np.asarray(position, dtype=np.float64)
+    return trimesh.Trimesh(v, np.asarray(mesh.faces), process=False)
+
+
+def _prepare_out_dir(out_dir: Path, force: bool) -> None:
+    """Refuse a non-empty folder unless forced; when forced, remove only what a previous
+    synthesis wrote there (listed in its truth.json), never anything else."""
+    if out_dir.exists() and not out_dir.is_dir():
+        raise OutputExistsError(f"{out_dir} exists and is not a folder")
+    if out_dir.exists() and any(out_dir.iterdir()):
+        if not force:
+            raise OutputExistsError(f"{out_dir} is not empty; use --force to write into it")
+        truth = out_dir / "truth.json"
+        if truth.exists():
+            try:
+                listed = json.loads(truth.read_text()).get("files", [])
+            except (OSError, ValueError):
+                listed = []
+            for name in listed:
+                p = out_dir / Path(name).name
+                if p.is_file():
+                    p.unlink()
+    out_dir.mkdir(parents=True, exist_ok=True)
+
+
+def _camera(photo: PhotoPlan, size) -> tuple[PinholeCamera | GroundGrid, CameraSpec]:
+    w, h = size
+    v = photo.view
+    if v.kind == "topdown":
+        keys = photo.key_points[:, :2]
+        lo, hi = keys.min(0), keys.max(0)
+        centre = (lo + hi) / 2
+        if v.topdown_extent_m is not None:
+            pixel_m = v.topdown_extent_m / w
+        else:
+            ext = (hi - lo) * (1 + 2 * v.margin)
+            pixel_m = max(ext[0] / w, ext[1] / h)
+        grid = topdown_grid(centre, w, h, pixel_m)
+        return grid, CameraSpec(kind="topdown", pixel_m=grid.pixel_m, origin_m=grid.origin_m)
+    cam = fit_handheld_camera(photo.key_points, v.bearing_deg, v.eye_height_m, w, h, v.fov_x_deg, v.margin,
+                              v.roll_deg, v.aim_jitter_m, v.min_distance_m)
+    return cam, CameraSpec(kind="explicit", K=cam.K.tolist(), R=cam.R.tolist(), t=cam.t.tolist())
+
+
+def _penumbra_px(photo: PhotoPlan, mesh: trimesh.Trimesh, camera) -> float:
+    """Widest geometric penumbra of the object on the ground (2 d tan r / sin(el), d its
+    top's distance along the light) over the ground size of a pixel near the base: a
+    rough figure for 'is the penumbra resolved' (recorded in truth.json)."""
+    top = float(mesh.bounds[1, 2])
+    el = math.radians(photo.light.elevation_deg)
+    width_m = 2 * top / math.sin(el) * math.tan(photo.light.radius_rad) / math.sin(el)
+    if isinstance(camera, GroundGrid):
+        return width_m / camera.pixel_m
+    depth = float(np.linalg.norm(camera.centre - np.array([0.0, 0.0, 0.0])))
+    return width_m / (depth / camera.K[0, 0])
+
+
+def _depth_image(camera: PinholeCamera, render) -> np.ndarray:
+    """z-depth (H, W) float32 of the receiver along the optical axis, NaN where no receiver."""
+    pts = render.receiver_point.reshape(-1, 3)
+    z = pts @ camera.R[2] + camera.t[2]
+    z = np.where(render.receiver_valid.ravel(), z, np.nan)
+    return z.reshape(render.receiver_valid.shape).astype(np.float32)
+
+
+def _group_truth(label: str, photos: list[PhotoPlan]) -> dict:
+    light = photos[0].light
+    truth = light.truth()
+    truth.update(
+        label=label,
+        photos=[],
+        sun_azimuth_deg=float(np.mean([p.light.azimuth_deg for p in photos])),
+        sun_elevation_deg=float(np.mean([p.light.elevation_deg for p in photos])),
+        range=100.0 * light.range_k,
+        brightness=float(brightness_to_paper(light.rho)),
+    )
+    return truth
+
+
+def synthesize(out_dir, preset: str = "table2", seed: int = 0, renderer: str = "physical",
+               size: tuple[int, int] | None = None, fmt: str | None = None, quality: int = 92,
+               progress: bool = True, force: bool = False, write_sun: bool | None = None,
+               cameras: str = "explicit", render_quality: RenderQuality | None = None,
+               noise: bool = True) -> Path:
+    """Render preset ``preset`` into ``out_dir`` and return its path.
+
+    renderer: 'physical' (ray-cast sun disk + sky) or 'model' (the project's model).
+    size: (width, height) override; fmt: 'jpg', 'tiff', 'png' or 'dng' (default jpg);
+    quality: JPEG quality; force: write into a non-empty folder (removing only the
+    files a previous synthesis listed). write_sun: write each photo's sun into
+    scene.toml (default: the preset's choice; table2 leaves it to time + site).
+    cameras: 'explicit' writes K, R, t per photo; 'markers' leaves registration to the
+    printed board ([camera] kind = "markers"). noise: sensor noise on/off.
+    """
+    t_start = time.perf_counter()
+    if renderer not in RENDERERS:
+        raise ValueError(f"unknown renderer {renderer!r}; choose one of {RENDERERS}")
+    if cameras not in ("explicit", "markers"):
+        raise ValueError(f"cameras must be 'explicit' or 'markers', got {cameras!r}")
+    plan: PresetPlan = build_preset(preset, seed, size)
+    fmt = fmt or plan.fmt
+    if fmt not in FORMATS:
+        raise ValueError(f"unknown image format {fmt!r}; choose one of {FORMATS}")
+    out = Path(out_dir)
+    _prepare_out_dir(out, force)
+    write_sun = plan.write_sun if write_sun is None else bool(write_sun)
+
+    mesh = posed_mesh(plan.mesh, plan.position, plan.rotation_deg, plan.scale)
+    receiver = bank_terrain() if plan.receiver == "bank" else PlaneReceiver()
+    scene = SynthScene(mesh, plan.object_albedo, receiver)
+    quality_settings = render_quality or RenderQuality()
+    rend = make_renderer(renderer, scene, quality_settings, seed)
+    textures: dict[str, np.ndarray] = {}
+
+    spec = SceneSpec(object=ObjectSpec(plan.mesh, tuple(plan.position), tuple(plan.rotation_deg), plan.scale))
+    if plan.site is not None:
+        spec.site = SiteSpec(plan.site["latitude"], plan.site["longitude"], plan.site.get("timezone"))
+    if plan.receiver == "bank":
+        spec.receiver = {"kind": "depth", "depth_quantity": "z-depth along the camera's optical axis (m), "
+                         "float32 TIFF, NaN where no receiver; file named in each photo's 'depth'"}
+    if plan.board is not None:
+        b = plan.board
+        spec.camera = CameraSpec(kind="markers", dictionary=b.dictionary, squares=tuple(b.squares),
+                                 square_m=b.square_m, marker_m=b.marker_m, origin_m=tuple(b.origin_m))
+
+    groups: dict[str, dict] = {}
+    group_photos: dict[str, list[PhotoPlan]] = {}
+    for p in plan.photos:
+        if not p.corrupt:
+            group_photos.setdefault(p.group, []).append(p)
+    for label, ps in group_photos.items():
+        groups[label] = _group_truth(label, ps)
+
+    details: dict[str, dict] = {}
+    files: list[str] = []
+    skipped: list[dict] = []
+    iterator = plan.photos
+    if progress:
+        from tqdm import tqdm
+        iterator = tqdm(plan.photos, desc=f"synth {preset}", unit="photo")
+    for index, photo in enumerate(iterator):
+        rng = np.random.default_rng([seed, 7, index])
+        ext = ".jpg" if photo.corrupt else EXTENSIONS[fmt]
+        name = photo.name + ext
+        camera, cam_spec = _camera(photo, plan.size)
+        rays = topdown_rays(camera) if isinstance(camera, GroundGrid) else pinhole_rays(camera)
+        if photo.texture not in textures:
+            textures[photo.texture] = procedural_texture(photo.texture, np.random.default_rng([seed, 11]))
+        ground = GroundAppearance(textures[photo.texture], papers=photo.papers, board=plan.board)
+        t0 = time.perf_counter()
+        render = rend.render(rays, photo.light, ground, rng)
+        seconds = time.perf_counter() - t0
+        sensor = photo.sensor if noise else dataclasses.replace(photo.sensor, full_well_e=1e12, read_noise_e=0.0)
+        linear = camera_pipeline(render.radiance, photo.light.lit_irradiance, sensor, rng, photo.exposure_gain)
+        if photo.corrupt:
+            write_corrupt_jpeg(out / name, linear, quality)
+            files.append(name)
+            skipped.append({"photo": name, "reason": photo.note or "corrupt file"})
+            continue
+        exif_time = photo.time if (photo.exif_time and fmt == "jpg") else None
+        site = plan.site or {}
+        meta = PhotoMetadata(exif_time, site.get("latitude"), site.get("longitude"))
+        write_photo(out / name, linear, fmt, quality, meta)
+        files.append(name)
+        entry = PhotoSpec(camera=cam_spec if (cameras == "explicit" or cam_spec.kind == "topdown") else None)
+        scene_time = photo.scene_time if photo.scene_time is not None else (fmt != "jpg" or not photo.exif_time)
+        if scene_time and photo.time is not None:
+            entry.time = photo.time.isoformat()
+        entry.group = photo.scene_group
+        sun_written = write_sun if photo.write_sun is None else photo.write_sun
+        if sun_written:
+            entry.sun_azimuth_deg = float(photo.light.azimuth_deg)
+            entry.sun_elevation_deg = float(photo.light.elevation_deg)
+        if plan.receiver == "bank" and isinstance(camera, PinholeCamera):
+            import tifffile
+            depth_name = photo.name + ".depth.tiff"
+            tifffile.imwrite(out / depth_name, _depth_image(camera, render))
+            entry.extra["depth"] = depth_name
+            files.append(depth_name)
+        spec.photos[name] = entry
+        groups[photo.group]["photos"].append(name)
+        details[name] = {
+            "group": photo.group,
+            "time": photo.time.isoformat() if photo.time else None,
+            "time_in_exif": exif_time is not None,
+            "time_in_scene": entry.time is not None,
+            "sun_in_scene": bool(sun_written),
+            "sun_azimuth_deg": float(photo.light.azimuth_deg),
+            "sun_elevation_deg": float(photo.light.elevation_deg),
+            "camera": cam_spec.to_toml(),
+            "exposure_gain": photo.exposure_gain,
+            "sensor": dataclasses.asdict(sensor),
+            "texture": photo.texture,
+            "penumbra_px": _penumbra_px(photo, mesh, camera),
+            "render_seconds": seconds,
+            "render_stats": render.stats,
+            "note": photo.note,
+        }
+    dump_scene(spec, out / "scene.toml")
+    truth = {
+        "groups": [g for g in groups.values() if g["photos"]],
+        "renderer": renderer,
+        "renderer_detail": ("ray-cast sun disk + uniform sky, trimesh/Embree (data_synth.physical)"
+                            if renderer == "physical" else "softshadow.render.SoftShadowModel, rule edge, "
+                            "profile linear, k = tan(sun radius)"),
+        "preset": preset,
+        "seed": int(seed),
+        "size": list(plan.size),
+        "format": fmt,
+        "render_quality": dataclasses.asdict(quality_settings),
+        "truth_definition": {"range_k": "tan(sun angular radius), the edge rule's geometric value",
+                             "rho": "E_sky / (E_sun_horizontal + E_sky) on open ground, direct light only",
+                             "brightness": "255 rho^(1/2.2)", "range": "100 k"},
+        "photos_detail": details,
+        "expected_skipped": skipped,
+        "files": files + ["scene.toml", "truth.json"],
+        "seconds": time.perf_counter() - t_start,
+    }
+    (out / "truth.json").write_text(json.dumps(truth, indent=1, default=_json_default), encoding="utf-8")
+    return out
+
+
+def _json_default(value):
+    if isinstance(value, (np.floating, np.integer)):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, (_dt.datetime, Path)):
+        return str(value)
+    raise TypeError(f"cannot write {type(value).__name__} to JSON")
