@@ -1,0 +1,30 @@
+"""data_synth: synthetic photo folders with known truth, rendered by physics or by the model.
+
+``synthesize(out_dir, preset="table2", ...)`` writes a photo folder in the
+CONVENTIONS format (images, scene.toml, truth.json). The default renderer casts
+rays against the mesh for a sun disk of finite angular radius plus a uniform
+sky (``data_synth.physical``), independent of the project's shadow model; the
+``model`` renderer uses softshadow.render.SoftShadowModel. See docs/data_synth.md.
+"""
+
+from .camera_pipeline import (SensorSettings, camera_pipeline, fit_handheld_camera, handheld_camera, srgb_decode,
+                              srgb_encode, topdown_grid)
+from .image_io import FORMATS, PhotoMetadata, dng_available, exif_bytes, write_photo
+from .lighting import SUN_RADIUS_DEG, SunSky
+from .physical import (SkyVisibilityMap, irradiance, shadow_reach, sky_visibility, sky_visibility_map,
+                       sun_visibility)
+from .presets import PRESETS, PresetPlan, build_preset
+from .receivers import HeightfieldReceiver, PlaneReceiver, bank_terrain
+from .renderers import RENDERERS, ModelRenderer, PhysicalRenderer, RenderQuality, SynthScene, make_renderer
+from .synth import OutputExistsError, posed_mesh, synthesize
+from .textures import BoardSpec, GroundAppearance, PaperSheet, procedural_texture
+
+__all__ = [
+    "BoardSpec", "FORMATS", "GroundAppearance", "HeightfieldReceiver", "ModelRenderer", "OutputExistsError",
+    "PRESETS", "PaperSheet", "PhotoMetadata", "PhysicalRenderer", "PlaneReceiver", "PresetPlan", "RENDERERS",
+    "RenderQuality", "SUN_RADIUS_DEG", "SensorSettings", "SkyVisibilityMap", "SunSky", "SynthScene",
+    "bank_terrain", "build_preset", "camera_pipeline", "dng_available", "exif_bytes", "fit_handheld_camera",
+    "handheld_camera", "irradiance", "make_renderer", "posed_mesh", "procedural_texture", "shadow_reach",
+    "sky_visibility", "sky_visibility_map", "srgb_decode", "srgb_encode", "sun_visibility", "synthesize",
+    "topdown_grid", "write_photo",
+]

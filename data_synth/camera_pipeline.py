@@ -56,37 +56,63 @@ def handheld_camera(target, bearing_deg: float, distance_m: float, eye_height_m:
     position = target + np.array([math.sin(b) * distance_m, math.cos(b) * distance_m, 0.0])
     position[2] = eye_height_m
     aim = target + np.array([aim_jitter_m[0], aim_jitter_m[1], 0.0])
-    cam = look_at_camera(position, aim, width, height, fov_x_deg)
-    if roll_deg:
-        c, s = math.cos(math.radians(roll_deg)), math.sin(math.radians(roll_deg))
-        roll = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
-        R = roll @ cam.R
-        cam = PinholeCamera(cam.K, R, -R @ position, width, height)
-    return cam
+    return _look(position, aim, width, height, fov_x_deg, roll_deg)
 
 
 def fit_handheld_camera(key_points: np.ndarray, bearing_deg: float, eye_height_m: float, width: int,
                         height: int, fov_x_deg: float = 62.0, margin: float = 0.08, roll_deg: float = 0.0,
                         aim_jitter_m=(0.0, 0.0), min_distance_m: float = 1.5) -> PinholeCamera:
-    """A handheld camera at a bearing that frames all key points (N, 3) with a margin.
+    """A handheld camera at a bearing that frames all key points (N, 3) tightly.
 
-    Aims at the centre of the key points' bounding box and steps back until
-    every key point projects inside the frame (at most 40 steps of 10 %).
+    The camera stands at the bearing from the key points' centre, at the nearest
+    distance (steps of 8 %) where, after re-aiming so that the key points' image
+    bounding box is centred, every key point lies inside the frame with a margin.
+    aim_jitter_m then shifts the aim (hand tremor; it may push points out).
     """
     pts = np.asarray(key_points, dtype=np.float64).reshape(-1, 3)
-    target = np.array([*(pts[:, :2].min(0) + pts[:, :2].max(0)) / 2, 0.0])
-    distance = min_distance_m
-    cam = None
-    for _ in range(40):
-        cam = handheld_camera(target, bearing_deg, distance, eye_height_m, width, height, fov_x_deg,
-                              roll_deg, aim_jitter_m)
+    centre = np.array([*(pts[:, :2].min(0) + pts[:, :2].max(0)) / 2, 0.0])
+    b = math.radians(bearing_deg)
+    away = np.array([math.sin(b), math.cos(b), 0.0])
+    mu, mv = margin * width, margin * height
+
+    def framed(distance):
+        position = centre + away * distance
+        position[2] = eye_height_m
+        aim = centre.copy()
+        cam = handheld_camera(aim, bearing_deg, distance, eye_height_m, width, height, fov_x_deg, roll_deg)
+        for _ in range(4):  # re-aim at the ground point under the key points' image centre
+            uv, front = cam.project(pts)
+            if not front.all():
+                break
+            c = (uv.min(0) + uv.max(0)) / 2
+            g, ok = cam.ground_points(np.array([c[0]]), np.array([c[1]]))
+            if not ok[0]:
+                break
+            aim = g[0]
+            cam = _look(position, aim, width, height, fov_x_deg, roll_deg)
         uv, front = cam.project(pts)
-        mu, mv = margin * width, margin * height
         inside = (front & (uv[:, 0] > mu) & (uv[:, 0] < width - 1 - mu) & (uv[:, 1] > mv)
                   & (uv[:, 1] < height - 1 - mv))
-        if inside.all():
-            return cam
-        distance *= 1.1
+        return cam, position, aim, bool(inside.all())
+
+    distance = min_distance_m
+    for _ in range(60):
+        cam, position, aim, ok = framed(distance)
+        if ok:
+            break
+        distance *= 1.08
+    if aim_jitter_m[0] or aim_jitter_m[1]:
+        cam = _look(position, aim + np.array([aim_jitter_m[0], aim_jitter_m[1], 0.0]), width, height,
+                    fov_x_deg, roll_deg)
+    return cam
+
+
+def _look(position, aim, width, height, fov_x_deg, roll_deg) -> PinholeCamera:
+    cam = look_at_camera(position, aim, width, height, fov_x_deg)
+    if roll_deg:
+        c, s = math.cos(math.radians(roll_deg)), math.sin(math.radians(roll_deg))
+        R = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]]) @ cam.R
+        cam = PinholeCamera(cam.K, R, -R @ np.asarray(position, dtype=np.float64), width, height)
     return cam
 
 

@@ -23,11 +23,10 @@ import dataclasses
 
 import numpy as np
 import trimesh
-from scipy.ndimage import map_coordinates
 from scipy.spatial import ConvexHull, QhullError
 
 from .lighting import SunSky, limb_darkening_weight
-from .sampling import (cap_directions, cosine_hemisphere_directions, orthonormal_basis,
+from .sampling import (bilinear, cap_directions, cosine_hemisphere_directions, orthonormal_basis,
                        stratified_square, strata_side)
 
 __all__ = ["RAY_OFFSET_M", "shadow_reach", "sun_visibility", "sky_visibility", "SkyGrid",
@@ -54,6 +53,11 @@ def _any_hit(mesh: trimesh.Trimesh, origins: np.ndarray, directions: np.ndarray)
     return out
 
 
+def _dot(points: np.ndarray, vector: np.ndarray) -> np.ndarray:
+    """points (N, 3) . vector (3,) -> (N,), elementwise: BLAS threads fight Embree's here."""
+    return points[:, 0] * vector[0] + points[:, 1] * vector[1] + points[:, 2] * vector[2]
+
+
 def shadow_reach(occluder_vertices: np.ndarray, sun: SunSky, points: np.ndarray,
                  margin_m: float = 0.01, widen: float = 1.5) -> np.ndarray:
     """Points (N, 3) that any direction of the sun's disk may see blocked by the occluder.
@@ -67,8 +71,8 @@ def shadow_reach(occluder_vertices: np.ndarray, sun: SunSky, points: np.ndarray,
     s = sun.direction
     t1, t2 = orthonormal_basis(s)
     v = np.asarray(occluder_vertices, dtype=np.float64)
-    va = np.stack([v @ t1, v @ t2], -1)
-    top = float(np.max(v @ s))
+    va = np.stack([_dot(v, t1), _dot(v, t2)], -1)
+    top = float(np.max(_dot(v, s)))
     try:
         hull = ConvexHull(va)
         eq = hull.equations  # rows (nx, ny, c): inside where nx x + ny y + c <= 0
@@ -81,12 +85,22 @@ def shadow_reach(occluder_vertices: np.ndarray, sun: SunSky, points: np.ndarray,
     chunk = 262_144
     for a in range(0, len(pts), chunk):
         p = pts[a:a + chunk]
-        depth = top - p @ s  # how far the occluder's top lies beyond p along the sun
-        pa = np.stack([p @ t1, p @ t2], -1)
-        dist = pa @ eq[:, :2].T + eq[:, 2]
+        depth = top - _dot(p, s)  # how far the occluder's top lies beyond p along the sun
+        pa, pb = _dot(p, t1), _dot(p, t2)
+        dist = pa[:, None] * eq[:, 0] + pb[:, None] * eq[:, 1] + eq[:, 2]
         dilate = np.maximum(depth, 0.0) * tan_r + margin_m
         out[a:a + chunk] = (depth > -margin_m) & np.all(dist <= dilate[:, None], axis=1)
     return out
+
+
+N_SUN_PATTERNS = 128  # distinct jittered disk patterns; each point draws one at random
+
+
+def _sun_patterns(sun: SunSky, side: int, rng: np.random.Generator | None):
+    """Directions (K, m, 3) and limb-darkening weights (K, m) of K stratified disk patterns."""
+    u = stratified_square(N_SUN_PATTERNS if rng is not None else 1, side, rng)
+    dirs, frac = cap_directions(sun.direction, sun.radius_rad, u)
+    return dirs, limb_darkening_weight(frac, sun.limb_darkening)
 
 
 def sun_visibility(mesh: trimesh.Trimesh, points: np.ndarray, normals: np.ndarray, sun: SunSky,
@@ -94,22 +108,25 @@ def sun_visibility(mesh: trimesh.Trimesh, points: np.ndarray, normals: np.ndarra
                    pixel_axes: np.ndarray | None = None, offset_m: float = RAY_OFFSET_M) -> np.ndarray:
     """Fraction (N,) of the sun's disk (limb-darkening weighted) seen from points (N, 3).
 
-    Stratified over the disk (side x side strata, jittered per point when rng is
-    given). pixel_axes (N, 2, 3): the ground extent of each point's pixel along
-    u and v; each sun sample then starts from a random position in the pixel, so
-    the estimate is also an area average (anti-aliasing of narrow penumbrae).
+    Stratified over the disk (side x side strata). With rng, each point uses one of
+    N_SUN_PATTERNS independently jittered patterns, drawn at random (unbiased, noise
+    uncorrelated between points); without, the strata centres (deterministic).
+    pixel_axes (N, 2, 3): the receiver extent of each point's pixel along u and v;
+    each sun sample then starts from a random position in the pixel, so the
+    estimate is also an area average (anti-aliasing of narrow penumbrae).
+    normals are unused for the rays (origins move along the ray, which keeps the
+    penumbra in place) but kept for a uniform signature.
     """
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
     side = strata_side(n_samples)
     m = side * side
+    table, weights = _sun_patterns(sun, side, rng)
     out = np.empty(len(pts))
     per_chunk = max(1, MAX_RAYS_PER_CALL // m)
     for a in range(0, len(pts), per_chunk):
-        p, n = pts[a:a + per_chunk], nrm[a:a + per_chunk]
-        u = stratified_square(len(p), side, rng)
-        dirs, frac = cap_directions(sun.direction, sun.radius_rad, u)
-        weight = limb_darkening_weight(frac, sun.limb_darkening)
+        p = pts[a:a + per_chunk]
+        pick = rng.integers(0, len(table), len(p)) if rng is not None else np.zeros(len(p), int)
+        dirs, weight = table[pick], weights[pick]
         # Start each ray a little along itself (not along n): the ray's line, hence
         # where it meets the occluder, is unchanged, so the penumbra does not shift.
         origins = p[:, None, :] + offset_m * dirs
@@ -186,7 +203,7 @@ class SkyGrid:
     def sample(self, xy: np.ndarray) -> np.ndarray:
         i = (xy[:, 0] - self.x0) / self.step
         j = (xy[:, 1] - self.y0) / self.step
-        return map_coordinates(self.values, [j, i], order=1, mode="nearest")
+        return bilinear(self.values, j, i).astype(np.float64)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -243,5 +260,5 @@ def sky_visibility_map(mesh: trimesh.Trimesh | None, receiver, object_bounds: np
 
 def irradiance(sun: SunSky, normals: np.ndarray, sun_vis: np.ndarray, sky_vis: np.ndarray) -> np.ndarray:
     """E (N,) = E_sun_normal max(n.s, 0) V_sun + pi L_sky V_sky."""
-    cos_s = np.clip(np.asarray(normals).reshape(-1, 3) @ sun.direction, 0.0, None)
+    cos_s = np.clip(_dot(np.asarray(normals).reshape(-1, 3), sun.direction), 0.0, None)
     return sun.sun_normal_irradiance * cos_s * sun_vis + sun.sky_horizontal_irradiance * sky_vis

@@ -140,11 +140,12 @@ def _sensor(rng: np.random.Generator) -> SensorSettings:
 
 def _handheld(rng, bearing) -> ViewSpec:
     return ViewSpec("handheld", bearing_deg=float(bearing + rng.normal(0, 6)),
-                    eye_height_m=float(rng.uniform(1.45, 1.7)), roll_deg=float(rng.normal(0, 2.0)),
+                    eye_height_m=float(rng.uniform(1.6, 1.85)), roll_deg=float(rng.normal(0, 2.0)),
                     aim_jitter_m=(float(rng.normal(0, 0.1)), float(rng.normal(0, 0.1))))
 
 
-BOARD_SOUTH = BoardSpec(origin_m=(-0.35, -0.7))
+# A board printed large (A0-sized, 1.05 x 0.75 m) so that oblique handheld views still detect it.
+BOARD_SOUTH = BoardSpec(origin_m=(-0.525, -0.7), square_m=0.15, marker_m=0.11)
 
 # (label, time of the first photo, rho, sun radius in degrees (haze widens the real 0.2665))
 TABLE2_TIMES = (
@@ -164,7 +165,9 @@ def _table2(seed: int, size) -> PresetPlan:
         length = min(3.0 / math.tan(math.radians(el0)) + 0.6, 4.0)
         paper = _paper_along_shadow(az0, max(length, 1.5))
         keys = _key_points((0, 0), az0, el0, 3.0, BOARD_SOUTH)
-        for k, bearing in enumerate((155.0, 195.0, 235.0)):
+        # Stand beside the shadow (across it, on the board's south side), three spots 35 deg apart.
+        across = min(((az0 + 180 + 90) % 360, (az0 + 180 - 90) % 360), key=lambda b: abs(b - 180.0))
+        for k, bearing in enumerate((across - 35.0, across, across + 35.0)):
             t = t0 + _dt.timedelta(seconds=40 * k + int(rng.integers(0, 10)))
             az, el = _sun_at(t)
             photos.append(PhotoPlan(

@@ -52,7 +52,7 @@ class RenderQuality:
     sky_samples: int = 1024
     sky_fine_nodes: int = 96
     object_sun_samples: int = 4
-    object_sky_samples: int = 64
+    object_sky_samples: int = 36
 
 
 @dataclasses.dataclass
@@ -127,17 +127,14 @@ class PhysicalRenderer:
         t_trace = time.perf_counter() - t0
         recv = np.flatnonzero(hits.kind == KIND_RECEIVER)
         pts, nrm = hits.points[recv], hits.normals[recv]
-        axes_all = pixel_axes(hits, rays.width, rays.height)
-        axes = axes_all[recv]
-        foot = float(np.max(np.linalg.norm(axes, axis=-1))) if len(axes) else 0.0
-        # Margin: half a pixel's extent (sample jitter) but not the huge footprints near the horizon.
-        margin = 0.01 + min(foot, 0.1)
-        reach = shadow_reach(self.scene.object_mesh.vertices, sun, pts, margin_m=margin)
+        # Margin 0.1 m: covers the in-pixel jitter of sun samples for footprints up to 0.2 m.
+        reach = shadow_reach(self.scene.object_mesh.vertices, sun, pts, margin_m=0.1)
         t1 = time.perf_counter()
         sun_vis = np.ones(len(pts))
         if reach.any():
+            axes = pixel_axes(hits, rays.width, rays.height, recv[reach])
             sun_vis[reach] = sun_visibility(self.occluders, pts[reach], nrm[reach], sun, q.sun_samples, rng,
-                                            pixel_axes=axes[reach])
+                                            pixel_axes=axes)
         t_sun = time.perf_counter() - t1
         t1 = time.perf_counter()
         sky_vis = self.sky_map().at(pts)
@@ -147,17 +144,34 @@ class PhysicalRenderer:
         e_obj = np.zeros(len(obj))
         if len(obj):
             opts, onrm = hits.points[obj], hits.normals[obj]
-            facing = onrm @ sun.direction > 0
+            facing = np.einsum("nj,j->n", onrm, sun.direction) > 0
             osun = np.zeros(len(obj))
             if facing.any():
                 osun[facing] = sun_visibility(self.occluders, opts[facing], onrm[facing], sun,
                                               q.object_sun_samples, rng)
-            osky = sky_visibility(self.occluders, opts, onrm, q.object_sky_samples, seed=self.seed + 1)
+            osky = self._object_sky(hits, obj, rays.width)
             e_obj = irradiance(sun, onrm, osun, osky)
         stats = {"seconds_trace": t_trace, "seconds_sun": t_sun, "seconds_sky_lookup": t_sky,
                  "receiver_pixels": int(len(recv)), "sun_ray_pixels": int(reach.sum()),
                  "sun_rays": int(reach.sum()) * q.sun_samples, "object_pixels": int(len(obj))}
         return _assemble(self.scene, ground, rays, hits, e_recv, e_obj, sun.lit_irradiance, stats)
+
+
+    def _object_sky(self, hits, obj: np.ndarray, width: int) -> np.ndarray:
+        """Open sky of the object's pixels: computed on every other row and column (it is
+        smooth and the object is not measured) and copied to the neighbours."""
+        row, col = np.divmod(obj, width)
+        anchor = (row - row % 2) * width + (col - col % 2)
+        is_obj = np.zeros(len(hits.kind), bool)
+        is_obj[obj] = True
+        own = ~is_obj[anchor] | (anchor == obj)  # compute here when the anchor is not on the object
+        src = np.where(own, obj, anchor)
+        todo = np.unique(src)
+        values = sky_visibility(self.occluders, hits.points[todo], hits.normals[todo],
+                                self.quality.object_sky_samples, seed=self.seed + 1)
+        lookup = np.zeros(len(hits.kind))
+        lookup[todo] = values
+        return lookup[src]
 
 
 class ModelRenderer:
@@ -192,7 +206,7 @@ class ModelRenderer:
         e_recv = sun.lit_irradiance * shading
         obj = np.flatnonzero(hits.kind == KIND_OBJECT)
         onrm = hits.normals[obj]
-        e_obj = (sun.sun_normal_irradiance * np.clip(onrm @ sun.direction, 0, None)
+        e_obj = (sun.sun_normal_irradiance * np.clip(np.einsum("nj,j->n", onrm, sun.direction), 0, None)
                  + sun.sky_horizontal_irradiance * 0.5 * (1 + onrm[:, 2]))
         stats = {"seconds_total": time.perf_counter() - t0, "receiver_pixels": int(len(recv)),
                  "model_pixels": int(reach.sum()), "object_pixels": int(len(obj))}

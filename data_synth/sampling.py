@@ -85,3 +85,35 @@ def cosine_hemisphere_directions(normals: np.ndarray, u: np.ndarray) -> np.ndarr
     z = np.sqrt(np.clip(1.0 - np.sum(d * d, -1), 0.0, None))
     t1, t2 = orthonormal_basis(normals)
     return (d[..., 0:1] * t1[:, None, :] + d[..., 1:2] * t2[:, None, :] + z[..., None] * normals[:, None, :])
+
+
+def bilinear(image: np.ndarray, rows: np.ndarray, cols: np.ndarray, wrap: bool = False,
+             fill: float | None = None) -> np.ndarray:
+    """Bilinear samples of image (H, W[, C]) at fractional (rows, cols) (N,), via cv2.remap.
+
+    Pixel (r, c) holds the value at (r, c). wrap: the image tiles the plane;
+    fill: value outside the image (None: the nearest edge value).
+    """
+    import cv2
+
+    img = np.ascontiguousarray(image, dtype=np.float32)
+    n = len(rows)
+    if wrap:
+        h, w = img.shape[:2]
+        rows = np.mod(rows, h)
+        cols = np.mod(cols, w)
+    block = 4096  # remap wants maps under 32767 a side: fold the point list into rows of 4096
+    m = max(block, -(-n // block) * block)
+    mx = np.zeros(m, np.float32)
+    my = np.zeros(m, np.float32)
+    mx[:n] = cols
+    my[:n] = rows
+    if wrap:
+        border, value = cv2.BORDER_WRAP, 0.0
+    elif fill is None:
+        border, value = cv2.BORDER_REPLICATE, 0.0
+    else:
+        border, value = cv2.BORDER_CONSTANT, float(fill)
+    out = cv2.remap(img, mx.reshape(-1, block), my.reshape(-1, block), cv2.INTER_LINEAR,
+                    borderMode=border, borderValue=value)
+    return out.reshape((m,) + img.shape[2:])[:n]

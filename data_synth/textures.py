@@ -14,7 +14,8 @@ import math
 
 import cv2
 import numpy as np
-from scipy.ndimage import map_coordinates
+
+from .sampling import bilinear
 
 __all__ = ["TEXTURE_KINDS", "BoardSpec", "PaperSheet", "GroundAppearance", "procedural_texture",
            "board_raster", "board_object_to_world"]
@@ -163,9 +164,10 @@ class PaperSheet:
         h = math.radians(self.heading_deg)
         along = np.array([math.sin(h), math.cos(h)])
         across = np.array([math.cos(h), -math.sin(h)])
-        d = xy[:, :2] - np.asarray(self.centre)
-        a = np.abs(d @ along) - self.size[0] / 2
-        b = np.abs(d @ across) - self.size[1] / 2
+        dx = xy[:, 0] - self.centre[0]
+        dy = xy[:, 1] - self.centre[1]
+        a = np.abs(dx * along[0] + dy * along[1]) - self.size[0] / 2
+        b = np.abs(dx * across[0] + dy * across[1]) - self.size[1] / 2
         return np.clip(0.5 - np.maximum(a, b) / soft_m, 0.0, 1.0)
 
 
@@ -195,9 +197,7 @@ class GroundAppearance:
         xy = np.asarray(xy, dtype=np.float64).reshape(len(xy), -1)
         col = xy[:, 0] / self.base_pixel_m
         row = -xy[:, 1] / self.base_pixel_m
-        out = np.empty((len(xy), 3), np.float32)
-        for c in range(3):
-            out[:, c] = map_coordinates(self.base[..., c], [row, col], order=1, mode="grid-wrap")
+        out = bilinear(self.base, row, col, wrap=True).reshape(len(xy), 3)
         if self.papers:
             cover = np.zeros(len(xy), np.float32)
             for sheet in self.papers:
@@ -224,6 +224,6 @@ class GroundAppearance:
         img = self._board_img
         col = x_b[sheet] / self.board_pixel_m - 0.5
         row = y_b[sheet] / self.board_pixel_m - 0.5
-        grey = map_coordinates(img, [row, col], order=1, mode="constant", cval=0.85)
+        grey = bilinear(img, row, col, fill=0.85)
         out[sheet] = grey[:, None].astype(np.float32)
         return out

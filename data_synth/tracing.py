@@ -28,14 +28,22 @@ class ViewRays:
     directions: np.ndarray
     width: int
     height: int
+    camera: PinholeCamera | None = None  # lets ``trace`` cull by projecting the object's box
 
 
 def pinhole_rays(camera: PinholeCamera) -> ViewRays:
     rows, cols = np.mgrid[0:camera.height, 0:camera.width]
-    d = camera.pixel_rays(cols, rows)
+    if camera.dist is not None and np.any(camera.dist):
+        d = camera.pixel_rays(cols, rows)
+    else:  # the same as camera.pixel_rays, elementwise (BLAS threads fight Embree's here)
+        Kinv = np.linalg.inv(camera.K)
+        x = (Kinv[0, 0] * cols + Kinv[0, 1] * rows + Kinv[0, 2]).ravel()
+        y = (Kinv[1, 1] * rows + Kinv[1, 2]).ravel()
+        R = camera.R
+        d = np.stack([R[0, j] * x + R[1, j] * y + R[2, j] for j in range(3)], -1)
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     o = np.broadcast_to(camera.centre, d.shape)
-    return ViewRays(o, d, camera.width, camera.height)
+    return ViewRays(o, d, camera.width, camera.height, camera)
 
 
 def topdown_rays(grid: GroundGrid) -> ViewRays:
@@ -69,6 +77,26 @@ def _slab_candidates(rays: ViewRays, bounds: np.ndarray, pad: float = 1e-3) -> n
     tmin = np.max(np.minimum(t0, t1), axis=1)
     tmax = np.min(np.maximum(t0, t1), axis=1)
     return (tmax >= np.maximum(tmin, 0.0))
+
+
+def _object_candidates(rays: ViewRays, bounds: np.ndarray) -> np.ndarray:
+    """Indices of rays that may hit the object: pixels inside the projected bounding box
+    (pinhole camera with the box in front), else a ray/box slab test."""
+    cam = rays.camera
+    if cam is not None:
+        corners = np.array([[bounds[i, 0], bounds[j, 1], bounds[k, 2]]
+                            for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+        uv, front = cam.project(corners)
+        if front.all():
+            c0, r0 = np.floor(uv.min(0)).astype(int) - 2
+            c1, r1 = np.ceil(uv.max(0)).astype(int) + 2
+            c0, r0 = max(c0, 0), max(r0, 0)
+            c1, r1 = min(c1, rays.width - 1), min(r1, rays.height - 1)
+            if c0 > c1 or r0 > r1:
+                return np.zeros(0, np.int64)
+            rr, cc = np.mgrid[r0:r1 + 1, c0:c1 + 1]
+            return (rr * rays.width + cc).ravel()
+    return np.flatnonzero(_slab_candidates(rays, bounds))
 
 
 def _first_hits(mesh: trimesh.Trimesh, origins, directions):
@@ -116,7 +144,7 @@ def trace(rays: ViewRays, object_mesh: trimesh.Trimesh | None, receiver) -> Surf
     if recv_valid.any():
         normals[recv_valid] = receiver.normal(recv_pts[recv_valid, :2])
     if object_mesh is not None:
-        cand = np.flatnonzero(_slab_candidates(rays, object_mesh.bounds))
+        cand = _object_candidates(rays, object_mesh.bounds)
         if len(cand):
             iray, loc, itri = _first_hits(object_mesh, o[cand], d[cand])
             idx = cand[iray]
@@ -133,36 +161,32 @@ def trace(rays: ViewRays, object_mesh: trimesh.Trimesh | None, receiver) -> Surf
     return SurfaceHits(kind, points, normals, recv_pts, recv_valid)
 
 
-def pixel_axes(hits: SurfaceHits, width: int, height: int) -> np.ndarray:
-    """Receiver extent of each pixel along u and v (N, 2, 3), from neighbouring hits.
+def pixel_axes(hits: SurfaceHits, width: int, height: int, index: np.ndarray) -> np.ndarray:
+    """Receiver extent of the pixels ``index`` (M,) along u and v, shape (M, 2, 3).
 
-    Central differences where both neighbours hit the receiver, one-sided where
-    only one does, zero where neither (the object's outline, the horizon).
+    From the hits of neighbouring pixels: central differences where both
+    neighbours hit the receiver, one-sided where one does (or where the other
+    side jumps more than 3x: a depth discontinuity), zero where neither.
     """
-    p = hits.points.reshape(height, width, 3)
-    ok = (hits.kind == KIND_RECEIVER).reshape(height, width)
-    axes = np.zeros((height, width, 2, 3))
-    for k, axis in ((0, 1), (1, 0)):
-        fwd = np.zeros_like(p)
-        bwd = np.zeros_like(p)
-        fok = np.zeros_like(ok)
-        bok = np.zeros_like(ok)
-        sl_a = [slice(None)] * 2
-        sl_b = [slice(None)] * 2
-        sl_a[axis] = slice(0, -1)
-        sl_b[axis] = slice(1, None)
-        diff = p[tuple(sl_b)] - p[tuple(sl_a)]
-        both = ok[tuple(sl_b)] & ok[tuple(sl_a)]
-        fwd[tuple(sl_a)] = diff
-        fok[tuple(sl_a)] = both
-        bwd[tuple(sl_b)] = diff
-        bok[tuple(sl_b)] = both
-        # Reject jumps across depth discontinuities: keep the shorter side when they differ a lot.
-        nf = np.linalg.norm(fwd, axis=-1)
-        nb = np.linalg.norm(bwd, axis=-1)
-        fok &= ~(bok & (nf > 3 * nb))
-        bok &= ~(fok & (nb > 3 * nf))
-        cnt = fok.astype(float) + bok.astype(float)
-        axes[..., k, :] = (fwd * fok[..., None] + bwd * bok[..., None]) / np.maximum(cnt, 1)[..., None]
-    axes[~ok] = 0.0
-    return axes.reshape(-1, 2, 3)
+    index = np.asarray(index, dtype=np.int64)
+    row, col = np.divmod(index, width)
+    recv = hits.kind == KIND_RECEIVER
+    p = hits.points
+    out = np.zeros((len(index), 2, 3))
+    for k, (step, pos, size) in enumerate(((1, col, width), (width, row, height))):
+        has_f = pos + 1 < size
+        has_b = pos - 1 >= 0
+        fi = np.where(has_f, index + step, index)
+        bi = np.where(has_b, index - step, index)
+        fok = has_f & recv[fi]
+        bok = has_b & recv[bi]
+        fwd = p[fi] - p[index]
+        bwd = p[index] - p[bi]
+        nf = np.linalg.norm(fwd, axis=1)
+        nb = np.linalg.norm(bwd, axis=1)
+        fok2 = fok & ~(bok & (nf > 3 * nb))
+        bok2 = bok & ~(fok & (nb > 3 * nf))
+        cnt = fok2.astype(float) + bok2.astype(float)
+        out[:, k] = (fwd * fok2[:, None] + bwd * bok2[:, None]) / np.maximum(cnt, 1)[:, None]
+    out[~recv[index]] = 0.0
+    return out

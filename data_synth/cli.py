@@ -1,0 +1,73 @@
+"""Command-line glue for ``softshadow synth OUT_DIR --preset NAME --seed N`` (called by softshadow.cli)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+__all__ = ["add_arguments", "run", "parse_size"]
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """'1600x1200' -> (1600, 1200)."""
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"size must look like 1600x1200, got {text!r}") from None
+    if w < 16 or h < 16:
+        raise argparse.ArgumentTypeError(f"size must be at least 16x16, got {text!r}")
+    return w, h
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the synth options to an argparse (sub)parser."""
+    from .image_io import FORMATS
+    from .presets import PRESETS
+    from .renderers import RENDERERS
+
+    parser.add_argument("out_dir", metavar="OUT_DIR", help="folder to write (images, scene.toml, truth.json)")
+    parser.add_argument("--preset", default="table2", choices=PRESETS, help="scene preset (default table2)")
+    parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    parser.add_argument("--renderer", default="physical", choices=RENDERERS,
+                        help="physical (ray-cast sun disk + sky, default) or model (the project's own model)")
+    parser.add_argument("--size", type=parse_size, default=None, metavar="WxH",
+                        help="image size, e.g. 1600x1200 (the preset's default otherwise)")
+    parser.add_argument("--format", dest="fmt", default=None, choices=FORMATS,
+                        help="jpg (sRGB + EXIF, default), tiff/png (16-bit linear) or dng (needs pidng)")
+    parser.add_argument("--quality", type=int, default=92, help="JPEG quality 1-100 (default 92)")
+    parser.add_argument("--force", action="store_true", help="write into a non-empty OUT_DIR")
+    parser.add_argument("--write-sun", dest="write_sun", action="store_true", default=None,
+                        help="write each photo's sun into scene.toml (table2 leaves it to time + site)")
+    parser.add_argument("--cameras", default="explicit", choices=("explicit", "markers"),
+                        help="explicit: K, R, t per photo (default); markers: rely on the printed board")
+    parser.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run a synthesis from parsed arguments; 0 on success, 1 with a one-line reason on stderr."""
+    from .synth import OutputExistsError, synthesize
+
+    try:
+        out = synthesize(args.out_dir, preset=args.preset, seed=args.seed, renderer=args.renderer, size=args.size,
+                         fmt=args.fmt, quality=args.quality, progress=getattr(args, "progress", True),
+                         force=args.force, write_sun=getattr(args, "write_sun", None),
+                         cameras=getattr(args, "cameras", "explicit"))
+    except OutputExistsError as exc:
+        print(f"softshadow synth: {exc}", file=sys.stderr)
+        return 1
+    except (ValueError, RuntimeError, OSError) as exc:
+        print(f"softshadow synth: {exc}", file=sys.stderr)
+        return 1
+    print(out)
+    return 0
+
+
+def main(argv=None) -> int:
+    """Stand-alone entry point: python -m data_synth.cli OUT_DIR ..."""
+    parser = argparse.ArgumentParser(prog="softshadow synth", description="Write a synthetic photo folder.")
+    add_arguments(parser)
+    return run(parser.parse_args(argv))
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
