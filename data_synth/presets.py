@@ -189,6 +189,9 @@ def _single_object(name: str, mesh: str, albedo, texture: str, top_m: float, pap
     centre = d * reach * 0.5
     paper = PaperSheet((float(centre[0]), float(centre[1])), (reach + paper_m, paper_m), (az0 + 180) % 360)
     keys = _key_points((0, 0), az0, el0, top_m, BOARD_SOUTH, half_width_m=max(0.3, paper_m / 3))
+    if top_m < 2.5:  # a short object is framed whole (the ball floats 1 m above the ground)
+        box = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (0.0, top_m)])
+        keys = np.concatenate([keys, box])
     photos = []
     views = [_handheld(rng, 170.0), _handheld(rng, 225.0), ViewSpec("topdown")]
     for k, view in enumerate(views):
@@ -202,15 +205,15 @@ def _single_object(name: str, mesh: str, albedo, texture: str, top_m: float, pap
 
 def _depth_background(seed: int, size) -> PresetPlan:
     rng = np.random.default_rng([seed, 4])
-    t0 = _time(2026, 4, 20, 11, 35)
+    t0 = _time(2026, 4, 20, 13, 0)  # sun in the SSW: the shadow climbs the bank to the NNE
     az0, el0 = _sun_at(t0)
-    keys = np.array([[-1.0, -0.5, 0.0], [1.0, -0.5, 0.0], [-1.0, 2.6, 0.6], [1.0, 2.6, 0.6]])
+    keys = np.array([[-0.5, -0.5, 0.0], [0.8, -0.5, 0.0], [0.3, 2.6, 0.6], [1.6, 2.6, 0.6]])
     photos = []
-    for k, bearing in enumerate((185.0, 215.0)):
+    for k, bearing in enumerate((105.0, 135.0)):
         t = t0 + _dt.timedelta(seconds=60 * k)
         az, el = _sun_at(t)
         view = dataclasses.replace(_handheld(rng, bearing), eye_height_m=1.6, min_distance_m=3.0)
-        photos.append(PhotoPlan(f"IMG_{k + 1:04d}", "11:35", SunSky.from_rho(az, el, 0.22, 0.28), view, keys, t,
+        photos.append(PhotoPlan(f"IMG_{k + 1:04d}", "13:00", SunSky.from_rho(az, el, 0.22, 0.28), view, keys, t,
                                 texture="concrete", exposure_gain=float(rng.uniform(0.9, 1.1)), sensor=_sensor(rng)))
     return PresetPlan("depth-background", "pillar", (0.55, 0.52, 0.48), tuple(photos), size, receiver="bank",
                       site=dict(IWATE))
@@ -239,9 +242,8 @@ def _hard_cases(seed: int, size) -> PresetPlan:
     add("IMG_0003", "subpixel", sub, ViewSpec("topdown", topdown_extent_m=80.0),
         _key_points((0, 0), 200, 55, 3.0, None), note="penumbra narrower than a pixel (coarse top-down map)")
     oof = SunSky.from_rho(150.0, 30.0, 0.3)
-    keys = _key_points((0, 0), 150, 30, 3.0, None, 1.2)
-    add("IMG_0004", "out-of-frame", oof, ViewSpec("handheld", bearing_deg=240.0, eye_height_m=1.6, margin=0.02,
-                                                  aim_jitter_m=(-0.6, 0.6)),
+    keys = _key_points((0, 0), 150, 30, 3.0, None, 1.2)  # frames 1.2 m of a 5.2 m shadow
+    add("IMG_0004", "out-of-frame", oof, ViewSpec("handheld", bearing_deg=240.0, eye_height_m=1.6, margin=0.02),
         keys, papers=(_paper_along_shadow(150.0, 4.0),), note="shadow partly out of frame")
     clutter = SunSky.from_rho(160.0, 45.0, 0.28)
     add("IMG_0005", "clutter", clutter, _handheld(rng, 190.0), _key_points((0, 0), 160, 45, 3.0, None),

@@ -86,7 +86,7 @@ class HeightfieldReceiver:
         return float(np.max(np.hypot(fx, fy)))
 
 
-def bank_terrain(bounds=(-4.0, -4.0, 4.0, 8.0), rise_m: float = 0.6, start_y: float = 1.8,
+def bank_terrain(bounds=(-4.0, -4.0, 4.0, 8.0), rise_m: float = 0.6, start_y: float = 0.9,
                  width_m: float = 1.6, bump_m: float = 0.04, spacing: float = 0.04) -> HeightfieldReceiver:
     """Flat ground that rises smoothly (a grassy bank) north of y = start_y, with gentle bumps.
 
