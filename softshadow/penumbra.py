@@ -30,9 +30,11 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float, Int
 
-__all__ = ["PROFILES", "RULES", "penumbra_coordinate", "profile_alpha", "edge_alpha",
+__all__ = ["PROFILES", "RULES", "penumbra_coordinate", "profile_alpha", "edge_alpha", "edge_coordinate",
+           "blurred_profile_alpha",
            "occluded_disk_fraction", "shade"]
 
 PROFILES = ("linear", "disk")
@@ -86,8 +88,13 @@ def profile_alpha(u, profile: str = "linear"):
 def penumbra_coordinate(points: Float[Array, "n 3"], a: Float[Array, "n 3"], b: Float[Array, "n 3"],
                         outward_sign: Float[Array, " n"], light: Float[Array, "3"], range_k,
                         inside: Float[Array, " n"], rule: str = "edge",
-                        paper_normal: Float[Array, "n 3"] | None = None):
+                        paper_normal: Float[Array, "n 3"] | None = None, with_slope: bool = False):
     """Normalised penumbra coordinate u (n,) of each point against its own edge segment (a, b).
+
+    With ``with_slope`` also returns du/dT (n,), the factor between u and the
+    angular tangent T it is made from (2 / (T_out + T_in), the only place k enters),
+    so a caller can scale a precomputed spatial gradient of T instead of
+    differentiating u again.
 
     u = +1 on the expanded silhouette, -1 on the contracted one, |u| > 1 outside
     the penumbra. Its size comes from the edge's plane where the point, seen
@@ -141,28 +148,58 @@ def penumbra_coordinate(points: Float[Array, "n 3"], a: Float[Array, "n 3"], b: 
     # The side comes from the hard shadow, so k = 0 gives exactly the hard shadow.
     tan_x = jnp.where(inside > 0.5, -magnitude, magnitude)
     u = (2.0 * tan_x - t_out + t_in) / (t_out + t_in)
-    return jnp.clip(u, -1e6, 1e6)
+    u = jnp.clip(u, -1e6, 1e6)
+    if with_slope:
+        return u, 2.0 / (t_out + t_in)
+    return u
 
 
-def edge_alpha(points, edge_ids: Int[Array, "n K"], edge_vertices_world: Float[Array, "s 2 3"],
-               outward_sign: Float[Array, " s"], light, range_k, inside: Float[Array, " n"],
-               rule: str = "edge", profile: str = "linear",
-               paper_normal_world: Float[Array, "s 3"] | None = None):
-    """Alpha (n,) at points (n, 3) against their candidate edges ``edge_ids`` (n, K).
+def edge_coordinate(points, edge_ids: Int[Array, "n K"], edge_vertices_world: Float[Array, "s 2 3"],
+                    outward_sign: Float[Array, " s"], light, range_k, inside: Float[Array, " n"],
+                    rule: str = "edge", paper_normal_world: Float[Array, "s 3"] | None = None,
+                    with_slope: bool = False):
+    """Penumbra coordinate u (n,) at points (n, 3) against their candidate edges (n, K).
 
     Each point takes the candidate nearest in penumbra units (smallest |u|): the
     silhouette that the sun disk sees first. The choice is piecewise constant,
     so gradients flow through the chosen edge exactly.
     """
     n_pts, n_cand = edge_ids.shape
-    ev = edge_vertices_world[edge_ids.reshape(-1)]
-    pn = None if paper_normal_world is None else paper_normal_world[edge_ids.reshape(-1)]
+    flat = edge_ids.reshape(-1)
+    ev = edge_vertices_world[flat]
+    pn = None if paper_normal_world is None else paper_normal_world[flat]
     rep = lambda x: jnp.repeat(x, n_cand, axis=0)
-    u = penumbra_coordinate(rep(points), ev[:, 0], ev[:, 1], outward_sign[edge_ids.reshape(-1)],
-                            light, range_k, rep(inside), rule, pn).reshape(n_pts, n_cand)
-    best = jnp.argmin(jnp.abs(u), axis=1)
-    u_best = jnp.take_along_axis(u, best[:, None], axis=1)[:, 0]
-    return profile_alpha(u_best, profile)
+    u, slope = penumbra_coordinate(rep(points), ev[:, 0], ev[:, 1], outward_sign[flat], light,
+                                   range_k, rep(inside), rule, pn, with_slope=True)
+    u = u.reshape(n_pts, n_cand)
+    best = jnp.argmin(jnp.abs(u), axis=1)[:, None]
+    u_best = jnp.take_along_axis(u, best, axis=1)[:, 0]
+    if with_slope:
+        return u_best, jnp.take_along_axis(slope.reshape(n_pts, n_cand), best, axis=1)[:, 0]
+    return u_best
+
+
+def edge_alpha(points, edge_ids: Int[Array, "n K"], edge_vertices_world: Float[Array, "s 2 3"],
+               outward_sign: Float[Array, " s"], light, range_k, inside: Float[Array, " n"],
+               rule: str = "edge", profile: str = "linear",
+               paper_normal_world: Float[Array, "s 3"] | None = None):
+    """Alpha (n,) at points (n, 3) against their candidate edges (n, K); see ``edge_coordinate``."""
+    u = edge_coordinate(points, edge_ids, edge_vertices_world, outward_sign, light, range_k, inside,
+                        rule, paper_normal_world)
+    return profile_alpha(u, profile)
+
+
+def blurred_profile_alpha(u, tau, profile: str = "linear", nodes: int = 12):
+    """Alpha of a profile seen through Gaussian blur of standard deviation ``tau`` in u units.
+
+    Gauss-Hermite quadrature over the blur; u and tau broadcast. With tau = 0 it
+    equals ``profile_alpha``. Used for camera blur and pixel-area integration.
+    """
+    z, w = np.polynomial.hermite_e.hermegauss(nodes)
+    z = jnp.asarray(z, dtype=jnp.result_type(u))
+    w = jnp.asarray(w / w.sum(), dtype=jnp.result_type(u))
+    samples = profile_alpha(u[..., None] + tau[..., None] * z, profile)
+    return jnp.sum(samples * w, axis=-1)
 
 
 def shade(alpha, rho):

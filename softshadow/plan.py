@@ -22,12 +22,13 @@ from jaxtyping import Array, Bool, Float, Int
 from .camera import GroundGrid
 from .occluder import Occluder, posed_vertices, silhouette
 from .params import Pose, Sun
-from .penumbra import edge_alpha
+from .penumbra import edge_alpha, edge_coordinate
 from .raster import (ShadowRaster, candidate_labels, project_to_ground, rasterise_shadow,
                      winding_at_points)
 from .sun import check_sun_above_horizon
 
-__all__ = ["EdgeSet", "PointPlan", "plan_points", "plan_grid", "plan_alpha", "edge_band_widths",
+__all__ = ["EdgeSet", "PointPlan", "plan_points", "plan_grid", "plan_alpha", "plan_coordinate",
+           "edge_band_widths",
            "bucket_size"]
 
 MAX_RASTER_SIDE = 2048
@@ -251,6 +252,25 @@ def plan_alpha(points: Float[Array, "n 3"], plan: PointPlan, pose: Pose, sun: Su
     alpha = edge_alpha(points, plan.edge_id, ev, edges.outward_sign, sun.light, range_k,
                        plan.hard, rule, profile, paper)
     return jnp.where(plan.active, alpha, plan.hard)
+
+
+def plan_coordinate(points: Float[Array, "n 3"], plan: PointPlan, pose: Pose, sun: Sun, range_k,
+                    rule: str = "edge", with_slope: bool = False):
+    """Normalised penumbra coordinate u (n,) at the plan's points (+1 outer, -1 inner silhouette).
+
+    Outside the penumbra bands u is +-1e6 from the hard shadow, so any profile
+    gives alpha 0 or 1 there. Use with ``profile_alpha`` (possibly blurred).
+    With ``with_slope`` also returns du/dT (see ``penumbra_coordinate``), 0 outside bands.
+    """
+    edges = plan.edges
+    ev = pose.apply(edges.vertices_local)
+    paper = pose.apply_direction(edges.paper_normal_local) if rule == "paper" else None
+    u, slope = edge_coordinate(points, plan.edge_id, ev, edges.outward_sign, sun.light, range_k,
+                               plan.hard, rule, paper, with_slope=True)
+    u = jnp.where(plan.active, u, jnp.where(plan.hard > 0.5, -1e6, 1e6))
+    if with_slope:
+        return u, jnp.where(plan.active, slope, 0.0)
+    return u
 
 
 plan_alpha_jit = jax.jit(plan_alpha, static_argnames=("rule", "profile"))

@@ -67,11 +67,17 @@ class CameraRender:
     ground_points: np.ndarray
 
 
-def object_mask(occ: Occluder, pose: Pose, camera: PinholeCamera) -> np.ndarray:
-    """Pixels (H, W) where the posed mesh hides the receiver from the camera (NumPy/OpenCV)."""
+def object_mask(occ: Occluder, pose: Pose, camera: PinholeCamera | GroundGrid) -> np.ndarray:
+    """Pixels (H, W) where the posed mesh hides the receiver (NumPy/OpenCV).
+
+    For a top-down ground map, the mesh seen straight down (its footprint from above).
+    """
     world = posed_vertices(occ.vertices, np.asarray(pose.position, np.float64),
                            np.asarray(pose.rotation, np.float64), float(pose.scale))
-    uv, front = camera.project(world)
+    if isinstance(camera, GroundGrid):
+        uv, front = camera.to_pixel(world), np.ones(len(world), bool)
+    else:
+        uv, front = camera.project(world)
     mask = np.zeros((camera.height, camera.width), np.uint8)
     faces = occ.faces[np.all(front[occ.faces], axis=1)]
     tri = np.rint(uv[faces] * 16).astype(np.int64)

@@ -82,6 +82,9 @@ class CameraSpec:
                        square_m=self.square_m, marker_m=self.marker_m)
             if self.origin_m is not None:
                 out["origin_m"] = _lists(self.origin_m)
+            for key in ("K", "dist"):
+                if getattr(self, key) is not None:
+                    out[key] = _lists(getattr(self, key))
         return out
 
 

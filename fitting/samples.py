@@ -1,0 +1,184 @@
+"""Choosing the pixels a fit looks at: a band around the predicted shadow boundary (NumPy/OpenCV).
+
+Only pixels near the shadow's edge carry information about k; pixels in the
+umbra and on the lit ground fix rho and the lit level. The band is centred on
+the hard-shadow boundary predicted from the mesh, pose and sun, and is wide
+enough for the largest penumbra allowed (``range_k_max``) plus the sun's
+uncertainty. The object itself, saturated pixels and masked pixels are left
+out; the albedo class (the white paper against the ground) is found per pixel.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import cv2
+import numpy as np
+
+from softshadow.params import Pose, Sun
+from softshadow.plan import PointPlan, edge_band_widths, plan_points
+from softshadow.raster import project_to_ground
+from softshadow.occluder import silhouette
+from softshadow.render import SoftShadowModel, object_mask
+
+from .views import PhotoView
+
+__all__ = ["PhotoSamples", "select_samples", "NoShadowInView", "paper_mask"]
+
+
+class NoShadowInView(ValueError):
+    """The predicted shadow boundary does not fall inside the usable part of the photo."""
+
+
+@dataclasses.dataclass
+class PhotoSamples:
+    """Pixels of one photo used by the fit.
+
+    uv (n, 2) pixel (col, row); ground (n, 3); jac (n, 2, 2) ground metres per pixel;
+    observed (n,) linear gray; albedo_class (n,) 0 paper / 1 other; uv_norm (n, 2) in
+    [-0.5, 0.5]; profile_id (n,) nearest boundary sample; plan: the discrete choices.
+    """
+
+    name: str
+    uv: np.ndarray
+    ground: np.ndarray
+    jac: np.ndarray
+    observed: np.ndarray
+    albedo_class: np.ndarray
+    uv_norm: np.ndarray
+    profile_id: np.ndarray
+    plan: PointPlan
+    n_profiles: int
+    band_px: int
+
+
+def paper_mask(gray: np.ndarray, exclude: np.ndarray) -> np.ndarray | None:
+    """The white sheet (H, W) bool: the convex hull of large bright, smooth regions, or None.
+
+    Found when the image's brightness is clearly bimodal (paper at least 1.5x the
+    ground); the hull closes the parts the shadow hides.
+    """
+    usable = ~exclude & np.isfinite(gray)
+    if usable.sum() < 100:
+        return None
+    values = gray[usable]
+    scale = np.percentile(values, 99.5)
+    if not scale > 0:
+        return None
+    img8 = np.clip(gray / scale * 255, 0, 255).astype(np.uint8)
+    thr, _ = cv2.threshold(img8[usable].reshape(-1, 1), 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
+    bright = (img8 > thr) & usable
+    dark_med = np.median(values[values * 255 / scale <= thr]) if np.any(values * 255 / scale <= thr) else 0
+    bright_med = np.median(values[values * 255 / scale > thr]) if bright.any() else 0
+    if not (bright_med > 1.5 * max(dark_med, 1e-9)):
+        return None
+    # Smooth: low local variation relative to brightness (paper, not specular clutter).
+    blur = cv2.GaussianBlur(gray.astype(np.float32), (0, 0), 2.0)
+    var = cv2.GaussianBlur((gray.astype(np.float32) - blur) ** 2, (0, 0), 2.0)
+    smooth = np.sqrt(np.maximum(var, 0)) < 0.08 * np.maximum(blur, 1e-9)
+    region = (bright & smooth).astype(np.uint8)
+    region = cv2.morphologyEx(region, cv2.MORPH_OPEN, np.ones((5, 5), np.uint8))
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(region, connectivity=8)
+    keep = [i for i in range(1, n) if stats[i, cv2.CC_STAT_AREA] >= 0.002 * gray.size]
+    if not keep:
+        return None
+    pts = np.column_stack(np.nonzero(np.isin(labels, keep))[::-1]).astype(np.int32)
+    hull = cv2.convexHull(pts)
+    mask = np.zeros(gray.shape, np.uint8)
+    cv2.fillConvexPoly(mask, hull, 1)
+    return mask.astype(bool)
+
+
+def _boundary_ground_points(model: SoftShadowModel, pose: Pose, sun: Sun, spacing_m: float):
+    """Points along the projected silhouette (M, 3) and their edge's ground width per unit k."""
+    occ = model.occluder
+    rotation = np.asarray(pose.rotation, np.float64)
+    world = (float(pose.scale) * occ.vertices) @ rotation.T + np.asarray(pose.position, np.float64)
+    light = np.asarray(sun.light, np.float64)
+    sil = silhouette(occ, world, rotation, light)
+    if not len(sil.vertex_ids):
+        return np.zeros((0, 3)), np.zeros(0), world, light, sil
+    a, b = world[sil.vertex_ids[:, 0]], world[sil.vertex_ids[:, 1]]
+    ga, gb = project_to_ground(a, light), project_to_ground(b, light)
+    n = np.maximum(np.ceil(np.linalg.norm(gb - ga, axis=1) / spacing_m).astype(int), 1) + 1
+    seg = np.repeat(np.arange(len(a)), n)
+    frac = (np.arange(len(seg)) - np.repeat(np.cumsum(n) - n, n)) / np.repeat(n - 1, n)
+    pts2 = ga[seg] + frac[:, None] * (gb[seg] - ga[seg])
+    t = b - a
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    outward = np.cross(t, light)
+    outward /= np.maximum(np.linalg.norm(outward, axis=1, keepdims=True), 1e-12)
+    width_per_k = edge_band_widths(a, b, outward, light, 1e-3) / 1e-3
+    pts = np.column_stack([pts2, np.zeros(len(pts2))])
+    return pts, width_per_k[seg], world, light, sil
+
+
+def select_samples(model: SoftShadowModel, pose: Pose, view: PhotoView, range_k_max: float = 0.03,
+                   sun_margin_deg: float = 0.3, max_samples: int = 12000, seed: int = 0,
+                   min_band_px: int = 5, max_band_px: int = 80) -> PhotoSamples:
+    """Pixels in a band around the predicted shadow boundary of one photo.
+
+    Raises NoShadowInView when no usable boundary pixel is in the frame.
+    """
+    h, w = view.shape
+    sun = Sun(view.sun_azimuth_deg, view.sun_elevation_deg)
+    # Boundary points on the ground, about one image pixel apart.
+    mid = view.ground_of_pixels(np.array([w / 2]), np.array([h / 2]))
+    probe_jac = mid[2][0] if mid[1][0] else np.eye(2) * 0.005
+    spacing = max(float(np.abs(probe_jac).max()), 1e-4)
+    bpts, width_per_k, world, light, sil = _boundary_ground_points(model, pose, sun, spacing)
+    if not len(bpts):
+        raise NoShadowInView("the mesh casts no shadow edge for this sun")
+    # Keep only points on the hard shadow's boundary (not silhouette lines inside the shadow).
+    plan_b = model.plan_points(sun, pose, bpts, range_k_max=1e-4, pixel_m=spacing)
+    on_boundary = np.asarray(plan_b.active)[:len(bpts)]
+    uvb, ok = view.project(bpts)
+    inside = ok & (uvb[:, 0] >= 0) & (uvb[:, 0] <= w - 1) & (uvb[:, 1] >= 0) & (uvb[:, 1] <= h - 1)
+    keep = on_boundary & inside
+    if not keep.any():
+        raise NoShadowInView("the predicted shadow boundary is outside the photo")
+    bpts, uvb, width_per_k = bpts[keep], uvb[keep], width_per_k[keep]
+    # Band half-width in pixels: the widest allowed penumbra plus the sun's uncertainty.
+    _, _, jac_b = view.ground_of_pixels(uvb[:, 0], uvb[:, 1])
+    px_size = np.maximum(np.sqrt(np.abs(np.linalg.det(jac_b))), 1e-6)
+    depth = width_per_k / 2.0  # ground width per unit k ~ 2 d
+    sun_shift = np.deg2rad(sun_margin_deg) * depth * 2
+    half = np.ceil((0.75 * range_k_max * width_per_k + sun_shift) / px_size) + 3
+    band_px = int(np.clip(np.percentile(half, 90), min_band_px, max_band_px))
+    boundary_img = np.zeros((h, w), np.uint8)
+    ib = np.rint(uvb).astype(int)
+    boundary_img[ib[:, 1], ib[:, 0]] = 1
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * band_px + 1, 2 * band_px + 1))
+    band = cv2.dilate(boundary_img, kernel) > 0
+    exclude = view.saturated.copy() | ~np.isfinite(view.gray)
+    if view.ignore is not None:
+        exclude |= view.ignore
+    obj = object_mask(model.occluder, pose, view.camera if view.camera is not None else view.grid)
+    exclude |= cv2.dilate(obj.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
+    paper = paper_mask(view.gray, exclude)
+    if paper is not None:
+        edge = cv2.morphologyEx(paper.astype(np.uint8), cv2.MORPH_GRADIENT, np.ones((7, 7), np.uint8)) > 0
+        exclude |= edge
+    rows, cols = np.nonzero(band & ~exclude)
+    if len(rows) < 50:
+        raise NoShadowInView(f"only {len(rows)} usable pixels near the predicted shadow boundary")
+    rng = np.random.default_rng(seed)
+    if len(rows) > max_samples:
+        pick = np.sort(rng.choice(len(rows), max_samples, replace=False))
+        rows, cols = rows[pick], cols[pick]
+    ground, valid, jac = view.ground_of_pixels(cols, rows)
+    rows, cols, ground, jac = rows[valid], cols[valid], ground[valid], jac[valid]
+    # Profile id: the nearest boundary point (every 8th one counts as a profile).
+    from scipy.spatial import cKDTree
+    _, nearest = cKDTree(uvb).query(np.column_stack([cols, rows]))
+    stride = max(1, len(uvb) // 400)
+    profile_id = nearest // stride
+    plan = model.plan_points(sun, pose, ground, range_k_max=range_k_max * 1.5,
+                             pixel_m=float(np.median(px_size)) / 2)
+    uv = np.column_stack([cols, rows]).astype(np.float64)
+    return PhotoSamples(
+        name=view.name, uv=uv, ground=ground, jac=jac,
+        observed=view.gray[rows, cols].astype(np.float64),
+        albedo_class=(np.zeros(len(rows), int) if paper is None else (~paper[rows, cols]).astype(int)),
+        uv_norm=np.column_stack([cols / w - 0.5, rows / h - 0.5]),
+        profile_id=profile_id, plan=plan, n_profiles=int(len(np.unique(profile_id))), band_px=band_px)
