@@ -1,0 +1,301 @@
+"""Plots of a fit (PNG, matplotlib's Agg canvas, no pyplot state).
+
+- ``plot_group``: per group, observed against fitted values across the shadow edge
+  (OUT_DIR/plots/<label>_profiles.png) and the fitted shadow over each photo
+  (OUT_DIR/plots/<label>_overlay_<photo stem>.png).
+- ``plot_range_vs_time``: range and brightness against time of day
+  (OUT_DIR/plots/range_vs_time.png).
+
+Figures are built on ``matplotlib.figure.Figure`` directly, so plotting works in
+threads and never touches the user's pyplot backend.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+from matplotlib.figure import Figure
+from matplotlib.ticker import MultipleLocator
+from matplotlib.transforms import offset_copy
+
+from .report import (_minutes, _time_order, brightness_stderr, range_stderr_paper,
+                     reference_for_group, truth_for_group)
+from softshadow.params import brightness_to_paper, range_to_paper
+from .results import FitResults, GroupResult, OverlayPlotData, ProfilePlotData
+
+__all__ = ["safe_name", "plot_group", "plot_profiles", "plot_overlay", "plot_range_vs_time",
+           "MAX_OVERLAY_SIDE"]
+
+#: Overlays show the photo downsampled to at most this many pixels on its longer side.
+MAX_OVERLAY_SIDE = 800
+#: At most this many individual profiles are drawn as lines per photo (the rest only as dots).
+MAX_PROFILE_LINES = 60
+_DPI = 100
+
+
+def safe_name(text: str) -> str:
+    """A file-name-safe version of a label or photo stem: ':' becomes '-', anything but
+    letters, digits, '.', '_' and '-' becomes '_' ('09:20' -> '09-20')."""
+    name = re.sub(r"[^A-Za-z0-9._-]", "_", str(text).replace(":", "-")).strip(".")
+    return name or "group"
+
+
+def _plots_dir(out_dir) -> Path:
+    path = Path(out_dir) / "plots"
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def _save(fig: Figure, path: Path) -> Path:
+    """Save atomically (temporary name in the same folder, then replace)."""
+    tmp = path.with_name(f".{path.name}.tmp.png")
+    try:
+        fig.savefig(tmp, dpi=_DPI)
+        tmp.replace(path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return path
+
+
+def _has_profile_data(p: ProfilePlotData) -> bool:
+    return np.asarray(p.distance_px).size > 0 and np.asarray(p.observed).size > 0
+
+
+def _has_overlay_data(o: OverlayPlotData) -> bool:
+    image = np.asarray(o.image)
+    return image.ndim >= 2 and image.shape[0] > 0 and image.shape[1] > 0
+
+
+# --------------------------------------------------------------------------- profiles
+
+def _binned_median(x: np.ndarray, y: np.ndarray, n_bins: int = 40) -> tuple[np.ndarray, np.ndarray]:
+    """Median of y in equal-width bins of x (bins with no sample dropped)."""
+    ok = np.isfinite(x) & np.isfinite(y)
+    x, y = x[ok], y[ok]
+    if x.size == 0:
+        return np.empty(0), np.empty(0)
+    edges = np.linspace(x.min(), x.max(), n_bins + 1)
+    which = np.clip(np.digitize(x, edges) - 1, 0, n_bins - 1)
+    centres, medians = [], []
+    for b in range(n_bins):
+        sel = which == b
+        if sel.any():
+            centres.append(0.5 * (edges[b] + edges[b + 1]))
+            medians.append(np.median(y[sel]))
+    return np.asarray(centres), np.asarray(medians)
+
+
+def plot_profiles(group: GroupResult, out_dir) -> Path | None:
+    """OUT_DIR/plots/<label>_profiles.png: per photo, observed (dots) and fitted values
+    against the signed distance to the fitted boundary (px, positive = lit), the
+    individual observed profiles as faint lines and binned medians of both as lines.
+    None when the group has no profile data."""
+    data = [p for p in group.plot_profiles if _has_profile_data(p)]
+    if not data:
+        return None
+    n = len(data)
+    cols = min(n, 3)
+    rows = math.ceil(n / cols)
+    fig = Figure(figsize=(4.2 * cols, 3.2 * rows + 0.4), layout="constrained")
+    axes = fig.subplots(rows, cols, squeeze=False, sharey=True)
+    for ax, p in zip(axes.flat, data):
+        d = np.asarray(p.distance_px, float).ravel()
+        obs = np.asarray(p.observed, float).ravel()
+        fit = np.asarray(p.fitted, float).ravel()
+        ids = np.asarray(p.profile_id).ravel()
+        if ids.size == d.size:
+            for pid in np.unique(ids)[:MAX_PROFILE_LINES]:
+                sel = ids == pid
+                order = np.argsort(d[sel])
+                ax.plot(d[sel][order], obs[sel][order], color="0.6", lw=0.5, alpha=0.35, zorder=1)
+        ax.scatter(d, obs, s=3, color="tab:blue", alpha=0.35, lw=0, label="observed", zorder=2)
+        if fit.size == d.size:
+            ax.scatter(d, fit, s=2, color="tab:orange", alpha=0.5, lw=0, label="fitted", zorder=3)
+            ax.plot(*_binned_median(d, fit), color="tab:red", lw=1.5, label="fitted (median)", zorder=5)
+        ax.plot(*_binned_median(d, obs), color="navy", lw=1.5, label="observed (median)", zorder=4)
+        ax.axvline(0.0, color="k", lw=0.6, ls="--")
+        ax.set_title(p.photo, fontsize=9)
+        ax.set_xlabel("signed distance to boundary [px] (lit > 0)")
+        ax.grid(alpha=0.3)
+    for ax in axes[:, 0]:
+        ax.set_ylabel("value / lit level (linear)")
+    for ax in list(axes.flat)[n:]:
+        ax.set_visible(False)
+    axes.flat[0].legend(fontsize=7, loc="lower right", markerscale=3)
+    fig.suptitle(_group_title(group), fontsize=10)
+    return _save(fig, _plots_dir(out_dir) / f"{safe_name(group.label)}_profiles.png")
+
+
+def _group_title(g: GroupResult) -> str:
+    parts = [g.label if g.time in (None, g.label) else f"{g.label} ({g.time})"]
+    if g.range_k is not None:
+        bound = "≤ " if not g.identifiable else ""
+        parts.append(f"range {bound}{g.range:.2f} (k {bound}{g.range_k:.4g})")
+    if g.rho is not None:
+        parts.append(f"brightness {g.brightness:.1f} (ρ {g.rho:.3g})")
+    return ", ".join(parts)
+
+
+# --------------------------------------------------------------------------- overlay
+
+def _display(image: np.ndarray) -> np.ndarray:
+    """Linear gray -> [0, 1] display values: scaled to its 99.5th percentile, sRGB-like
+    gamma so shadows stay visible."""
+    img = np.asarray(image, float)
+    if img.ndim == 3:
+        img = img[..., :3].mean(axis=-1)
+    finite = img[np.isfinite(img)]
+    top = np.percentile(finite, 99.5) if finite.size else 1.0
+    top = top if top > 0 else 1.0
+    return np.clip(np.nan_to_num(img / top, nan=0.0), 0.0, 1.0) ** (1 / 2.2)
+
+
+def plot_overlay(group: GroupResult, overlay: OverlayPlotData, out_dir, stem: str | None = None) -> Path | None:
+    """OUT_DIR/plots/<label>_overlay_<photo stem>.png: the photo in gray, the fitted
+    alpha as a translucent colour overlay, the fitted boundary (alpha = 0.5) as a
+    contour, and the fit's sample pixels as tiny dots. Big photos are shown with a
+    stride so the longer side is at most MAX_OVERLAY_SIDE; coordinates stay in the
+    photo's pixels. None when there is no image."""
+    if not _has_overlay_data(overlay):
+        return None
+    image = np.asarray(overlay.image)
+    h, w = image.shape[:2]
+    step = max(1, math.ceil(max(h, w) / MAX_OVERLAY_SIDE))
+    gray = _display(image[::step, ::step])
+    # Pixel centres at integers (OpenCV convention); a strided pixel covers `step` pixels.
+    extent = (-0.5, -0.5 + step * gray.shape[1], -0.5 + step * gray.shape[0], -0.5)
+
+    aspect = h / w
+    width_in = 7.0
+    fig = Figure(figsize=(width_in, width_in * aspect + 0.6), layout="constrained")
+    ax = fig.subplots()
+    ax.imshow(gray, cmap="gray", vmin=0.0, vmax=1.0, extent=extent, interpolation="nearest")
+
+    alpha = np.asarray(overlay.alpha, float)
+    if alpha.shape[:2] == (h, w):
+        a = alpha[::step, ::step]
+        a_clip = np.clip(np.nan_to_num(a, nan=0.0), 0.0, 1.0)
+        rgba = np.zeros(a.shape + (4,))
+        rgba[..., 0], rgba[..., 2] = 1.0, 0.2  # magenta-red: stands out on gray
+        rgba[..., 3] = 0.4 * a_clip * np.isfinite(a)
+        ax.imshow(rgba, extent=extent, interpolation="nearest")
+        if np.isfinite(a).any() and np.nanmin(a) < 0.5 < np.nanmax(a):
+            ys = np.arange(a.shape[0]) * step
+            xs = np.arange(a.shape[1]) * step
+            ax.contour(xs, ys, np.where(np.isfinite(a), a, np.nan), levels=[0.5],
+                       colors="yellow", linewidths=0.8)
+    uv = np.asarray(overlay.samples_uv, float).reshape(-1, 2) if np.size(overlay.samples_uv) else np.empty((0, 2))
+    if len(uv):
+        ax.scatter(uv[:, 0], uv[:, 1], s=0.3, color="cyan", lw=0, alpha=0.7)
+    ax.set_xlim(extent[0], extent[1])
+    ax.set_ylim(extent[2], extent[3])
+    ax.set_title(f"{_group_title(group)}\n{overlay.photo}: fitted alpha (red), "
+                 f"boundary alpha=0.5 (yellow), samples (cyan)", fontsize=8)
+    ax.set_xlabel("u [px]")
+    ax.set_ylabel("v [px]")
+    stem = stem if stem is not None else safe_name(Path(overlay.photo).stem)
+    return _save(fig, _plots_dir(out_dir) / f"{safe_name(group.label)}_overlay_{stem}.png")
+
+
+def plot_group(group: GroupResult, out_dir) -> list[Path]:
+    """The profile plot and one overlay per photo of a group; [] when it has no plot data."""
+    written = []
+    p = plot_profiles(group, out_dir)
+    if p is not None:
+        written.append(p)
+    stems: dict[str, int] = {}
+    for overlay in group.plot_overlays:
+        stem = safe_name(Path(overlay.photo).stem)
+        # Two photos with one stem (a.jpg and a.dng) must not overwrite each other.
+        stems[stem] = stems.get(stem, 0) + 1
+        if stems[stem] > 1:
+            stem = f"{stem}_{stems[stem]}"
+        p = plot_overlay(group, overlay, out_dir, stem=stem)
+        if p is not None:
+            written.append(p)
+    return written
+
+
+# --------------------------------------------------------------------------- range vs time
+
+def _hhmm(minutes: float, _pos=None) -> str:
+    minutes = int(round(minutes))
+    return f"{minutes // 60:02d}:{minutes % 60:02d}"
+
+
+def plot_range_vs_time(results: FitResults, out_dir, reference: Mapping | None = None,
+                       truth: Mapping | None = None) -> Path | None:
+    """OUT_DIR/plots/range_vs_time.png: range (100 k) and brightness (255 rho^(1/2.2))
+    against time of day, one-sigma error bars, upper bounds as down-arrows; reference
+    and truth values as open markers when given. None when no fitted group has a time."""
+    groups = [g for g in _time_order(results.groups) if g.fitted and _minutes(g.time) is not None]
+    if not groups:
+        return None
+    t = np.array([_minutes(g.time) for g in groups])
+    fig = Figure(figsize=(6.5, 5.5), layout="constrained")
+    ax_r, ax_b = fig.subplots(2, 1, sharex=True)
+
+    # Range: measured points with error bars, upper bounds as arrows pointing down.
+    with_range = [(tm, g) for tm, g in zip(t, groups) if g.range_k is not None]
+    measured = [(tm, g) for tm, g in with_range if g.identifiable]
+    bounds = [(tm, g) for tm, g in with_range if not g.identifiable]
+    if measured:
+        ax_r.errorbar([tm for tm, _ in measured], [g.range for _, g in measured],
+                      yerr=[range_stderr_paper(g) or 0.0 for _, g in measured],
+                      fmt="o", color="tab:blue", capsize=3, label="fitted")
+    # The arrow's length is fixed in points so it shows whatever the axis range.
+    arrow_head = offset_copy(ax_r.transData, fig=fig, y=-24, units="points")
+    for tm, g in bounds:
+        ax_r.annotate("", xy=(tm, g.range), xycoords=arrow_head, xytext=(tm, g.range),
+                      textcoords="data", annotation_clip=False,
+                      arrowprops=dict(arrowstyle="-|>", color="tab:blue", lw=1.2,
+                                      shrinkA=0, shrinkB=0))
+        ax_r.plot([tm], [g.range], marker="_", ms=12, mew=2, color="tab:blue")
+    if bounds:
+        ax_r.plot([], [], marker="v", ls="", color="tab:blue", label="upper bound")
+    if not with_range:
+        ax_r.text(0.5, 0.5, "no range: no scene geometry", transform=ax_r.transAxes,
+                  ha="center", va="center", color="0.4")
+
+    b_pts = [(tm, g) for tm, g in zip(t, groups) if g.rho is not None]
+    ax_b.errorbar([tm for tm, _ in b_pts], [g.brightness for _, g in b_pts],
+                  yerr=[brightness_stderr(g.rho, g.rho_stderr) or 0.0 for _, g in b_pts],
+                  fmt="o", color="tab:blue", capsize=3, label="fitted")
+
+    refs = [(tm, reference_for_group(g, reference)) for tm, g in zip(t, groups)]
+    refs = [(tm, r) for tm, r in refs if r is not None]
+    if refs:
+        ax_r.plot([tm for tm, _ in refs], [r[0] for _, r in refs], "s", mfc="none",
+                  color="tab:green", label="reference")
+        ax_b.plot([tm for tm, _ in refs], [r[1] for _, r in refs], "s", mfc="none",
+                  color="tab:green", label="reference")
+    truths = [(tm, truth_for_group(g, truth)) for tm, g in zip(t, groups)]
+    truths = [(tm, tr) for tm, tr in truths if tr is not None]
+    tk = [(tm, tr["range_k"]) for tm, tr in truths if tr.get("range_k") is not None]
+    tr_ = [(tm, tr["rho"]) for tm, tr in truths if tr.get("rho") is not None]
+    if tk:
+        ax_r.plot([a for a, _ in tk], [range_to_paper(k) for _, k in tk], "D", mfc="none",
+                  color="tab:red", label="truth")
+    if tr_:
+        ax_b.plot([a for a, _ in tr_], [brightness_to_paper(max(r, 0.0)) for _, r in tr_], "D",
+                  mfc="none", color="tab:red", label="truth")
+
+    ax_r.set_ylabel("range of the soft shadow\n(100 k)")
+    ax_b.set_ylabel("brightness of the shadow\n(255 ρ^(1/2.2))")
+    ax_r.set_ylim(bottom=0.0)
+    ax_b.set_ylim(0.0, 255.0)
+    ax_b.set_xlabel("time of day")
+    span_h = (t.max() - t.min()) / 60.0
+    ax_b.xaxis.set_major_locator(MultipleLocator(60.0 * max(1, math.ceil(span_h / 6))))
+    ax_b.xaxis.set_major_formatter(_hhmm)
+    pad = max(30.0, 0.1 * (t.max() - t.min()))
+    ax_b.set_xlim(t.min() - pad, t.max() + pad)
+    for ax in (ax_r, ax_b):
+        ax.grid(alpha=0.3)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=8)
+    return _save(fig, _plots_dir(out_dir) / "range_vs_time.png")
