@@ -1,0 +1,272 @@
+"""Fitting photo folders: ``fit_folder`` (files) and ``fit_photos`` (images in memory).
+
+Reads the photos, groups them into times of day, resolves each photo's camera
+and sun, fits each group, and returns ``FitResults``. A bad photo or group
+never stops the others: each gets a one-line reason in ``skipped`` or in its
+group. With ``out_dir`` every finished group is written at once to
+``out_dir/groups/``, so an interrupted run loses nothing and resumes there.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import dataclasses
+import datetime as _dt
+import json
+import re
+import time as _time
+from pathlib import Path
+from typing import Callable
+
+import cv2
+import jax
+import numpy as np
+
+from softshadow.meshes import MeshError
+from softshadow.params import Pose
+from softshadow.render import SoftShadowModel
+from softshadow.scene_io import CameraSpec, SceneError, SceneSpec, load_scene
+from softshadow.sun import SunBelowHorizonError, check_sun_above_horizon, solar_position
+
+from .exif import intrinsics_from_exif, read_exif
+from .grouping import PhotoGroup, group_photos, photo_time
+from .photos import Photo, PhotoError, list_photos, read_photo
+from .results import FitResults, GroupResult
+from .solve import FitOptions, fit_group
+from .views import PhotoView
+
+__all__ = ["fit_folder", "fit_photos", "FolderError"]
+
+
+class FolderError(ValueError):
+    """The folder as a whole cannot be fitted (no images, unreadable scene.toml)."""
+
+
+def _enable_x64():
+    jax.config.update("jax_enable_x64", True)
+
+
+def _safe_label(label: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", label).strip("_") or "group"
+
+
+def _software() -> dict:
+    from importlib.metadata import PackageNotFoundError, version
+    out = {}
+    for name in ("softshadow", "jax", "optimistix", "numpy", "opencv-contrib-python-headless"):
+        try:
+            out[name] = version(name)
+        except PackageNotFoundError:
+            pass
+    return out
+
+
+def _camera_view(photo: Photo, spec: CameraSpec | None, view: PhotoView) -> None:
+    """Fill the view's camera or grid from the scene; markers are registered here."""
+    h, w = photo.gray.shape
+    if spec is None:
+        raise ValueError("no camera: give [camera] (explicit, topdown or markers) in scene.toml")
+    if spec.kind == "topdown":
+        view.grid = spec.grid(w, h)
+    elif spec.kind == "explicit":
+        cam = spec.pinhole(w, h)
+        view.camera = cam
+    else:
+        from .markers import board_outline_world, register_board
+        K = np.asarray(spec.K) if spec.K is not None else intrinsics_from_exif(photo.exif, w, h)
+        reg = register_board(photo.gray, spec, K=K, exif=photo.exif)
+        view.camera = reg.camera
+        view.reprojection_error_px = reg.reprojection_error_px
+        outline = board_outline_world(spec)
+        uv, front = reg.camera.project(outline)
+        ignore = np.zeros((h, w), np.uint8)
+        if front.all():
+            cv2.fillConvexPoly(ignore, np.rint(uv).astype(np.int32), 1)
+            ignore = cv2.dilate(ignore, np.ones((9, 9), np.uint8))
+        view.ignore = ignore.astype(bool)
+
+
+def _sun_view(name: str, when: _dt.datetime | None, scene: SceneSpec, view: PhotoView) -> None:
+    spec = scene.photo(name)
+    if spec.sun_azimuth_deg is not None and spec.sun_elevation_deg is not None:
+        view.sun_azimuth_deg, view.sun_elevation_deg = spec.sun_azimuth_deg, spec.sun_elevation_deg
+        view.sun_source = "given"
+    elif when is not None and scene.site is not None and when.tzinfo is not None:
+        view.sun_azimuth_deg, view.sun_elevation_deg = solar_position(
+            when, scene.site.latitude, scene.site.longitude, scene.site.altitude_m)
+        view.sun_source = "time+site"
+    else:
+        view.sun_source = "fitted"
+        return
+    check_sun_above_horizon(view.sun_elevation_deg)
+
+
+def _fit_group_with_sun(model, pose, views, group: PhotoGroup, options: FitOptions) -> GroupResult:
+    """Fit a group; when the sun is unknown, search for it coarsely, then fit and re-plan."""
+    if all(v.sun_source != "fitted" for v in views):
+        return fit_group(model, pose, views, group.label, group.time, options)
+    from .sun_search import search_sun
+    az, el, _ = search_sun(model, pose, views[0])
+    for v in views:
+        v.sun_azimuth_deg, v.sun_elevation_deg = az, el
+    result = None
+    for _ in range(3):  # re-plan around the refined sun
+        result = fit_group(model, pose, views, group.label, group.time, options)
+        if not result.fitted:
+            return result
+        moved = abs(result.sun_azimuth_deg - views[0].sun_azimuth_deg) + abs(
+            result.sun_elevation_deg - views[0].sun_elevation_deg)
+        for v in views:
+            v.sun_azimuth_deg, v.sun_elevation_deg = result.sun_azimuth_deg, result.sun_elevation_deg
+        if moved < 0.05:
+            break
+    return result
+
+
+def _measure_without_scene(photo: Photo, when, scene: SceneSpec | None) -> GroupResult:
+    from .edge_measure import measure_shadow_edges
+    start = _time.perf_counter()
+    label = photo.name
+    time_label = when.strftime("%H:%M") if when is not None else None
+    result = GroupResult(label=label, time=time_label, photos=[photo.name])
+    pixel_m = None
+    if scene is not None and scene.camera is not None and scene.camera.kind == "topdown":
+        pixel_m = scene.camera.pixel_m
+    m = measure_shadow_edges(photo.gray, mask=photo.saturated, pixel_m=pixel_m)
+    result.seconds = _time.perf_counter() - start
+    if not m.edges_found:
+        result.error = m.reason or "no shadow edge found"
+        return result
+    result.rho, result.rho_stderr = float(m.rho), float(m.rho_stderr)
+    result.penumbra_px, result.penumbra_px_iqr = float(m.penumbra_px), float(m.penumbra_px_iqr)
+    result.penumbra_m = None if m.penumbra_m is None else float(m.penumbra_m)
+    result.n_profiles = int(m.n_profiles)
+    result.converged = True
+    result.identifiable = True
+    return result
+
+
+def fit_photos(photos: list[Photo], scene: SceneSpec | None = None, options: FitOptions | None = None,
+               half_size: bool = False, progress: Callable | None = None,
+               done: dict[str, GroupResult] | None = None,
+               on_group: Callable[[GroupResult], None] | None = None) -> FitResults:
+    """Fit photos already decoded (``fitting.photos.read_photo``) with an optional scene.
+
+    done: results of groups already fitted (by label), reused when their photos match.
+    on_group: called with each group's result as soon as it is finished.
+    """
+    _enable_x64()
+    options = options or FitOptions()
+    skipped: list[dict] = []
+    by_name = {p.name: p for p in photos}
+    times = {}
+    for p in photos:
+        try:
+            times[p.name] = photo_time(p.name, p.exif, scene)
+        except SceneError as exc:
+            times[p.name] = None
+            skipped.append({"photo": p.name, "reason": str(exc)})
+    groups_out: list[GroupResult] = []
+    if scene is None or scene.object is None:
+        # No geometry: each photo on its own (CONVENTIONS).
+        for p in photos:
+            result = _measure_without_scene(p, times.get(p.name), scene)
+            groups_out.append(result)
+            if on_group:
+                on_group(result)
+        return FitResults(groups_out, skipped, _software())
+    try:
+        model = SoftShadowModel.from_mesh(scene.object.mesh, rule=options.rule, base_dir=scene.base_dir)
+    except MeshError as exc:
+        raise FolderError(f"cannot use the mesh: {exc}") from exc
+    pose = Pose(scene.object.position, scene.object.rotation_deg, scene.object.scale)
+    explicit = {n: scene.photo(n).group for n in by_name if scene.photo(n).group}
+    groups, no_time = group_photos({n: times.get(n) for n in by_name}, explicit)
+    skipped += [{"photo": n, "reason": r} for n, r in no_time]
+    iterator = progress(groups) if progress else groups
+    for group in iterator:
+        if done and group.label in done and sorted(done[group.label].photos) == sorted(group.photos):
+            groups_out.append(done[group.label])
+            continue
+        views = []
+        for name in group.photos:
+            photo = by_name[name]
+            view = PhotoView(name, photo.gray, photo.saturated, time=times.get(name))
+            try:
+                _camera_view(photo, scene.camera_for(name), view)
+                _sun_view(name, times.get(name), scene, view)
+            except (SunBelowHorizonError, SceneError, ValueError) as exc:
+                skipped.append({"photo": name, "reason": str(exc).splitlines()[0]})
+                continue
+            views.append(view)
+        kept = [v.name for v in views]
+        if not views:
+            result = GroupResult(group.label, group.time, group.photos,
+                                 error="no usable photo in this group (see skipped)")
+        else:
+            try:
+                result = _fit_group_with_sun(model, pose, views, PhotoGroup(group.label, group.time, kept),
+                                             options)
+            except Exception as exc:  # a failed group must not lose the others
+                result = GroupResult(group.label, group.time, kept,
+                                     error=f"fit failed: {type(exc).__name__}: {exc}".splitlines()[0])
+        groups_out.append(result)
+        if on_group:
+            on_group(result)
+    return FitResults(groups_out, skipped, _software())
+
+
+def fit_folder(path, scene: SceneSpec | str | Path | None = None, options: FitOptions | None = None,
+               out_dir=None, force: bool = False, half_size: bool = False,
+               progress: Callable | None = None) -> FitResults:
+    """Fit every time of day in a photo folder.
+
+    scene: a SceneSpec, a path to a scene.toml, or None to read ``path/scene.toml`` if any.
+    out_dir: when given, finished groups are kept in ``out_dir/groups/*.json`` as they
+    finish and reused on the next run (``force`` refits them).
+    Raises FolderError when nothing in the folder can be read.
+    """
+    folder = Path(path)
+    if not folder.is_dir():
+        raise FolderError(f"{folder} is not a folder")
+    if scene is None and (folder / "scene.toml").exists():
+        scene = folder / "scene.toml"
+    if isinstance(scene, (str, Path)):
+        try:
+            scene = load_scene(scene)
+        except SceneError as exc:
+            raise FolderError(str(exc)) from exc
+    files, skipped_files = list_photos(folder)
+    skipped = [{"photo": n, "reason": r} for n, r in skipped_files]
+    photos = []
+    for f in files:
+        try:
+            photos.append(read_photo(f, half_size=half_size))
+        except PhotoError as exc:
+            skipped.append({"photo": f.name, "reason": exc.reason})
+    if not photos:
+        reasons = "; ".join(f"{s['photo']}: {s['reason']}" for s in skipped) or "no image files"
+        raise FolderError(f"no readable photo in {folder} ({reasons})")
+    done: dict[str, GroupResult] = {}
+    groups_dir = None
+    if out_dir is not None:
+        groups_dir = Path(out_dir) / "groups"
+        groups_dir.mkdir(parents=True, exist_ok=True)
+        if not force:
+            for f in groups_dir.glob("*.json"):
+                try:
+                    g = GroupResult.from_json(json.loads(f.read_text()))
+                    done[g.label] = g
+                except (ValueError, TypeError, OSError):
+                    continue  # a damaged record is simply refitted
+
+    def keep(result: GroupResult):
+        if groups_dir is not None:
+            target = groups_dir / f"{_safe_label(result.label)}.json"
+            tmp = target.with_suffix(".json.tmp")
+            tmp.write_text(json.dumps(result.to_json(), indent=1))
+            tmp.replace(target)
+
+    results = fit_photos(photos, scene, options, half_size, progress, done, keep)
+    results.skipped = skipped + results.skipped
+    return results

@@ -1,0 +1,145 @@
+"""The ``softshadow`` command: render, fit, synth, demo, bench."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+__all__ = ["main"]
+
+
+def _use_compilation_cache() -> None:
+    """JAX's persistent compilation cache: a second run skips most compilation."""
+    import jax
+    cache = Path(os.environ.get("SOFTSHADOW_JAX_CACHE", Path.home() / ".cache" / "softshadow" / "jax"))
+    try:
+        cache.mkdir(parents=True, exist_ok=True)
+        jax.config.update("jax_compilation_cache_dir", str(cache))
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+    except OSError:
+        pass
+
+
+def _fail(command: str, message: str, code: int = 1) -> int:
+    print(f"softshadow {command}: {message}", file=sys.stderr)
+    return code
+
+
+# -- render -----------------------------------------------------------------------------------
+def _add_render(sub):
+    p = sub.add_parser("render", help="render the model's soft shadow for a scene.toml to a PNG",
+                       description="Render the expanded-shadow-volume soft shadow of a scene.")
+    p.add_argument("--scene", required=True, help="scene.toml (object, camera, sun or time + site)")
+    p.add_argument("--out", required=True, help="output PNG (8-bit sRGB)")
+    p.add_argument("--photo", help="which [photos] entry's camera and sun to use (default: the first)")
+    p.add_argument("--range", dest="range_paper", type=float, help="range in paper units (100 k)")
+    p.add_argument("--brightness", type=float, help="brightness in paper units (255 rho^(1/2.2))")
+    p.add_argument("--k", type=float, help="range as k (overrides --range); default 0.01")
+    p.add_argument("--rho", type=float, help="brightness as rho (overrides --brightness); default 0.3")
+    p.add_argument("--sun-azimuth", type=float, help="degrees clockwise from north")
+    p.add_argument("--sun-elevation", type=float, help="degrees above the horizon")
+    p.add_argument("--rule", default="edge", choices=("edge", "paper"))
+    p.add_argument("--profile", default="linear", choices=("linear", "disk"))
+    p.add_argument("--size", default="512x512", help="image size WxH for a default top-down map")
+    p.add_argument("--pixel-m", type=float, help="metres per pixel for a default top-down map")
+    p.add_argument("--npy", help="also write the linear shading (H, W) as .npy")
+    p.add_argument("--silhouettes", action="store_true",
+                   help="draw the outer (expanded), hard and inner (contracted) outlines")
+    p.set_defaults(func=_run_render)
+
+
+def _run_render(args) -> int:
+    import numpy as np
+
+    from .render_cli import render_scene_file
+    try:
+        image, shading = render_scene_file(args)
+    except (ValueError, OSError) as exc:
+        return _fail("render", str(exc).splitlines()[0])
+    from PIL import Image
+    Image.fromarray(image).save(args.out)
+    if args.npy:
+        np.save(args.npy, shading)
+    print(f"wrote {args.out}" + (f" and {args.npy}" if args.npy else ""))
+    return 0
+
+
+# -- fit ----------------------------------------------------------------------------------------
+def _add_fit(sub):
+    p = sub.add_parser("fit", help="fit range and brightness per time of day from a photo folder",
+                       description="Fit the soft shadow's range k and brightness rho per time of day.")
+    p.add_argument("photo_dir", metavar="PHOTO_DIR")
+    p.add_argument("--out", required=True, metavar="OUT_DIR", help="results.json, table2.md/.csv, plots/")
+    p.add_argument("--force", action="store_true", help="overwrite existing results and refit all groups")
+    p.add_argument("--jobs", type=int, default=1, help="groups fitted at once (threads; default 1)")
+    p.add_argument("--verbose", action="store_true", help="print solver details")
+    p.add_argument("--profile", default="auto", choices=("auto", "linear", "disk"),
+                   help="penumbra profile; auto picks by BIC (default)")
+    p.add_argument("--rule", default="edge", choices=("edge", "paper"))
+    p.add_argument("--range-k-max", type=float, default=0.03, help="largest k searched (default 0.03)")
+    p.add_argument("--half-size", action="store_true", help="decode RAW at half size (faster)")
+    p.add_argument("--no-plots", dest="plots", action="store_false")
+    p.set_defaults(func=_run_fit)
+
+
+def _run_fit(args) -> int:
+    from fitting.cli import run_fit
+    return run_fit(args)
+
+
+# -- synth / demo / bench -----------------------------------------------------------------------
+def _add_synth(sub):
+    p = sub.add_parser("synth", help="write a synthetic photo folder with known truth",
+                       description="Synthesise a photo folder (images, scene.toml, truth.json).")
+    from data_synth.cli import add_arguments
+    add_arguments(p)
+    p.set_defaults(func=lambda a: __import__("data_synth.cli", fromlist=["run"]).run(a))
+
+
+def _add_demo(sub):
+    p = sub.add_parser("demo", help="synthesise the paper's scene, fit it, print the table",
+                       description="Synthesise the table2 preset (physical renderer), fit it and print "
+                                   "the fitted table beside the truth and the paper's hand-set values.")
+    p.add_argument("--out", default="softshadow-demo", help="where to write the photos and results")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--size", default="800x600", help="photo size (default 800x600)")
+    p.set_defaults(func=_run_demo)
+
+
+def _run_demo(args) -> int:
+    from fitting.cli import run_demo
+    return run_demo(args)
+
+
+def _add_bench(sub):
+    p = sub.add_parser("bench", help="time the renderer (and fitter); print JSON",
+                       description="Benchmarks: speed against error, as JSON.")
+    p.add_argument("--json", dest="json_path", help="also write the JSON here")
+    p.add_argument("--quick", action="store_true", help="fewer repeats and sizes")
+    p.add_argument("--what", default="render", choices=("render", "fit", "all"))
+    p.set_defaults(func=_run_bench)
+
+
+def _run_bench(args) -> int:
+    from .bench import run_bench
+    return run_bench(args)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="softshadow", description=__doc__)
+    parser.add_argument("--version", action="version", version="softshadow 0.1.0")
+    sub = parser.add_subparsers(dest="command", required=True)
+    _add_render(sub)
+    _add_fit(sub)
+    _add_synth(sub)
+    _add_demo(sub)
+    _add_bench(sub)
+    args = parser.parse_args(argv)
+    _use_compilation_cache()
+    return int(args.func(args) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

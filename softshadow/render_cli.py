@@ -1,0 +1,104 @@
+"""``softshadow render``: a scene.toml to an image of the model's soft shadow."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .camera import GroundGrid
+from .meshes import load_mesh
+from .params import Pose, ShadowParams, Sun, paper_to_range_k, paper_to_rho
+from .render import SoftShadowModel
+from .scene_io import load_scene, parse_time
+from .sun import solar_position
+
+__all__ = ["render_scene_file", "shading_to_srgb8", "draw_outlines"]
+
+PAPER_ALBEDO = 0.85  # white paper, for display
+
+
+def shading_to_srgb8(shading: np.ndarray, albedo: float = PAPER_ALBEDO) -> np.ndarray:
+    """Linear shading (H, W) to an 8-bit sRGB grey image (H, W, 3); NaN shows as black."""
+    lin = np.nan_to_num(np.clip(shading * albedo, 0, 1), nan=0.0)
+    srgb = np.where(lin <= 0.0031308, 12.92 * lin, 1.055 * lin ** (1 / 2.4) - 0.055)
+    g = np.rint(srgb * 255).astype(np.uint8)
+    return np.repeat(g[..., None], 3, axis=-1)
+
+
+def draw_outlines(image: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+    """Outer (alpha = 0+, blue), hard (0.5, yellow) and inner (1-, red) outlines over an image."""
+    from skimage import measure
+    out = image.copy()
+    for level, colour in ((0.02, (40, 90, 255)), (0.5, (255, 210, 0)), (0.98, (230, 30, 30))):
+        for contour in measure.find_contours(np.nan_to_num(alpha, nan=0.0), level):
+            rc = np.rint(contour).astype(int)
+            ok = (rc[:, 0] >= 0) & (rc[:, 0] < out.shape[0]) & (rc[:, 1] >= 0) & (rc[:, 1] < out.shape[1])
+            out[rc[ok, 0], rc[ok, 1]] = colour
+    return out
+
+
+def render_scene_file(args):
+    """(sRGB image (H, W, 3) uint8, linear shading (H, W)) for the render command's arguments."""
+    scene = load_scene(args.scene)
+    if scene.object is None:
+        raise ValueError(f"{args.scene} has no [object]")
+    model = SoftShadowModel.from_mesh(load_mesh(scene.object.mesh, scene.base_dir), args.rule,
+                                      args.profile)
+    pose = Pose(scene.object.position, scene.object.rotation_deg, scene.object.scale)
+    name = args.photo or (next(iter(scene.photos)) if scene.photos else None)
+    photo = scene.photo(name) if name else None
+    az, el = args.sun_azimuth, args.sun_elevation
+    if (az is None or el is None) and photo is not None:
+        if photo.sun_azimuth_deg is not None:
+            az = photo.sun_azimuth_deg if az is None else az
+            el = photo.sun_elevation_deg if el is None else el
+        elif photo.time and scene.site:
+            a, e = solar_position(parse_time(photo.time, scene.site.timezone), scene.site.latitude,
+                                  scene.site.longitude)
+            az = a if az is None else az
+            el = e if el is None else el
+    if az is None or el is None:
+        raise ValueError("no sun: give --sun-azimuth/--sun-elevation, or a sun or time + site in the scene")
+    k = args.k if args.k is not None else (paper_to_range_k(args.range_paper)
+                                           if args.range_paper is not None else 0.01)
+    rho = args.rho if args.rho is not None else (paper_to_rho(args.brightness)
+                                                 if args.brightness is not None else 0.3)
+    params = ShadowParams(k, rho)
+    sun = Sun(az, el)
+    cam = scene.camera_for(name) if name else scene.camera
+    w, h = (int(v) for v in args.size.lower().split("x"))
+    if cam is not None and cam.kind == "explicit":
+        camera = cam.pinhole(w, h) if cam.K is None else None
+        from .camera import PinholeCamera
+        K = np.asarray(cam.K)
+        width = int(round(2 * (K[0, 2] + 0.5))) if args.size == "512x512" else w
+        height = int(round(2 * (K[1, 2] + 0.5))) if args.size == "512x512" else h
+        camera = PinholeCamera(K, cam.R, cam.t, width, height, cam.dist)
+        rendered = model.camera_image(params, sun, pose, camera)
+        shading = np.asarray(rendered.shading)
+        alpha = (1 - shading) / max(1 - rho, 1e-9)
+        shading = np.where(rendered.object_mask, 0.35, shading)  # the object in grey
+    else:
+        if cam is not None and cam.kind == "topdown":
+            grid = cam.grid(w, h)
+        else:
+            grid = _default_grid(model, pose, sun, w, h, args.pixel_m)
+        shading = np.asarray(model.ground_map(params, sun, pose, grid))
+        alpha = (1 - shading) / max(1 - rho, 1e-9)
+    image = shading_to_srgb8(shading)
+    if args.silhouettes:
+        image = draw_outlines(image, alpha)
+    return image, shading
+
+
+def _default_grid(model, pose, sun, w, h, pixel_m):
+    """A north-up map framing the object and its whole shadow."""
+    from .raster import project_to_ground
+    world = np.asarray(pose.apply(model.occluder.vertices))
+    g = project_to_ground(world, np.asarray(sun.light))
+    pts = np.vstack([g, world[:, :2]])
+    lo, hi = pts.min(0), pts.max(0)
+    centre = (lo + hi) / 2
+    if pixel_m is None:
+        pixel_m = 1.15 * max((hi - lo)[0] / w, (hi - lo)[1] / h)
+    origin = (centre[0] - (w - 1) / 2 * pixel_m, centre[1] + (h - 1) / 2 * pixel_m)
+    return GroundGrid(pixel_m, origin, w, h)
