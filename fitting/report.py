@@ -487,18 +487,27 @@ def write_table2(results: FitResults, out_dir, reference=None, truth=None) -> tu
 
 # --------------------------------------------------------------------------- everything
 
-def write_report(results: FitResults, out_dir, reference=None, truth=None) -> dict[str, Path]:
-    """Write results.json, table2.md/.csv and the plots into OUT_DIR.
+def write_report(results: FitResults, out_dir, reference=None, truth=None,
+                 plots: bool = True) -> dict[str, Path]:
+    """Write results.json, table2.md/.csv and (unless ``plots`` is False) the plots
+    into OUT_DIR.
 
     Returns {path relative to OUT_DIR (posix): absolute Path} of every file written.
     results.json and the tables come first; a plot that fails is logged and left out,
     never losing the numbers.
     """
-    from . import plots  # matplotlib is only imported when plots are wanted
-
     out_dir = Path(out_dir)
     written: list[Path] = [write_results_json(results, out_dir)]
     written += write_table2(results, out_dir, reference, truth)
+    if plots:
+        written += _write_plots(results, out_dir, reference, truth)
+    return {p.relative_to(out_dir).as_posix(): p for p in written}
+
+
+def _write_plots(results: FitResults, out_dir: Path, reference, truth) -> list[Path]:
+    from . import plots  # matplotlib is only imported when plots are wanted
+
+    written: list[Path] = []
     for g in results.groups:
         try:
             written += plots.plot_group(g, out_dir)
@@ -510,4 +519,4 @@ def write_report(results: FitResults, out_dir, reference=None, truth=None) -> di
             written.append(p)
     except Exception as exc:
         logger.warning("range_vs_time plot skipped: %s: %s", type(exc).__name__, exc)
-    return {p.relative_to(out_dir).as_posix(): p for p in written}
+    return written

@@ -344,3 +344,9 @@ def test_write_report_survives_a_failing_plot(tmp_path, monkeypatch, caplog):
     assert {"results.json", "table2.md", "table2.csv"} <= set(written)
     assert "bad plot data" in caplog.text
     assert report.PAPER_TABLE2["13:21"] == (5.0, 120.0)
+
+
+def test_write_report_without_plots(tmp_path):
+    written = write_report(_results(with_plots=True), tmp_path, plots=False)
+    assert set(written) == {"results.json", "table2.md", "table2.csv"}
+    assert not (tmp_path / "plots").exists()
