@@ -89,6 +89,17 @@ def _binned_median(x: np.ndarray, y: np.ndarray, n_bins: int = 40) -> tuple[np.n
     return np.asarray(centres), np.asarray(medians)
 
 
+def _view_half_width(distance_px: np.ndarray) -> float:
+    """Half-width (px) of the x range shown: 3 times the median |distance|, so that the
+    edge fills the panel even when a few samples lie far away (the fitter may park
+    samples with no local distance at a large clip value), at least 5 px, at most the
+    farthest sample."""
+    a = np.abs(distance_px[np.isfinite(distance_px)])
+    if a.size == 0:
+        return 5.0
+    return float(min(a.max(), max(5.0, 3.0 * np.median(a))))
+
+
 def plot_profiles(group: GroupResult, out_dir) -> Path | None:
     """OUT_DIR/plots/<label>_profiles.png: per photo, observed (dots) and fitted values
     against the signed distance to the fitted boundary (px, positive = lit), the
@@ -107,6 +118,13 @@ def plot_profiles(group: GroupResult, out_dir) -> Path | None:
         obs = np.asarray(p.observed, float).ravel()
         fit = np.asarray(p.fitted, float).ravel()
         ids = np.asarray(p.profile_id).ravel()
+        half_width = _view_half_width(d)
+        keep = np.abs(d) <= half_width
+        n_out = int(np.count_nonzero(~keep & np.isfinite(d)))
+        same = d.size
+        d, obs = d[keep], obs[keep]
+        fit = fit[keep] if fit.size == same else fit
+        ids = ids[keep] if ids.size == same else ids
         if ids.size == d.size:
             for pid in np.unique(ids)[:MAX_PROFILE_LINES]:
                 sel = ids == pid
@@ -118,7 +136,9 @@ def plot_profiles(group: GroupResult, out_dir) -> Path | None:
             ax.plot(*_binned_median(d, fit), color="tab:red", lw=1.5, label="fitted (median)", zorder=5)
         ax.plot(*_binned_median(d, obs), color="navy", lw=1.5, label="observed (median)", zorder=4)
         ax.axvline(0.0, color="k", lw=0.6, ls="--")
-        ax.set_title(p.photo, fontsize=9)
+        ax.set_xlim(-half_width, half_width)
+        title = p.photo if not n_out else f"{p.photo} ({n_out} samples beyond ±{half_width:.0f} px not shown)"
+        ax.set_title(title, fontsize=9)
         ax.set_xlabel("signed distance to boundary [px] (lit > 0)")
         ax.grid(alpha=0.3)
     for ax in axes[:, 0]:

@@ -350,3 +350,20 @@ def test_write_report_without_plots(tmp_path):
     written = write_report(_results(with_plots=True), tmp_path, plots=False)
     assert set(written) == {"results.json", "table2.md", "table2.csv"}
     assert not (tmp_path / "plots").exists()
+
+
+def test_profile_plot_view_ignores_far_outliers():
+    """A fifth of the samples parked at +-1000 px must not squeeze the edge into a line."""
+    d = np.concatenate([np.linspace(-10, 10, 80), np.full(10, 1000.0), np.full(10, -1000.0)])
+    half = plots._view_half_width(d)
+    assert 10.0 <= half <= 40.0
+    assert plots._view_half_width(np.linspace(-2, 2, 9)) == 2.0
+    assert plots._view_half_width(np.array([np.nan])) == 5.0
+
+
+def test_written_files_have_ordinary_permissions(tmp_path):
+    import os
+    mask = os.umask(0o022)
+    os.umask(mask)
+    for path in write_report(_results(), tmp_path, plots=False).values():
+        assert path.stat().st_mode & 0o777 == 0o666 & ~mask
