@@ -84,11 +84,9 @@ def _to_uint16(linear: np.ndarray) -> np.ndarray:
 
 
 def dng_available() -> bool:
-    try:
-        import pidng.core  # noqa: F401
-    except ImportError:
-        return False
-    return True
+    """Whether the optional DNG writer (PiDNG, ``pip install pidng``) is installed."""
+    import importlib.util
+    return importlib.util.find_spec("pidng") is not None
 
 
 def _write_dng(path: Path, linear: np.ndarray) -> None:

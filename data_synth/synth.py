@@ -143,6 +143,8 @@ def synthesize(out_dir, preset: str = "table2", seed: int = 0, renderer: str = "
         raise ValueError(f"unknown renderer {renderer!r}; choose one of {RENDERERS}")
     if cameras not in ("explicit", "markers"):
         raise ValueError(f"cameras must be 'explicit' or 'markers', got {cameras!r}")
+    if not 1 <= int(quality) <= 100:
+        raise ValueError(f"JPEG quality must be 1..100, got {quality}")
     plan: PresetPlan = build_preset(preset, seed, size)
     fmt = fmt or plan.fmt
     if fmt not in FORMATS:
