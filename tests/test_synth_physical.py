@@ -184,3 +184,27 @@ def test_matches_independent_mitsuba_render_of_the_same_scene():
     assert abs(mine[umbra].mean() / ref[umbra].mean() - 1) < 0.02
     assert np.mean(np.abs(mine[penumbra] - ref[penumbra])) < 0.03
     assert np.mean(np.abs(mine[ground] - ref[ground])) < 0.006
+
+
+def test_adaptive_sun_sampling_agrees_with_full_sampling():
+    from softshadow.camera import GroundGrid
+    from data_synth.renderers import PhysicalRenderer, RenderQuality, SynthScene
+    from data_synth.textures import GroundAppearance
+    from data_synth.tracing import topdown_rays
+
+    scene = SynthScene(builtin_mesh("pillar"), (0.5, 0.5, 0.5), PlaneReceiver())
+    sun = SunSky.from_rho(200.0, 50.0, 0.3, 0.6)
+    rays = topdown_rays(GroundGrid.around((0.6, 1.3), 3.0, 150))
+    ground = GroundAppearance(np.full((4, 4, 3), 0.8, np.float32))
+    maps = {}
+    for adaptive in (False, True):
+        q = RenderQuality(sun_samples=256, sky_samples=256, sky_fine_nodes=32, adaptive=adaptive)
+        out = PhysicalRenderer(scene, q).render(rays, sun, ground, np.random.default_rng(1))
+        maps[adaptive] = out.irradiance / sun.lit_irradiance
+        if adaptive:
+            assert 0 < out.stats["sun_refined_pixels"] < out.stats["sun_reach_pixels"]
+    ok = np.isfinite(maps[True])
+    penumbra = ok & (maps[False] > 0.35) & (maps[False] < 0.95)
+    assert penumbra.sum() > 200
+    assert abs(np.mean(maps[True][penumbra] - maps[False][penumbra])) < 0.005  # no bias
+    assert np.max(np.abs(maps[True][ok] - maps[False][ok])) < 0.15  # noise only, no lost penumbra
