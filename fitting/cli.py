@@ -22,8 +22,7 @@ def _progress(total_label: str):
     from tqdm import tqdm
 
     def wrap(groups):
-        return tqdm(groups, desc=total_label, unit="group", file=sys.stderr,
-                    disable=not sys.stderr.isatty() and False)
+        return tqdm(groups, desc=total_label, unit="group", file=sys.stderr)
     return wrap
 
 
@@ -31,21 +30,10 @@ def fit_and_report(photo_dir, out_dir, options, force=False, half_size=False, tr
                    reference=None):
     """Fit a folder and write results.json, table2.md/.csv and plots; returns FitResults."""
     from .api import fit_folder
-    from .plots import plot_group, plot_range_vs_time
     from .report import write_report
     results = fit_folder(photo_dir, options=options, out_dir=out_dir, force=force,
                          half_size=half_size, progress=_progress("fitting"))
-    write_report(results, out_dir, reference=reference, truth=truth)
-    if options.plots:
-        for g in results.groups:
-            try:
-                plot_group(g, out_dir)
-            except Exception as exc:  # a plot must never lose the results
-                print(f"softshadow fit: plot for {g.label} failed: {exc}", file=sys.stderr)
-        try:
-            plot_range_vs_time(results, out_dir)
-        except Exception as exc:
-            print(f"softshadow fit: range plot failed: {exc}", file=sys.stderr)
+    write_report(results, out_dir, reference=reference, truth=truth, plots=options.plots)
     return results
 
 
@@ -64,8 +52,6 @@ def run_fit(args) -> int:
         print(f"softshadow fit: {exc}", file=sys.stderr)
         return 1
     print(format_table(results))
-    for s in results.skipped:
-        print(f"skipped {s['photo']}: {s['reason']}", file=sys.stderr)
     for g in results.groups:
         if g.error:
             print(f"group {g.label}: {g.error}", file=sys.stderr)

@@ -9,7 +9,8 @@ where u is softshadow's penumbra coordinate at the pixel's ground point (a
 function of k, the sun and the pose), the 1/12 is the pixel's own area (a
 box of one pixel), and blur is the camera's optical blur in pixels. Bounds
 are kept by reparameterisation: k = K_SCALE softplus(raw_k),
-rho = sigmoid(raw_rho), blur = raw_blur^2 (pixels).
+rho = sigmoid(raw_rho), blur variance = raw_blur (pixels^2, added to the
+pixel's 1/12).
 """
 
 from __future__ import annotations
@@ -20,12 +21,14 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
-from softshadow.params import Pose, Sun
+from softshadow.params import Pose
 from softshadow.penumbra import blurred_profile_alpha
-from softshadow.plan import PointPlan, plan_coordinate
+from softshadow.plan import PointPlan, plan_coordinate_light
+from softshadow.sun import light_direction
 
-__all__ = ["PhotoArrays", "FitConfig", "K_SCALE", "k_from_raw", "raw_from_k", "rho_from_raw",
-           "raw_from_rho", "predict_photo", "angular_pixel_gradient", "residuals", "pseudo_huber"]
+__all__ = ["GroupArrays", "FitConfig", "K_SCALE", "k_from_raw", "raw_from_k", "rho_from_raw",
+           "raw_from_rho", "predict", "angular_pixel_gradient", "residuals", "pseudo_huber",
+           "sample_light"]
 
 K_SCALE = 0.01
 
@@ -48,20 +51,27 @@ def raw_from_rho(rho):
     return np.log(rho / (1 - rho))
 
 
-class PhotoArrays(eqx.Module):
-    """One photo's samples as JAX arrays (padded: weight 0 on padding)."""
+class GroupArrays(eqx.Module):
+    """All samples of one group as flat JAX arrays (padding has weight 0).
+
+    ground (n, 3); jac (n, 2, 2); observed (n,); weight (n,); photo (n,) photo index;
+    albedo_class (n,); uv_norm (n, 2); plan: one plan for all photos (their edges
+    stacked); sun_azimuth_deg, sun_elevation_deg, scale (P,) per photo;
+    grad_t_pixel (n,) |dT/dpixel| at the start.
+    """
 
     ground: Float[Array, "n 3"]
     jac: Float[Array, "n 2 2"]
     observed: Float[Array, " n"]
     weight: Float[Array, " n"]
+    photo: Int[Array, " n"]
     albedo_class: Int[Array, " n"]
     uv_norm: Float[Array, "n 2"]
     plan: PointPlan
-    sun_azimuth_deg: Float[Array, ""]
-    sun_elevation_deg: Float[Array, ""]
-    scale: Float[Array, ""]  # the photo's lit level, so residuals are relative
-    grad_t_pixel: Float[Array, " n"]  # |d T / d pixel| at the start (T: the angular tangent)
+    sun_azimuth_deg: Float[Array, " P"]
+    sun_elevation_deg: Float[Array, " P"]
+    scale: Float[Array, " P"]
+    grad_t_pixel: Float[Array, " n"]
 
 
 class FitConfig(eqx.Module):
@@ -92,58 +102,59 @@ def pseudo_huber(r, delta):
     return r * jnp.sqrt(2.0 / (1.0 + jnp.sqrt(1.0 + (r / delta) ** 2)))
 
 
+def sample_light(group: GroupArrays, sun_delta_deg, fit_sun) -> Float[Array, "n 3"]:
+    """Light direction (n, 3) at each sample: its photo's sun plus the fitted correction."""
+    az = group.sun_azimuth_deg + fit_sun * sun_delta_deg[0]
+    el = group.sun_elevation_deg + fit_sun * sun_delta_deg[1]
+    return light_direction(az, el).T[group.photo]
+
+
 @eqx.filter_jit
-def angular_pixel_gradient(photo: PhotoArrays, pose: Pose, sun: Sun, k, rule: str = "edge"):
+def angular_pixel_gradient(group: GroupArrays, pose: Pose, k, rule: str = "edge"):
     """|dT/dpixel| (n,): how fast the angular tangent T changes per image pixel.
 
     It depends on the geometry only (not on k), so it is computed once per solve;
     the model then gets |du/dpixel| = du/dT * this, without differentiating u twice.
     """
-    u, grad_pixel = _coordinate_and_pixel_gradient(photo, pose, sun, k, rule)
-    _, dudt = plan_coordinate(photo.ground, photo.plan, pose, sun, k, rule, with_slope=True)
+    light = sample_light(group, jnp.zeros(2), 0.0)
+
+    def coord(points):
+        return plan_coordinate_light(points, group.plan, pose, light, k, rule)
+
+    ex = jnp.zeros_like(group.ground).at[:, 0].set(1.0)
+    ey = jnp.zeros_like(group.ground).at[:, 1].set(1.0)
+    _, du_dx = jax.jvp(coord, (group.ground,), (ex,))
+    _, du_dy = jax.jvp(coord, (group.ground,), (ey,))
+    grad_pixel = jnp.einsum("nij,ni->nj", group.jac, jnp.stack([du_dx, du_dy], -1))
+    _, dudt = plan_coordinate_light(group.ground, group.plan, pose, light, k, rule, with_slope=True)
     slope = jnp.sqrt(jnp.sum(grad_pixel**2, -1))
     ok = dudt > 0
     return jnp.where(ok, slope / jnp.where(ok, dudt, 1.0), 0.0)
 
 
-def _coordinate_and_pixel_gradient(photo: PhotoArrays, pose: Pose, sun: Sun, k, rule: str):
-    def coord(points):
-        return plan_coordinate(points, photo.plan, pose, sun, k, rule)
-
-    ex = jnp.zeros_like(photo.ground).at[:, 0].set(1.0)
-    ey = jnp.zeros_like(photo.ground).at[:, 1].set(1.0)
-    u, du_dx = jax.jvp(coord, (photo.ground,), (ex,))
-    _, du_dy = jax.jvp(coord, (photo.ground,), (ey,))
-    grad_ground = jnp.stack([du_dx, du_dy], -1)  # (n, 2)
-    grad_pixel = jnp.einsum("nij,ni->nj", photo.jac, grad_ground)  # J^T grad
-    return u, grad_pixel
-
-
-def predict_photo(params: dict, index: int, photo: PhotoArrays, pose: Pose, config: FitConfig):
-    """Predicted linear values (n,) and alpha (n,) for photo ``index``."""
+def predict(params: dict, group: GroupArrays, pose: Pose, config: FitConfig):
+    """Predicted linear values (n,), alpha (n,), u (n,) and |du/dpixel| (n,) at every sample."""
     k = k_from_raw(params["raw_k"])
     rho = rho_from_raw(params["raw_rho"])
-    az = photo.sun_azimuth_deg + config.fit_sun * params["sun_delta_deg"][0]
-    el = photo.sun_elevation_deg + config.fit_sun * params["sun_delta_deg"][1]
-    u, dudt = plan_coordinate(photo.ground, photo.plan, pose, Sun(az, el), k, config.rule,
-                              with_slope=True)
-    blur = config.fit_blur * params["raw_blur"] ** 2  # blur = raw^2: a regular minimum at 0
-    slope = dudt * photo.grad_t_pixel
-    tau = jnp.sqrt(blur**2 + 1.0 / 12.0) * slope
+    light = sample_light(group, params["sun_delta_deg"], config.fit_sun)
+    u, dudt = plan_coordinate_light(group.ground, group.plan, pose, light, k, config.rule,
+                                    with_slope=True)
+    # Blur variance (px^2) added to the pixel's own 1/12, free in sign so that "no blur" is an
+    # interior point (a regular minimum, quick to converge) rather than a boundary.
+    variance = 1.0 / 12.0 + config.fit_blur * params["raw_blur"]
+    slope = dudt * group.grad_t_pixel
+    tau = jnp.sqrt(jnp.maximum(variance, 1e-3)) * slope
     alpha = ((1.0 - config.disk) * blurred_profile_alpha(u, tau, "linear")
              + config.disk * blurred_profile_alpha(u, tau, "disk"))
-    level = jnp.exp(params["log_level"][index][photo.albedo_class])
-    level = level * (1.0 + photo.uv_norm @ params["gradient"][index])
-    return level * (1.0 - alpha * (1.0 - rho)), alpha
+    level = jnp.exp(params["log_level"][group.photo, group.albedo_class])
+    level = level * (1.0 + jnp.sum(group.uv_norm * params["gradient"][group.photo], -1))
+    return level * (1.0 - alpha * (1.0 - rho)), alpha, u, slope
 
 
 def residuals(params: dict, args):
-    """Weighted relative residuals of all photos, concatenated (robust-transformed if asked)."""
-    photos, pose, config = args
-    out = []
-    for i, photo in enumerate(photos):
-        pred, _ = predict_photo(params, i, photo, pose, config)
-        r = photo.weight * (photo.observed - pred) / photo.scale
-        robust = pseudo_huber(r, jnp.maximum(config.huber_delta, 1e-12))
-        out.append(jnp.where(config.huber_delta > 0, robust, r))
-    return jnp.concatenate(out)
+    """Weighted residuals relative to each photo's lit level (robust-transformed if asked)."""
+    group, pose, config = args
+    pred, _, _, _ = predict(params, group, pose, config)
+    r = group.weight * (group.observed - pred) / group.scale[group.photo]
+    robust = pseudo_huber(r, jnp.maximum(config.huber_delta, 1e-12))
+    return jnp.where(config.huber_delta > 0, robust, r)

@@ -24,13 +24,16 @@ from softshadow.render import SoftShadowModel
 
 from softshadow.params import Sun
 
-from .model import (FitConfig, PhotoArrays, angular_pixel_gradient, k_from_raw, predict_photo,
-                    raw_from_k, raw_from_rho, residuals, rho_from_raw)
+from softshadow.plan import concatenate_plans
+
+from .model import (FitConfig, GroupArrays, angular_pixel_gradient, k_from_raw, predict, raw_from_k,
+                    raw_from_rho, residuals, rho_from_raw)
 from .results import GroupResult, OverlayPlotData, ProfilePlotData
 from .samples import NoShadowInView, PhotoSamples, select_samples
 from .views import PhotoView
 
 __all__ = ["FitOptions", "fit_group"]
+
 
 
 @dataclasses.dataclass
@@ -41,28 +44,40 @@ class FitOptions:
     blur: tuple[bool, ...] = (False, True)
     rule: str = "edge"
     range_k_max: float = 0.03
-    max_samples_per_photo: int = 4000
+    max_samples_per_photo: int = 2500
     robust: bool = True
-    max_steps: int = 50
+    max_steps: int = 40
     seed: int = 0
     plots: bool = True
     verbose: bool = False
 
 
-def _to_arrays(s: PhotoSamples, view: PhotoView) -> PhotoArrays:
-    n = len(s.observed)
-    size = s.plan.edge_id.shape[0]
-    pad = lambda x, fill=0.0: np.concatenate([x, np.full((size - n,) + x.shape[1:], fill, dtype=x.dtype)])
-    lit = s.observed[np.asarray(s.plan.hard)[:n] < 0.5]
-    scale = float(np.percentile(lit, 75)) if len(lit) else float(np.percentile(s.observed, 90))
-    return PhotoArrays(
-        ground=jnp.asarray(pad(s.ground)), jac=jnp.asarray(pad(s.jac)),
-        observed=jnp.asarray(pad(s.observed)), weight=jnp.asarray(pad(np.ones(n))),
-        albedo_class=jnp.asarray(pad(s.albedo_class.astype(np.int32), 0)),
-        uv_norm=jnp.asarray(pad(s.uv_norm)), plan=s.plan,
-        sun_azimuth_deg=jnp.asarray(float(view.sun_azimuth_deg)),
-        sun_elevation_deg=jnp.asarray(float(view.sun_elevation_deg)),
-        scale=jnp.asarray(max(scale, 1e-9)), grad_t_pixel=jnp.zeros(size))
+def _group_arrays(samples: list[PhotoSamples], views: list[PhotoView]) -> GroupArrays:
+    """Stack the photos' samples into one padded set (one compiled solver for any group)."""
+    counts = [len(s.observed) for s in samples]
+    size = bucket_size(sum(counts), 1024)
+    plan = concatenate_plans([s.plan for s in samples], counts, pad_to=size,
+                             edge_pad_to=bucket_size(sum(int(s.plan.edges.outward_sign.shape[0])
+                                                         for s in samples), 256))
+    cat = lambda xs: np.concatenate(xs)
+    pad = lambda x, fill=0.0: np.concatenate([x, np.full((size - len(x),) + x.shape[1:], fill, dtype=x.dtype)])
+    scales = []
+    for s in samples:
+        lit = s.observed[np.asarray(s.plan.hard)[:len(s.observed)] < 0.5]
+        scale = float(np.percentile(lit, 75)) if len(lit) else float(np.percentile(s.observed, 90))
+        scales.append(max(scale, 1e-9))
+    photo = cat([np.full(n, i, np.int32) for i, n in enumerate(counts)])
+    return GroupArrays(
+        ground=jnp.asarray(pad(cat([s.ground for s in samples]))),
+        jac=jnp.asarray(pad(cat([s.jac for s in samples]))),
+        observed=jnp.asarray(pad(cat([s.observed for s in samples]))),
+        weight=jnp.asarray(pad(np.ones(sum(counts)))),
+        photo=jnp.asarray(pad(photo, 0)),
+        albedo_class=jnp.asarray(pad(cat([s.albedo_class.astype(np.int32) for s in samples]), 0)),
+        uv_norm=jnp.asarray(pad(cat([s.uv_norm for s in samples]))), plan=plan,
+        sun_azimuth_deg=jnp.asarray([float(v.sun_azimuth_deg) for v in views]),
+        sun_elevation_deg=jnp.asarray([float(v.sun_elevation_deg) for v in views]),
+        scale=jnp.asarray(scales), grad_t_pixel=jnp.zeros(size))
 
 
 def _initial_params(samples: list[PhotoSamples], fit_sun: bool) -> tuple[dict, float]:
@@ -84,7 +99,7 @@ def _initial_params(samples: list[PhotoSamples], fit_sun: bool) -> tuple[dict, f
     rho0 = float(np.clip(np.median(ratios) if ratios else 0.3, 0.02, 0.98))
     params = {"raw_k": jnp.asarray(0.0), "raw_rho": jnp.asarray(float(raw_from_rho(rho0))),
               "log_level": jnp.asarray(log_level), "gradient": jnp.zeros((len(samples), 2)),
-              "raw_blur": jnp.asarray(0.5), "sun_delta_deg": jnp.zeros(2)}
+              "raw_blur": jnp.asarray(0.0), "sun_delta_deg": jnp.zeros(2)}
     return params, rho0
 
 
@@ -116,6 +131,31 @@ def _covariance(params: dict, args, n_eff: int):
     return cov, unravel, flat, s2
 
 
+def _overlay(model: SoftShadowModel, pose: Pose, view: PhotoView, value: dict, cfg: FitConfig,
+             s: PhotoSamples, max_side: int = 480) -> OverlayPlotData:
+    """The fitted alpha over a downsampled copy of the photo, for the overlay plot."""
+    import cv2
+    from softshadow.params import ShadowParams
+    h, w = view.shape
+    f = min(1.0, max_side / max(h, w))
+    sw, sh = max(int(round(w * f)), 1), max(int(round(h * f)), 1)
+    small = cv2.resize(view.gray.astype(np.float32), (sw, sh), interpolation=cv2.INTER_AREA)
+    d = np.asarray(value["sun_delta_deg"]) * float(cfg.fit_sun)
+    sun = Sun(view.sun_azimuth_deg + d[0], view.sun_elevation_deg + d[1])
+    params = ShadowParams(float(k_from_raw(value["raw_k"])), 0.0)
+    m = model.with_options(profile=cfg.profile)
+    if view.grid is not None:
+        from softshadow.camera import GroundGrid
+        g = view.grid
+        p = g.pixel_m * w / sw
+        grid = GroundGrid(p, (g.origin_m[0] + (p - g.pixel_m) / 2, g.origin_m[1] - (p - g.pixel_m) / 2), sw, sh)
+        alpha = 1.0 - np.asarray(m.ground_map(params, sun, pose, grid))
+    else:
+        render = m.camera_image(params, sun, pose, view.camera.with_size(sw, sh))
+        alpha = 1.0 - np.asarray(render.shading)
+    return OverlayPlotData(view.name, small, alpha, s.uv * f)
+
+
 def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label: str,
               time_label: str | None, options: FitOptions | None = None) -> GroupResult:
     """Fit k and rho shared by ``views`` (one time of day). Never raises for bad data:
@@ -136,9 +176,9 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
         result.seconds = _time.perf_counter() - start
         return result
     fit_sun = any(v.sun_source == "fitted" for v in used)
-    arrays = tuple(_to_arrays(s, v) for s, v in zip(samples, used))
-    arrays = tuple(dataclasses.replace(a, grad_t_pixel=angular_pixel_gradient(
-        a, pose, Sun(a.sun_azimuth_deg, a.sun_elevation_deg), 0.01, options.rule)) for a in arrays)
+    arrays = _group_arrays(samples, used)
+    arrays = dataclasses.replace(arrays, grad_t_pixel=angular_pixel_gradient(arrays, pose, 0.01,
+                                                                             options.rule))
     n_eff = sum(len(s.observed) for s in samples)
     base, rho0 = _initial_params(samples, fit_sun)
 
@@ -157,19 +197,29 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
     r = np.asarray(residuals(start_value, (arrays, pose, plain)))
     sigma = 1.4826 * np.median(np.abs(r[np.abs(r) > 0])) if np.any(r) else 1e-3
     delta = float(max(3.0 * sigma, 1e-6)) if options.robust else 0.0
+    # Profiles are compared with blur free; then blur is kept only if BIC says so. Each solve
+    # starts from the previous solution, so the later ones take a few steps.
+    def run(profile, blur, init):
+        cfg = FitConfig.make(profile, blur, fit_sun, delta, options.rule)
+        args = (arrays, pose, cfg)
+        value, ok, steps = _solve(init, args, options.max_steps)
+        rss = float(_sum_sq(value, args))
+        bic = n_eff * np.log(max(rss, 1e-300) / n_eff) + _n_free(cfg, len(samples)) * np.log(n_eff)
+        if options.verbose:
+            print(f"  {label}: profile {profile} blur {blur}: {int(steps)} steps, ok {bool(ok)}, "
+                  f"BIC {bic:.1f}")
+        return bic, value, ok, cfg, rss
+
+    blur_first = True in options.blur
     best = None
     for profile in options.profiles:
-        for blur in options.blur:
-            cfg = FitConfig.make(profile, blur, fit_sun, delta, options.rule)
-            args = (arrays, pose, cfg)
-            value, ok, steps = _solve(start_value, args, options.max_steps)
-            if options.verbose:
-                print(f"  {label}: profile {profile} blur {blur}: {int(steps)} steps, ok {bool(ok)}")
-            rss = float(_sum_sq(value, args))
-            n_par = _n_free(cfg, len(arrays))
-            bic = n_eff * np.log(max(rss, 1e-300) / n_eff) + n_par * np.log(n_eff)
-            if best is None or bic < best[0]:
-                best = (bic, value, ok, cfg, rss)
+        trial = run(profile, blur_first, start_value if best is None else best[1])
+        if best is None or trial[0] < best[0]:
+            best = trial
+    if blur_first and False in options.blur:
+        trial = run(best[3].profile, False, best[1])
+        if trial[0] < best[0]:
+            best = trial
     bic, value, ok, cfg, rss = best
     args = (arrays, pose, cfg)
     cov, unravel, flat, s2 = _covariance(value, args, n_eff)
@@ -188,7 +238,7 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
     result.range_stderr = float(np.sqrt(max(var_k, 0)))
     result.rho_stderr = float(np.sqrt(max(var_rho, 0)))
     result.profile = cfg.profile
-    result.blur_px = float(value["raw_blur"]) ** 2 if float(cfg.fit_blur) else None
+    result.blur_px = float(np.sqrt(max(float(value["raw_blur"]), 0.0))) if float(cfg.fit_blur) else None
     result.rmse = float(np.sqrt(rss / n_eff))
     result.converged = bool(ok)
     result.n_samples = n_eff
@@ -203,25 +253,22 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
     result.sun_azimuth_deg, result.sun_elevation_deg = az0, el0
     result.sun_source = used[0].sun_source
     # Penumbra width in pixels at the solution; identifiability.
+    pred, alpha, u, slope = (np.asarray(x) for x in predict(value, arrays, pose, cfg))
+    photo_of = np.asarray(arrays.photo)
     widths = []
-    for i, (s, photo) in enumerate(zip(samples, arrays)):
-        pred, alpha = predict_photo(value, i, photo, pose, cfg)
-        from .model import _coordinate_and_pixel_gradient
-        sun = Sun(photo.sun_azimuth_deg + cfg.fit_sun * value["sun_delta_deg"][0],
-                  photo.sun_elevation_deg + cfg.fit_sun * value["sun_delta_deg"][1])
-        u, gpix = _coordinate_and_pixel_gradient(photo, pose, sun, k, cfg.rule)
-        n = len(s.observed)
-        u, gpix = np.asarray(u)[:n], np.asarray(gpix)[:n]
-        slope = np.linalg.norm(gpix, axis=1)
-        in_pen = np.abs(u) < 1
+    start_i = 0
+    for i, s in enumerate(samples):
+        sl = slice(start_i, start_i + len(s.observed))
+        start_i += len(s.observed)
+        in_pen = np.abs(u[sl]) < 1
         if in_pen.any():
-            widths.append(2.0 / np.maximum(slope[in_pen], 1e-12))
+            widths.append(2.0 / np.maximum(slope[sl][in_pen], 1e-12))
         if options.plots:
-            lvl = np.asarray(pred)[:n] / np.maximum(1 - np.asarray(alpha)[:n] * (1 - rho), 1e-9)
-            dist = np.where(slope > 0, u / np.maximum(slope, 1e-12), np.sign(u) * 1e3)
+            lvl = pred[sl] / np.maximum(1 - alpha[sl] * (1 - rho), 1e-9)
+            dist = np.where(slope[sl] > 0, u[sl] / np.maximum(slope[sl], 1e-12), np.nan)
             result.plot_profiles.append(ProfilePlotData(
-                s.name, np.clip(dist, -1e3, 1e3), s.observed / lvl, np.asarray(pred)[:n] / lvl,
-                s.profile_id))
+                s.name, dist, s.observed / lvl, pred[sl] / lvl, s.profile_id))
+            result.plot_overlays.append(_overlay(model, pose, used[i], value, cfg, s))
     if widths:
         w = np.concatenate(widths)
         result.penumbra_px = float(np.median(w))

@@ -28,6 +28,7 @@ from .raster import (ShadowRaster, candidate_labels, project_to_ground, rasteris
 from .sun import check_sun_above_horizon
 
 __all__ = ["EdgeSet", "PointPlan", "plan_points", "plan_grid", "plan_alpha", "plan_coordinate",
+           "plan_coordinate_light", "concatenate_plans",
            "edge_band_widths",
            "bucket_size"]
 
@@ -262,15 +263,57 @@ def plan_coordinate(points: Float[Array, "n 3"], plan: PointPlan, pose: Pose, su
     gives alpha 0 or 1 there. Use with ``profile_alpha`` (possibly blurred).
     With ``with_slope`` also returns du/dT (see ``penumbra_coordinate``), 0 outside bands.
     """
+    return plan_coordinate_light(points, plan, pose, sun.light, range_k, rule, with_slope)
+
+
+def plan_coordinate_light(points: Float[Array, "n 3"], plan: PointPlan, pose: Pose,
+                          light: Float[Array, "*n 3"], range_k, rule: str = "edge",
+                          with_slope: bool = False):
+    """``plan_coordinate`` with the light direction given directly, (3,) or one per point (n, 3)."""
     edges = plan.edges
     ev = pose.apply(edges.vertices_local)
     paper = pose.apply_direction(edges.paper_normal_local) if rule == "paper" else None
-    u, slope = edge_coordinate(points, plan.edge_id, ev, edges.outward_sign, sun.light, range_k,
+    if light.ndim == 2:
+        light = jnp.repeat(light, plan.edge_id.shape[1], axis=0)
+    u, slope = edge_coordinate(points, plan.edge_id, ev, edges.outward_sign, light, range_k,
                                plan.hard, rule, paper, with_slope=True)
     u = jnp.where(plan.active, u, jnp.where(plan.hard > 0.5, -1e6, 1e6))
     if with_slope:
         return u, jnp.where(plan.active, slope, 0.0)
     return u
+
+
+def concatenate_plans(plans: list[PointPlan], counts: list[int], pad_to: int | None = None,
+                      edge_pad_to: int | None = None) -> PointPlan:
+    """One plan for several point sets (each with its own sun): edges stacked, ids offset.
+
+    counts: how many leading points of each plan are real (the rest is padding).
+    """
+    verts, signs, papers, ids, hards, actives = [], [], [], [], [], []
+    offset = 0
+    for plan, n in zip(plans, counts):
+        e = plan.edges
+        verts.append(np.asarray(e.vertices_local))
+        signs.append(np.asarray(e.outward_sign))
+        papers.append(np.asarray(e.paper_normal_local))
+        ids.append(np.asarray(plan.edge_id)[:n] + offset)
+        hards.append(np.asarray(plan.hard)[:n])
+        actives.append(np.asarray(plan.active)[:n])
+        offset += len(signs[-1])
+    n_total = sum(counts)
+    size = pad_to or bucket_size(n_total)
+    e_size = edge_pad_to or bucket_size(offset, 16)
+    pad = lambda x, m, fill: np.concatenate([x, np.full((m - len(x),) + x.shape[1:], fill, x.dtype)])
+    v = np.concatenate(verts)
+    v = pad(v, e_size, 0.0)
+    v[offset:, 1, 0] = 1.0
+    paper = pad(np.concatenate(papers), e_size, 0.0)
+    paper[offset:, 2] = 1.0
+    edges = EdgeSet(jnp.asarray(v), jnp.asarray(pad(np.concatenate(signs), e_size, 1.0)),
+                    jnp.asarray(paper))
+    return PointPlan(edges, jnp.asarray(pad(np.concatenate(ids), size, 0)),
+                     jnp.asarray(pad(np.concatenate(hards), size, 0.0)),
+                     jnp.asarray(pad(np.concatenate(actives), size, False)))
 
 
 plan_alpha_jit = jax.jit(plan_alpha, static_argnames=("rule", "profile"))
