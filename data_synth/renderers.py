@@ -206,7 +206,7 @@ class ModelRenderer:
 
     name = "model"
 
-    def __init__(self, scene: SynthScene, rule: str = "edge", profile: str = "linear"):
+    def __init__(self, scene: SynthScene, rule: str = "edge", profile: str = "disk"):
         if scene.receiver.mesh is not None:
             raise ValueError("the model renderer draws shadows on the plane z = 0 only; "
                              "use renderer='physical' for a non-plane receiver")

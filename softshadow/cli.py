@@ -75,8 +75,9 @@ def _add_fit(sub):
     p.add_argument("--force", action="store_true", help="overwrite existing results and refit all groups")
     p.add_argument("--jobs", type=int, default=1, help="groups fitted at once (threads; default 1)")
     p.add_argument("--verbose", action="store_true", help="print solver details")
-    p.add_argument("--profile", default="auto", choices=("auto", "linear", "disk"),
-                   help="penumbra profile; auto picks by BIC (default)")
+    p.add_argument("--profile", default="disk", choices=("auto", "linear", "disk"),
+                   help="penumbra profile: disk (the sun's, default: k reads tan(sun radius)), "
+                        "linear (the paper's ramp), or auto (chosen by BIC)")
     p.add_argument("--rule", default="edge", choices=("edge", "paper"))
     p.add_argument("--range-k-max", type=float, default=0.03, help="largest k searched (default 0.03)")
     p.add_argument("--half-size", action="store_true", help="decode RAW at half size (faster)")
