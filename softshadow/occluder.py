@@ -138,6 +138,7 @@ def silhouette(occ: Occluder, world_vertices: np.ndarray, rotation: np.ndarray,
     paper = occ.face_normals[inner_face] + np.where((other_face != inner_face)[:, None],
                                                     occ.face_normals[other_face], 0.0)
     paper /= np.maximum(np.linalg.norm(paper, axis=1, keepdims=True), 1e-12)
+    ids, sign, paper = merge_collinear(occ.edges[idx], world_vertices, light, sign, paper)
     layers = [lit] if occ.watertight else [lit, (~lit) & (np.abs(ndotl) > PARALLEL_TOL)]
     fill = []
     for faces in layers:
@@ -145,4 +146,59 @@ def silhouette(occ: Occluder, world_vertices: np.ndarray, rotation: np.ndarray,
                           minlength=len(occ.edges))
         keep = np.nonzero(net)[0]
         fill.append((occ.edges[keep], net[keep]))
-    return Silhouette(occ.edges[idx], sign, paper, lit, tuple(fill))
+    return Silhouette(ids, sign, paper, lit, tuple(fill))
+
+
+def merge_collinear(ids: np.ndarray, world: np.ndarray, light: np.ndarray, sign: np.ndarray,
+                    paper: np.ndarray, tol: float = 1e-9):
+    """Join chains of collinear silhouette edges (a subdivided box edge) into single edges.
+
+    Two edges meeting at a vertex used by no other silhouette edge are joined when they
+    point the same way, face the same way and share the seed's normal. Fewer, longer edges
+    make a plan hold over larger sun and pose moves, and cost less.
+    """
+    if len(ids) < 2:
+        return ids, sign, paper
+    t = world[ids[:, 1]] - world[ids[:, 0]]
+    t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-300)
+    n = np.cross(t, light)
+    n = sign[:, None] * n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    flat = ids.ravel()
+    order = np.argsort(flat, kind="stable")
+    sorted_v = flat[order]
+    starts = np.flatnonzero(np.r_[True, sorted_v[1:] != sorted_v[:-1]])
+    counts = np.diff(np.r_[starts, len(flat)])
+    parent = np.arange(len(ids))
+
+    def find(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    joined = False
+    for st in starts[counts == 2]:
+        e1, e2 = order[st] // 2, order[st + 1] // 2
+        if (abs(abs(t[e1] @ t[e2]) - 1.0) < tol and n[e1] @ n[e2] > 1.0 - tol
+                and paper[e1] @ paper[e2] > 1.0 - 1e-6):
+            parent[find(e1)] = find(e2)
+            joined = True
+    if not joined:
+        return ids, sign, paper
+    roots = np.array([find(i) for i in range(len(ids))])
+    out_ids, out_sign, out_paper = [], [], []
+    for r in np.unique(roots):
+        members = np.flatnonzero(roots == r)
+        if len(members) == 1:
+            out_ids.append(ids[members[0]])
+        else:
+            verts = ids[members].ravel()
+            # The chain's ends: extreme vertices along the common direction.
+            proj = world[verts] @ t[members[0]]
+            out_ids.append(np.array([verts[np.argmin(proj)], verts[np.argmax(proj)]]))
+            # Keep the tangent's orientation convention of the first member.
+            if (world[out_ids[-1][1]] - world[out_ids[-1][0]]) @ t[members[0]] < 0:
+                out_ids[-1] = out_ids[-1][::-1]
+        out_sign.append(sign[members[0]])
+        out_paper.append(paper[members[0]])
+    return np.array(out_ids), np.array(out_sign), np.array(out_paper)

@@ -100,9 +100,9 @@ def penumbra_coordinate(points: Float[Array, "n 3"], a: Float[Array, "n 3"], b: 
     the penumbra. Its size comes from the edge's plane where the point, seen
     along the light, lies beside the segment (the CONVENTIONS definition), and
     from the angular distance to the end vertex beyond the ends (so convex
-    corners are rounded); its sign comes from ``inside`` (1 in the hard shadow,
-    0 outside), so a concave corner never lights up the umbra and k = 0 gives
-    exactly the hard shadow.
+    corners are rounded); its sign comes from the edge's plane near the segment
+    (within half a penumbra half-width) and from ``inside`` (1 in the hard shadow,
+    0 outside) elsewhere, so a concave corner never lights up the umbra.
     """
     t = b - a
     t = t / jnp.maximum(_norm(t), 1e-12)[:, None]
@@ -145,8 +145,12 @@ def penumbra_coordinate(points: Float[Array, "n 3"], a: Float[Array, "n 3"], b: 
     depth = jnp.where(beyond, end_depth, den)
     upstream = depth <= 1e-9 * jnp.where(beyond, end_scale, scale)
     magnitude = jnp.where(upstream, 1e6, jnp.minimum(jnp.where(beyond, tan_end, tan_plane), 1e6))
-    # The side comes from the hard shadow, so k = 0 gives exactly the hard shadow.
-    tan_x = jnp.where(inside > 0.5, -magnitude, magnitude)
+    # The side: beside the segment and within half a half-width of its plane, the plane's own
+    # side (so it follows the edge as the sun or pose moves); elsewhere the hard shadow's,
+    # so k = 0 gives exactly the hard shadow and concave corners never light the umbra.
+    near_plane = (~beyond) & (~upstream) & (tan_plane < 0.5 * 0.5 * (t_out + t_in))
+    side = jnp.where(near_plane, jnp.where(num < 0, -1.0, 1.0), jnp.where(inside > 0.5, -1.0, 1.0))
+    tan_x = side * magnitude
     u = (2.0 * tan_x - t_out + t_in) / (t_out + t_in)
     u = jnp.clip(u, -1e6, 1e6)
     if with_slope:
