@@ -1,0 +1,307 @@
+"""The renderer at the hard cases of issue 2: values finite and in range, gradients finite.
+
+Each case renders a small ground map (and values at points) with a plan made
+at the case's parameters, then takes jax.grad of a scalar loss with respect to
+ShadowParams, Sun and Pose together. Where a case has a known answer (the
+shadow of a degenerate mesh equals the clean mesh's, k = 1e-12 equals k = 0,
+an empty frame is all lit, the zenith does not depend on azimuth) it is
+checked too.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import trimesh
+
+from softshadow import GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun
+from softshadow.meshes import builtin_mesh
+
+
+@functools.lru_cache(maxsize=None)
+def builtin_model(name: str, rule: str = "edge", profile: str = "linear") -> SoftShadowModel:
+    return SoftShadowModel.from_mesh(builtin_mesh(name), rule=rule, profile=profile)
+
+
+def standing_box(extents=(0.6, 0.4, 1.0)) -> trimesh.Trimesh:
+    box = trimesh.creation.box(extents=extents)
+    box.apply_translation([0.0, 0.0, extents[2] / 2])
+    return box
+
+
+def box_with_bad_faces() -> trimesh.Trimesh:
+    """A standing box plus a zero-area face (repeated vertex), a sliver of collinear vertices and a
+    duplicated face; process=False keeps them all."""
+    box = standing_box()
+    v = np.asarray(box.vertices)
+    f = np.asarray(box.faces)
+    mid = 0.5 * (v[0] + v[1])
+    v2 = np.vstack([v, mid])
+    extra = np.array([[0, 0, 1], [0, 1, len(v)], f[3]])
+    return trimesh.Trimesh(v2, np.vstack([f, extra]), process=False)
+
+
+def open_box() -> trimesh.Trimesh:
+    """A standing box with its top removed (not watertight)."""
+    box = standing_box()
+    top = box.face_normals[:, 2] > 0.5
+    return trimesh.Trimesh(box.vertices, box.faces[~top], process=False)
+
+
+def single_quad() -> trimesh.Trimesh:
+    """One tilted quad (two triangles) floating above the ground: every edge is a boundary edge."""
+    v = np.array([[-0.5, -0.5, 1.0], [0.5, -0.5, 1.0], [0.5, 0.5, 1.4], [-0.5, 0.5, 1.4]])
+    return trimesh.Trimesh(v, np.array([[0, 1, 2], [0, 2, 3]]), process=False)
+
+
+def leaves_finite(tree) -> bool:
+    return all(bool(jnp.all(jnp.isfinite(x))) for x in jax.tree_util.tree_leaves(tree))
+
+
+def render_and_grad(mdl: SoftShadowModel, params: ShadowParams, sun: Sun, pose: Pose,
+                    grid: GroundGrid, range_k_max: float):
+    """Ground map (H, W) and the gradient of sum(W * map) wrt (params, sun, pose), plan fixed."""
+    plan = mdl.plan_grid(sun, pose, grid, range_k_max=range_k_max)
+    weights = jnp.asarray(np.random.default_rng(0).uniform(0.5, 1.5, (grid.height, grid.width)))
+
+    def loss(p, s, q):
+        return jnp.sum(weights * mdl.ground_map(p, s, q, grid, plan=plan))
+
+    img = np.asarray(mdl.ground_map(params, sun, pose, grid, plan=plan))
+    grads = jax.grad(loss, argnums=(0, 1, 2))(params, sun, pose)
+    rho = float(params.rho)
+    assert np.all(np.isfinite(img)), "non-finite shading"
+    assert img.min() >= rho - 1e-12 and img.max() <= 1.0 + 1e-12, (
+        f"shading outside [rho, 1]: [{img.min()}, {img.max()}] with rho = {rho}")
+    assert leaves_finite(grads), f"non-finite gradient: {grads}"
+    return img, grads
+
+
+def points_and_grad(mdl, params, sun, pose, points, range_k_max):
+    """Shading at points and its gradient (sum) wrt (params, sun, pose), plan fixed."""
+    plan = mdl.plan_points(sun, pose, points, range_k_max=range_k_max)
+
+    def loss(p, s, q):
+        return jnp.sum(mdl.at_points(p, s, q, points, plan=plan))
+
+    values = np.asarray(mdl.at_points(params, sun, pose, points, plan=plan))
+    grads = jax.grad(loss, argnums=(0, 1, 2))(params, sun, pose)
+    assert np.all(np.isfinite(values))
+    assert values.min() >= float(params.rho) - 1e-12 and values.max() <= 1.0 + 1e-12
+    assert leaves_finite(grads), f"non-finite gradient at points: {grads}"
+    return values, grads
+
+
+def shadow_fraction(img, rho):
+    return float(np.mean(img < 1.0 - 0.5 * (1.0 - rho)))
+
+
+# -- the sun near the horizon and near the zenith -------------------------------------------------
+
+@pytest.mark.parametrize("elevation", [3.0, 4.0, 5.0])
+@pytest.mark.parametrize("rule,profile", [("edge", "linear"), ("paper", "disk")])
+def test_sun_near_horizon(elevation, rule, profile):
+    mdl = builtin_model("pillar", rule, profile)
+    sun = Sun(120.0, elevation)
+    params, pose = ShadowParams(0.01, 0.3), Pose(rotation_deg=(0.0, 0.0, 10.0))
+    # The shadow is 3 m / tan(E) ~ 34-57 m long: a map near the base (shadow leaves the frame)
+    light = np.asarray(sun.light)
+    direction = light[:2] / np.linalg.norm(light[:2])
+    near = GroundGrid.around(tuple(2.0 * direction), 4.0, 64)
+    img, grads = render_and_grad(mdl, params, sun, pose, near, 0.015)
+    assert 0.02 < shadow_fraction(img, 0.3) < 0.5
+    # ... and a map around the far tip, where the penumbra is widest.
+    tip = 3.0 / np.tan(np.radians(elevation)) * direction
+    far = GroundGrid.around(tuple(tip), 6.0, 64)
+    img, grads = render_and_grad(mdl, params, sun, pose, far, 0.015)
+    assert np.any((img > 0.35) & (img < 0.95)), "the tip should show a penumbra"
+    assert abs(float(grads[0].range_k)) > 0, "k must matter at the tip"
+
+
+@pytest.mark.parametrize("elevation", [89.9, 90.0])
+def test_sun_near_zenith(elevation):
+    mdl = builtin_model("ball")
+    params, pose = ShadowParams(0.02, 0.25), Pose(position=(0.3, -0.2, 0.0))
+    sun = Sun(37.0, elevation)
+    grid = GroundGrid.around((0.3, -0.2), 1.6, 64)
+    img, grads = render_and_grad(mdl, params, sun, pose, grid, 0.03)
+    # A ball of r = 0.5 m seen from overhead: a round shadow of about pi r^2.
+    area = np.sum(img < 1.0 - 0.5 * 0.75) * grid.pixel_m ** 2
+    assert abs(area - np.pi * 0.25) < 0.05 * np.pi * 0.25
+    if elevation == 90.0:
+        # At the zenith the azimuth changes nothing; its derivative must vanish, not blow up.
+        scale = abs(float(grads[2].position[0])) + abs(float(grads[0].range_k))
+        assert abs(float(grads[1].azimuth_deg)) <= 1e-9 * max(scale, 1.0)
+    # The pillar from straight above: its vertical edges are along the light.
+    pillar = builtin_model("pillar")
+    img, _ = render_and_grad(pillar, params, Sun(37.0, elevation), Pose(rotation_deg=(0, 0, 20.0)),
+                             GroundGrid.around((0.0, 0.0), 0.8, 64), 0.03)
+    area = np.sum(img < 1.0 - 0.5 * 0.75) * (0.8 / 64) ** 2
+    assert abs(area - 0.04) < 0.01, f"pillar from overhead should cover its 0.2 x 0.2 m footprint, got {area}"
+
+
+# -- k at and near zero -------------------------------------------------------------------------
+
+@pytest.mark.parametrize("profile", ["linear", "disk"])
+def test_k_zero_and_tiny_give_the_hard_shadow_with_finite_gradients(profile):
+    mdl = builtin_model("pillar", "edge", profile)
+    sun, pose = Sun(200.0, 35.0), Pose(rotation_deg=(0.0, 0.0, 15.0))
+    grid = GroundGrid.around((0.8, 2.0), 5.0, 64)
+    hard, g0 = render_and_grad(mdl, ShadowParams(0.0, 0.3), sun, pose, grid, 0.0)
+    tiny, g1 = render_and_grad(mdl, ShadowParams(1e-12, 0.3), sun, pose, grid, 1e-12)
+    assert set(np.unique(hard)) <= {0.3, 1.0} or np.allclose(np.unique(hard), [0.3, 1.0])
+    np.testing.assert_allclose(tiny, hard, atol=1e-9)
+    assert 0.01 < shadow_fraction(hard, 0.3) < 0.5
+    # A plan made for a larger k still renders k = 0 as the hard shadow.
+    wide, _ = render_and_grad(mdl, ShadowParams(0.0, 0.3), sun, pose, grid, 0.05)
+    np.testing.assert_allclose(wide, hard, atol=1e-9)
+    points = grid.pixel_centres().reshape(-1, 3)[::7]
+    points_and_grad(mdl, ShadowParams(0.0, 0.3), sun, pose, points, 0.0)
+    points_and_grad(mdl, ShadowParams(1e-12, 0.3), sun, pose, points, 0.02)
+
+
+# -- occluder touching the receiver -------------------------------------------------------------
+
+@pytest.mark.parametrize("rule", ["edge", "paper"])
+def test_occluder_standing_on_the_ground(rule):
+    """A pillar and a box stand on z = 0: the base edges are at zero distance (zero penumbra)."""
+    sun, params = Sun(150.0, 40.0), ShadowParams(0.03, 0.2)
+    for mdl, pose in ((builtin_model("pillar", rule), Pose(rotation_deg=(0, 0, 25.0))),
+                      (SoftShadowModel.from_mesh(standing_box(), rule=rule), Pose(rotation_deg=(0, 0, 5.0)))):
+        grid = GroundGrid.around((0.0, 0.0), 0.8, 64)  # around the base, 12.5 mm pixels
+        img, grads = render_and_grad(mdl, params, sun, pose, grid, 0.03)
+        assert float(grads[0].range_k) != 0.0
+        # Points on the base outline and a hair outside it: zero distance to the occluder.
+        footprint = np.asarray(pose.rotation)[:2, :2]
+        half = 0.1 if mdl.occluder.n_faces == 176 else np.array([0.3, 0.2])
+        corners = (np.array([[1, 1], [-1, 1], [-1, -1], [1, -1]]) * half) @ footprint.T
+        ring = np.concatenate([corners + s * (corners / np.linalg.norm(corners, axis=1, keepdims=True))
+                               for s in (0.0, 1e-9, 1e-4, 3e-3)])
+        points = np.c_[ring, np.zeros(len(ring))]
+        values, _ = points_and_grad(mdl, params, sun, pose, points, 0.03)
+
+
+# -- broken meshes ----------------------------------------------------------------------------
+
+def test_degenerate_and_duplicate_faces_change_nothing():
+    sun, pose, params = Sun(100.0, 30.0), Pose(rotation_deg=(0, 0, 12.0)), ShadowParams(0.02, 0.3)
+    grid = GroundGrid.around((-1.0, 0.3), 3.0, 64)
+    clean, _ = render_and_grad(SoftShadowModel.from_mesh(standing_box()), params, sun, pose, grid, 0.02)
+    bad, grads = render_and_grad(SoftShadowModel.from_mesh(box_with_bad_faces()), params, sun, pose, grid,
+                                 0.02)
+    assert 0.02 < shadow_fraction(clean, 0.3)
+    np.testing.assert_allclose(bad, clean, atol=1e-9)
+
+
+@pytest.mark.parametrize("rule", ["edge", "paper"])
+def test_open_box_casts_the_closed_box_shadow(rule):
+    """A box without its top is not watertight, yet seen from the sun it has the same outline."""
+    sun, pose, params = Sun(100.0, 30.0), Pose(rotation_deg=(0, 0, 12.0)), ShadowParams(0.02, 0.3)
+    grid = GroundGrid.around((-1.0, 0.3), 3.0, 64)
+    closed, _ = render_and_grad(SoftShadowModel.from_mesh(standing_box(), rule=rule), params, sun, pose,
+                                grid, 0.02)
+    opened, grads = render_and_grad(SoftShadowModel.from_mesh(open_box(), rule=rule), params, sun, pose,
+                                    grid, 0.02)
+    hard_closed, _ = render_and_grad(SoftShadowModel.from_mesh(standing_box(), rule=rule),
+                                     ShadowParams(0.0, 0.3), sun, pose, grid, 0.0)
+    hard_open, _ = render_and_grad(SoftShadowModel.from_mesh(open_box(), rule=rule),
+                                   ShadowParams(0.0, 0.3), sun, pose, grid, 0.0)
+    np.testing.assert_array_equal(hard_open, hard_closed)
+    if rule == "edge":  # the edge rule depends only on the outline's edges and the light
+        assert np.max(np.abs(opened - closed)) < 1e-6
+
+
+def test_single_quad_matches_its_projected_parallelogram():
+    """Every edge of a lone quad is a boundary edge; with k = 0 the shadow is the projected quad."""
+    mdl = SoftShadowModel.from_mesh(single_quad())
+    sun, pose = Sun(210.0, 50.0), Pose()
+    grid = GroundGrid.around((0.6, 1.0), 3.0, 96)
+    img, _ = render_and_grad(mdl, ShadowParams(0.0, 0.0), sun, pose, grid, 0.0)
+    light = np.asarray(sun.light)
+    v = np.asarray(single_quad().vertices)
+    poly = v[:, :2] - (v[:, 2] / light[2])[:, None] * light[:2]
+    from matplotlib.path import Path
+    centres = grid.pixel_centres().reshape(-1, 3)[:, :2]
+    inside = Path(poly).contains_points(centres).reshape(grid.height, grid.width)
+    model_inside = img < 0.5
+    # Disagreement only within a pixel of the outline.
+    dist = np.min([_segment_distance(centres, poly[i], poly[(i + 1) % 4]) for i in range(4)], axis=0)
+    wrong = (model_inside != inside).ravel()
+    assert inside.sum() > 200
+    assert np.all(dist[wrong] <= 1.0 * grid.pixel_m), f"{wrong.sum()} pixels wrong away from the outline"
+    _, grads = render_and_grad(mdl, ShadowParams(0.02, 0.2), sun, pose, grid, 0.02)
+    assert float(grads[0].range_k) != 0.0
+
+
+def _segment_distance(p, a, b):
+    ab = b - a
+    t = np.clip(((p - a) @ ab) / (ab @ ab), 0.0, 1.0)
+    return np.linalg.norm(p - (a + t[:, None] * ab), axis=1)
+
+
+# -- faces parallel to the light ------------------------------------------------------------------
+
+@pytest.mark.parametrize("rule", ["edge", "paper"])
+def test_box_lit_side_on_has_finite_gradients(rule):
+    """Sun due east (azimuth 90) on an axis-aligned box: the +-y faces have n . L = 0 exactly."""
+    mdl = SoftShadowModel.from_mesh(standing_box(), rule=rule)
+    sun, pose, params = Sun(90.0, 35.0), Pose(), ShadowParams(0.02, 0.3)
+    grid = GroundGrid.around((-1.0, 0.0), 3.0, 64)
+    img, grads = render_and_grad(mdl, params, sun, pose, grid, 0.02)
+    assert 0.02 < shadow_fraction(img, 0.3)
+    # The faces parallel to the light make the shadow's long sides: y = +-0.2 exactly.
+    row_y = grid.pixel_centres()[:, 0, 1]
+    shadowed_rows = np.any(img < 0.65, axis=1)
+    assert np.all(np.abs(row_y[shadowed_rows]) <= 0.2 + 0.6 * grid.pixel_m)
+    points = np.c_[np.full(41, -1.0), np.linspace(-0.3, 0.3, 41), np.zeros(41)]
+    points_and_grad(mdl, params, sun, pose, points, 0.02)
+
+
+# -- the frame --------------------------------------------------------------------------------
+
+def test_shadow_partly_out_of_frame_agrees_with_a_larger_frame():
+    mdl = builtin_model("pillar")
+    sun, pose, params = Sun(160.0, 30.0), Pose(), ShadowParams(0.03, 0.3)
+    big = GroundGrid.around((-0.9, 2.4), 6.0, 96)  # the whole shadow
+    # A 48 x 48 window of the same pixels cut through the middle of the shadow.
+    part = GroundGrid(big.pixel_m, (big.origin_m[0] + 30 * big.pixel_m, big.origin_m[1] - 20 * big.pixel_m),
+                      48, 48)
+    whole, _ = render_and_grad(mdl, params, sun, pose, big, 0.03)
+    window, grads = render_and_grad(mdl, params, sun, pose, part, 0.03)
+    assert 0.02 < shadow_fraction(window, 0.3) < 0.9
+    np.testing.assert_allclose(window, whole[20:68, 30:78], atol=1e-9)
+
+
+def test_shadow_wholly_out_of_frame_is_all_lit_with_zero_gradients():
+    mdl = builtin_model("dragon")
+    sun, pose, params = Sun(160.0, 30.0), Pose(), ShadowParams(0.03, 0.3)
+    grid = GroundGrid.around((20.0, -20.0), 2.0, 32)
+    img, grads = render_and_grad(mdl, params, sun, pose, grid, 0.03)
+    np.testing.assert_array_equal(img, np.ones_like(img))
+    assert all(float(jnp.max(jnp.abs(g))) == 0.0 for g in jax.tree_util.tree_leaves(grads))
+    values, _ = points_and_grad(mdl, params, sun, pose, np.array([[20.0, -20.0, 0.0], [30.0, 5.0, 0.0]]),
+                                0.03)
+    np.testing.assert_array_equal(values, [1.0, 1.0])
+
+
+# -- rho at its ends ----------------------------------------------------------------------------
+
+@pytest.mark.parametrize("rho", [0.0, 1.0])
+@pytest.mark.parametrize("profile", ["linear", "disk"])
+def test_rho_at_its_ends(rho, profile):
+    mdl = builtin_model("ball", "edge", profile)
+    sun, pose, params = Sun(230.0, 55.0), Pose(), ShadowParams(0.03, rho)
+    grid = GroundGrid.around((0.8, 0.8), 3.0, 64)
+    img, grads = render_and_grad(mdl, params, sun, pose, grid, 0.03)
+    if rho == 1.0:
+        np.testing.assert_array_equal(img, np.ones_like(img))
+        for g in (grads[0].range_k, *jax.tree_util.tree_leaves(grads[1:])):
+            assert float(jnp.max(jnp.abs(g))) == 0.0
+        assert float(grads[0].rho) > 0.0  # d shade / d rho = alpha summed over the shadow
+    else:
+        assert img.min() == 0.0, "rho = 0: the umbra is black"
+        assert float(grads[0].rho) > 0.0
