@@ -1,0 +1,473 @@
+"""Shadow brightness and penumbra width from one photo alone, across detected shadow edges.
+
+Used where there is no scene description (no scene.toml, or no mesh): a photo
+then supports only what its shadow edges show. The log of a linear image is
+log I = log albedo + log E, so a shadow edge on one surface is a step of
+log rho whatever the albedo texture. Each profile across a candidate edge is
+fitted with
+
+    log I(s) = a + b (s - s0) + log(1 - alpha(s) (1 - rho)),
+    alpha(s) = clip(1/2 - (s - s0) / w, 0, 1),
+
+s the signed distance (px) along the edge normal towards the lit side, s0 the
+ramp centre, w the full width of the linear ramp (alpha from 1 to 0) and b a
+local shading slope. Profiles that do not look like a shadow edge on a single
+surface are rejected, the rest are combined robustly. See docs/edge_measure.md.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import optimize
+
+from fitting.edge_detect import (detect_edge_candidates, high_pass_log, log_image, max_half_span_inside,
+                                 sample_profiles, sample_strips)
+
+__all__ = ["EdgeMeasurement", "EdgeProfile", "RampFit", "measure_shadow_edges", "fit_edge_profile", "ramp_log_model"]
+
+NO_EDGE_REASON = "no shadow edge found"
+
+STEP_PX = 0.5              # sample spacing along a profile
+STRIP_HALF_WIDTH_PX = 3    # each sample averages 7 lines 1 px apart along the edge
+RHO_MAX = 0.9              # a step shallower than this is not treated as a shadow
+RHO_MIN = 0.005
+MIN_HALF_SPAN_PX = 8.0
+MIN_PLATEAU_PX = 3.0       # flat ground needed on each side beyond the ramp ...
+PLATEAU_PER_WIDTH = 0.5    # ... and at least this many ramp widths
+PLATEAU_EXTRA_PX = 8.0     # the second pass spans w (0.5 + PLATEAU_PER_WIDTH) + this on each side
+TEXTURE_SIGMA_PX = 1.0     # high-pass scale of the same-surface texture test
+SMOOTH_TEXTURE_LOG = 3e-3  # texture below this (log units) on both sides: too smooth to compare
+MAX_RESIDUAL_PER_STEP = 0.2    # rms fit residual / |log rho|: above it the profile holds more than one step
+MAX_SLOPE_STEP_FRACTION = 0.5  # |b| * (span) / |log rho|: larger means shading or another edge dominates
+TEXTURE_RATIO_LOW = 0.15   # dark-side / lit-side log texture; diffuse light in the umbra flattens relief texture (0.2-0.9 seen on asphalt)
+TEXTURE_RATIO_HIGH = 2.5   # ... times 1/sqrt(rho), the growth of shot noise in the darker side
+COLOUR_TOL_LOG = 0.75      # |log ratio in a channel - log ratio in gray|: skylit shadows are bluer
+MODE_BANDWIDTH_LOG = 0.05  # kernel density bandwidth for the dominant log-rho mode
+MODE_WINDOW_LOG = 0.25     # profiles farther than this (log) from the mode are other edges
+MIN_PROFILES = 5           # fewer shadow-like profiles than this is not a measurement
+BOOTSTRAP_RESAMPLES = 400
+# Gaussian prior (log units per px) on the shading slope b. Free, b trades
+# against rho whenever the plateaus are short (a texture tilt reads as a
+# different step: per-profile rho scattered 3x more on synthetic paper and was
+# biased by +0.004 to +0.008); this prior lets b absorb only a gradient the
+# whole profile supports (vignetting, gentle shading are ~1e-4 per px).
+SLOPE_SIGMA_PER_PX = 3e-4
+
+
+@dataclass(frozen=True)
+class EdgeProfile:
+    """One profile across a candidate edge, fitted, for plots and diagnostics.
+
+    position_uv: (2,) pixel (u, v) of the fitted ramp centre s0.
+    normal_uv: (2,) unit vector across the edge, from the shadow towards the lit side.
+    rho: fitted lit-to-umbra ratio of this profile (linear).
+    width_px: full width w of the fitted linear ramp, along the normal, in pixels.
+    residual: rms of the fit residual, in natural-log units.
+    kept: True when the profile passed every shadow-edge test and the mode window.
+    reject_reason: why it was not kept (None when kept).
+    offsets_px: (S,) sample positions s along the normal, relative to position_uv.
+    observed_log: (S,) log of the observed linear values (strip means).
+    fitted_log: (S,) the fitted model at offsets_px.
+    """
+
+    position_uv: np.ndarray
+    normal_uv: np.ndarray
+    rho: float
+    width_px: float
+    residual: float
+    kept: bool
+    reject_reason: str | None
+    offsets_px: np.ndarray
+    observed_log: np.ndarray
+    fitted_log: np.ndarray
+
+
+@dataclass(frozen=True)
+class EdgeMeasurement:
+    """What one photo alone says about its shadow.
+
+    rho: robust (median) shadow brightness over the kept profiles, linear ratio
+        umbra / lit on the same surface; NaN when nothing was measured.
+    rho_stderr: one-sigma uncertainty of that median (block bootstrap over
+        profiles); not the spread of rho over the scene.
+    penumbra_px: median full width of the fitted linear ramp (alpha 1 -> 0) across
+        the edge, in image pixels along the edge normal, camera blur included.
+    penumbra_px_iqr: interquartile range of the widths (px).
+    penumbra_m: penumbra_px * pixel_m when pixel_m is given, else None.
+    n_profiles: number of kept profiles.
+    edges_found: False when no shadow edge could be measured.
+    profiles: every fitted profile, kept or not (EdgeProfile).
+    reason: why nothing was measured (None when edges_found).
+    """
+
+    rho: float
+    rho_stderr: float
+    penumbra_px: float
+    penumbra_px_iqr: float
+    penumbra_m: float | None
+    n_profiles: int
+    edges_found: bool
+    profiles: list[EdgeProfile]
+    reason: str | None
+
+
+def ramp_log_model(s: np.ndarray, a: float, b: float, s0: float, w: float, rho: float) -> np.ndarray:
+    """log I(s) of a linear shadow ramp: a + b (s - s0) + log(1 - alpha (1 - rho)), alpha = clip(1/2 - (s - s0)/w, 0, 1)."""
+    alpha = np.clip(0.5 - (s - s0) / w, 0.0, 1.0)
+    return a + b * (s - s0) + np.log1p(-alpha * (1.0 - rho))
+
+
+@dataclass(frozen=True)
+class RampFit:
+    """Fitted ramp_log_model parameters, the rms residual (log units) and the model at the samples."""
+
+    a: float
+    b: float
+    s0: float
+    w: float
+    rho: float
+    residual_rms: float
+    fitted: np.ndarray
+
+
+def fit_edge_profile(s: np.ndarray, y: np.ndarray, max_width_px: float,
+                     slope_sigma_per_px: float | None = None) -> RampFit | None:
+    """Robust least-squares fit of ``ramp_log_model`` to one log profile y(s) (s increasing towards lit).
+
+    Start from the plateaus (outer quarters of the span) and the extent of the
+    20-80 % part of the step; soft-L1 loss at the profile's noise level so that
+    a speck or a crack inside the span does not pull the fit. Returns None when
+    the data show no darker side.
+    """
+    span = s[-1] - s[0]
+    dark = y[s < s[0] + 0.25 * span]
+    lit = y[s > s[-1] - 0.25 * span]
+    a0 = float(np.median(lit))
+    d0 = float(np.median(dark)) - a0
+    if not d0 < 0:
+        return None
+    rho0 = float(np.clip(np.exp(d0), 0.02, 0.95))
+    frac = (np.exp(y - a0) - rho0) / (1.0 - rho0)       # 1 - alpha, in linear units
+    mid = (frac > 0.2) & (frac < 0.8)
+    ds = s[1] - s[0]
+    w0 = float(np.clip(mid.sum() * ds / 0.6, 1.0, max_width_px * 0.9))
+    s00 = float(np.median(s[mid])) if mid.any() else 0.0
+    s00 = float(np.clip(s00, s[0] + 0.3 * span, s[-1] - 0.3 * span))
+    noise = max(1.4826 * float(np.median(np.abs(np.diff(y) - np.median(np.diff(y))))) / np.sqrt(2.0), 1e-3)
+
+    prior = 0.0 if slope_sigma_per_px is None else noise / slope_sigma_per_px
+
+    def residual(p):
+        return np.append(ramp_log_model(s, *p) - y, prior * p[1])
+
+    def jacobian(p):
+        a, b, s0, w, rho = p
+        t = (s - s0) / w
+        alpha = np.clip(0.5 - t, 0.0, 1.0)
+        inside = (alpha > 0.0) & (alpha < 1.0)
+        g = 1.0 - alpha * (1.0 - rho)
+        dm_dalpha = -(1.0 - rho) / g
+        jac = np.zeros((s.size + 1, 5))
+        jac[:-1, 0] = 1.0
+        jac[:-1, 1] = s - s0
+        jac[:-1, 2] = -b + np.where(inside, dm_dalpha / w, 0.0)
+        jac[:-1, 3] = np.where(inside, dm_dalpha * t / w, 0.0)
+        jac[:-1, 4] = alpha / g
+        jac[-1, 1] = prior
+        return jac
+
+    lo = [-np.inf, -np.inf, s[0] + 0.2 * span, 0.3, RHO_MIN]
+    hi = [np.inf, np.inf, s[-1] - 0.2 * span, max_width_px, 0.999]
+    p0 = np.clip([a0, 0.0, s00, w0, rho0], np.add(lo, 1e-9), np.subtract(hi, 1e-9))
+    sol = optimize.least_squares(residual, p0, jac=jacobian, bounds=(lo, hi), loss="soft_l1",
+                                 f_scale=3.0 * noise, x_scale="jac", max_nfev=200)
+    a, b, s0, w, rho = (float(v) for v in sol.x)
+    fitted = ramp_log_model(s, a, b, s0, w, rho)
+    return RampFit(a, b, s0, w, rho, float(np.sqrt(np.mean((fitted - y) ** 2))), fitted)
+
+
+def measure_shadow_edges(linear_gray: np.ndarray, mask: np.ndarray | None = None, pixel_m: float | None = None,
+                         max_profiles: int = 400, rng_seed: int = 0, *,
+                         linear_rgb: np.ndarray | None = None,
+                         saturation_level: float | None = None) -> EdgeMeasurement:
+    """Measure the shadow brightness rho and the penumbra width across shadow edges in one photo.
+
+    linear_gray: (H, W) float, linear radiometry (any scale; not display-encoded).
+    mask: (H, W) bool, True = ignore these pixels (the object, a board, ...).
+    pixel_m: ground size of one pixel (m), for ``penumbra_m``; only meaningful
+        for a top-down image of a flat receiver.
+    max_profiles: at most this many profiles are sampled and fitted.
+    rng_seed: seeds the choice of profile positions and the bootstrap.
+    linear_rgb: optional (H, W, 3) linear colour image of the same photo; when
+        given, a profile is kept only if its dark/lit ratio is about the same in
+        every channel (a shadow dims all channels alike, up to the bluer sky
+        light in the umbra; painted lines and coloured objects do not).
+    saturation_level: linear value at or above which a pixel (or, with
+        linear_rgb, any of its channels) is clipped and ignored; pass 1.0 for
+        images normalised from integer files (linearised 8-bit sRGB, 16-bit,
+        RAW scaled to its white level). None: nothing is treated as clipped.
+
+    Returns an EdgeMeasurement; "no shadow in view" is not an error
+    (edges_found False, reason "no shadow edge found"). Raises ValueError for
+    malformed input.
+    """
+    gray = _checked_gray(linear_gray)
+    ignore = _checked_mask(mask, gray.shape)
+    rgb = _checked_rgb(linear_rgb, gray.shape)
+    if pixel_m is not None and not (np.isfinite(pixel_m) and pixel_m > 0):
+        raise ValueError(f"pixel_m must be a positive number of metres, got {pixel_m!r}")
+    if int(max_profiles) < 1:
+        raise ValueError(f"max_profiles must be at least 1, got {max_profiles!r}")
+    rng = np.random.default_rng(rng_seed)
+
+    bad = np.zeros(gray.shape, bool) if ignore is None else ignore.copy()
+    if rgb is not None:
+        bad |= ~np.isfinite(rgb).all(axis=2)
+    if saturation_level is not None:
+        bad |= gray >= saturation_level
+        if rgb is not None:
+            bad |= (rgb >= saturation_level).any(axis=2)
+    ignore = bad
+    img = log_image(gray, ignore)
+    if not img.valid.any():
+        return _nothing("every pixel is masked, clipped or not finite", [])
+    candidates = detect_edge_candidates(img, int(max_profiles), rng)
+    if len(candidates) == 0:
+        return _nothing(NO_EDGE_REASON, [])
+
+    images = _Images(gray=gray, valid=img.valid, texture=high_pass_log(img, TEXTURE_SIGMA_PX), rgb=rgb)
+    profiles = _fit_candidates(images, candidates)
+    profiles = _keep_dominant_mode(profiles)
+    kept = [p for p in profiles if p.kept]
+    if len(kept) < MIN_PROFILES:
+        return _nothing(NO_EDGE_REASON, profiles)
+
+    log_rho = np.log([p.rho for p in kept])
+    widths = np.array([p.width_px for p in kept])
+    positions = np.array([p.position_uv for p in kept])
+    rho = float(np.exp(np.median(log_rho)))
+    rho_stderr = _block_bootstrap_median_stderr(np.exp(log_rho), positions, rng)
+    q25, q50, q75 = np.percentile(widths, [25, 50, 75])
+    return EdgeMeasurement(rho=rho, rho_stderr=rho_stderr, penumbra_px=float(q50), penumbra_px_iqr=float(q75 - q25),
+                           penumbra_m=None if pixel_m is None else float(q50 * pixel_m), n_profiles=len(kept),
+                           edges_found=True, profiles=profiles, reason=None)
+
+
+@dataclass(frozen=True)
+class _Images:
+    """The arrays every profile is sampled from."""
+
+    gray: np.ndarray            # (H, W) linear
+    valid: np.ndarray           # (H, W) bool
+    texture: np.ndarray         # (H, W) high-pass log (fine texture plus noise)
+    rgb: np.ndarray | None      # (H, W, 3) linear, or None
+
+
+def _fit_candidates(images: _Images, candidates) -> list[EdgeProfile]:
+    """Sample, fit and screen every candidate (two passes: the second spans the fitted ramp)."""
+    max_half = max(MIN_HALF_SPAN_PX, 0.25 * min(images.gray.shape))
+    profiles: list[EdgeProfile] = []
+    for point, normal, sigma in zip(candidates.points_uv, candidates.normals_uv, candidates.sigma_px):
+        room = max_half_span_inside(point, normal, images.gray.shape, STRIP_HALF_WIDTH_PX)
+        half1 = min(3.0 * sigma + 6.0, max_half, room)
+        first = _profile_fit(images, point, normal, half1)
+        if isinstance(first, str):
+            profiles.append(_rejected(point, normal, first))
+            continue
+        # Re-centre on the fitted ramp and span enough plateau on both sides of it.
+        centre = point + first[0].s0 * normal
+        room = max_half_span_inside(centre, normal, images.gray.shape, STRIP_HALF_WIDTH_PX)
+        half2 = min(first[0].w * (0.5 + PLATEAU_PER_WIDTH) + PLATEAU_EXTRA_PX, max_half, room)
+        second = _profile_fit(images, centre, normal, half2)
+        if isinstance(second, str):
+            profiles.append(_rejected(centre, normal, second))
+            continue
+        fit, s, y = second
+        half2 = float(s[-1])
+        reason = _shadow_edge_test(images, centre, normal, half2, fit, s, y)
+        profiles.append(EdgeProfile(position_uv=centre + fit.s0 * normal, normal_uv=normal, rho=fit.rho,
+                                    width_px=fit.w, residual=fit.residual_rms, kept=reason is None,
+                                    reject_reason=reason, offsets_px=s - fit.s0, observed_log=y,
+                                    fitted_log=fit.fitted))
+    return profiles
+
+
+def _profile_fit(images: _Images, point, normal, half_span_px: float):
+    """(fit, s, log profile) of the profile through point along normal, or the reason it has none.
+
+    A profile that meets masked or clipped pixels is shortened (down to
+    MIN_HALF_SPAN_PX) before it is given up: the edge may run close to the object.
+    """
+    half = half_span_px
+    while True:
+        if half < MIN_HALF_SPAN_PX:
+            return "too close to the image border or to masked/clipped pixels"
+        samples = sample_profiles(images.gray, images.valid, point[None], normal[None], half, step_px=STEP_PX,
+                                  half_width_px=STRIP_HALF_WIDTH_PX)
+        if samples.usable[0]:
+            break
+        half *= 0.7
+    s = samples.offsets_px
+    y = np.log(np.maximum(samples.values[0], 1e-300))
+    fit = fit_edge_profile(s, y, max_width_px=1.2 * half, slope_sigma_per_px=SLOPE_SIGMA_PER_PX)
+    if fit is None:
+        return "no darker side"
+    return fit, s, y
+
+
+def _plateaus(s: np.ndarray, fit: RampFit, extra_px: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Boolean sample masks of the flat parts beyond the ramp (dark, lit), 1 px + extra_px clear of it."""
+    margin = 0.5 * fit.w + 1.0 + extra_px
+    return s < fit.s0 - margin, s > fit.s0 + margin
+
+
+def _shadow_edge_test(images: _Images, centre, normal, half_span_px: float, fit: RampFit, s: np.ndarray,
+                      y: np.ndarray) -> str | None:
+    """Why this fitted profile is not a shadow edge on one surface, or None if it looks like one."""
+    if fit.rho > RHO_MAX:
+        return f"step too shallow (rho {fit.rho:.2f} > {RHO_MAX})"
+    step = -np.log(fit.rho)
+    dark, lit = _plateaus(s, fit)
+    need = max(MIN_PLATEAU_PX, PLATEAU_PER_WIDTH * fit.w) / STEP_PX
+    if dark.sum() < need or lit.sum() < need:
+        return "ramp not inside the profile (too little plateau on one side)"
+    if fit.residual_rms > MAX_RESIDUAL_PER_STEP * step:
+        return f"poor fit (residual {fit.residual_rms:.3f} > {MAX_RESIDUAL_PER_STEP} x step): texture or another edge"
+    if abs(fit.b) * (s[-1] - s[0]) > MAX_SLOPE_STEP_FRACTION * step:
+        return "shading slope comparable to the step: not a clean edge"
+    ratio = _texture_ratio(images, centre, normal, half_span_px, fit, s)
+    if ratio is not None and not TEXTURE_RATIO_LOW <= ratio <= TEXTURE_RATIO_HIGH / np.sqrt(fit.rho):
+        return f"texture differs across the edge (dark/lit {ratio:.2f}): two surfaces, not a shadow"
+    if images.rgb is not None:
+        colour = _colour_step_logs(images, centre, normal, half_span_px, fit, s)
+        if np.max(np.abs(colour)) > COLOUR_TOL_LOG:
+            return f"colour changes across the edge (channel log ratios differ by {np.max(np.abs(colour)):.2f})"
+    return None
+
+
+def _texture_ratio(images: _Images, centre, normal, half_span_px, fit, s) -> float | None:
+    """Robust std of fine log texture on the dark plateau over that on the lit plateau (None: both smooth).
+
+    Taken over the 2-D strip (every line, not the strip means) and clear of the
+    ramp by the high-pass kernel's reach, so the edge itself does not count.
+    """
+    strips = sample_strips(images.texture, centre[None], normal[None], half_span_px, STEP_PX,
+                           STRIP_HALF_WIDTH_PX)[0]                                # (S, T)
+    dark, lit = _plateaus(s, fit, extra_px=2.0 * TEXTURE_SIGMA_PX)
+    if dark.sum() < 2 or lit.sum() < 2:
+        return None
+    tex_dark = _robust_std(strips[dark].ravel())
+    tex_lit = _robust_std(strips[lit].ravel())
+    if max(tex_dark, tex_lit) < SMOOTH_TEXTURE_LOG:
+        return None
+    return max(tex_dark, SMOOTH_TEXTURE_LOG) / max(tex_lit, SMOOTH_TEXTURE_LOG)
+
+
+def _colour_step_logs(images: _Images, centre, normal, half_span_px, fit, s) -> np.ndarray:
+    """(3,) per-channel log(dark plateau / lit plateau) minus the same for the channel sum."""
+    samples = sample_profiles(images.rgb, images.valid, centre[None], normal[None], half_span_px, step_px=STEP_PX,
+                              half_width_px=STRIP_HALF_WIDTH_PX)
+    vals = np.maximum(samples.values[0], 1e-300)          # (S, 3)
+    dark, lit = _plateaus(s, fit)
+    steps = np.log(np.median(vals[dark], axis=0)) - np.log(np.median(vals[lit], axis=0))
+    sum_step = np.log(np.median(vals[dark].sum(axis=1))) - np.log(np.median(vals[lit].sum(axis=1)))
+    return steps - sum_step
+
+
+def _robust_std(x: np.ndarray) -> float:
+    return float(1.4826 * np.median(np.abs(x - np.median(x)))) if x.size else 0.0
+
+
+def _keep_dominant_mode(profiles: list[EdgeProfile]) -> list[EdgeProfile]:
+    """Keep only profiles whose log rho lies near the dominant mode of the shadow-like ones.
+
+    All shadow edges on one surface orientation share rho (one sun, one sky);
+    what survives the per-profile tests but sits far from the mode is an albedo
+    edge of a similar look or a differently oriented surface.
+    """
+    idx = [i for i, p in enumerate(profiles) if p.kept]
+    if not idx:
+        return profiles
+    log_rho = np.log([profiles[i].rho for i in idx])
+    grid = np.arange(np.log(RHO_MIN), 0.0, 0.005)
+    density = np.exp(-0.5 * ((grid[:, None] - log_rho[None, :]) / MODE_BANDWIDTH_LOG) ** 2).sum(axis=1)
+    mode = grid[int(np.argmax(density))]
+    near = np.abs(log_rho - mode) <= MODE_WINDOW_LOG
+    # Trim what is far from the median of the mode's members in units of their robust spread.
+    centre = np.median(log_rho[near])
+    spread = max(1.4826 * np.median(np.abs(log_rho[near] - centre)), 0.02)
+    inlier = near & (np.abs(log_rho - centre) <= 3.0 * spread)
+    out = list(profiles)
+    for j, i in enumerate(idx):
+        if not inlier[j]:
+            p = profiles[i]
+            out[i] = EdgeProfile(p.position_uv, p.normal_uv, p.rho, p.width_px, p.residual, False,
+                                 f"rho {p.rho:.3f} far from the dominant mode {np.exp(centre):.3f}",
+                                 p.offsets_px, p.observed_log, p.fitted_log)
+    return out
+
+
+def _block_bootstrap_median_stderr(rho: np.ndarray, positions_uv: np.ndarray, rng: np.random.Generator) -> float:
+    """Std of the median of rho under resampling of spatial blocks of profiles.
+
+    Neighbouring profiles share pixels (strips overlap) and texture, so they are
+    not independent: resample square blocks twice the strip width instead.
+    """
+    block = 2.0 * (2 * STRIP_HALF_WIDTH_PX + 1)
+    keys = np.floor(positions_uv / block).astype(np.int64)
+    _, labels = np.unique(keys[:, 0] * 1_000_003 + keys[:, 1], return_inverse=True)
+    members = [np.nonzero(labels == b)[0] for b in range(labels.max() + 1)]
+    n_blocks = len(members)
+    if n_blocks < 2:
+        return float("nan")
+    medians = np.empty(BOOTSTRAP_RESAMPLES)
+    for r in range(BOOTSTRAP_RESAMPLES):
+        pick = rng.integers(0, n_blocks, n_blocks)
+        medians[r] = np.median(rho[np.concatenate([members[b] for b in pick])])
+    return float(np.std(medians, ddof=1))
+
+
+def _rejected(point, normal, reason: str) -> EdgeProfile:
+    empty = np.zeros(0)
+    return EdgeProfile(np.asarray(point, float), np.asarray(normal, float), float("nan"), float("nan"),
+                       float("nan"), False, reason, empty, empty, empty)
+
+
+def _nothing(reason: str, profiles: list[EdgeProfile]) -> EdgeMeasurement:
+    nan = float("nan")
+    return EdgeMeasurement(rho=nan, rho_stderr=nan, penumbra_px=nan, penumbra_px_iqr=nan, penumbra_m=None,
+                           n_profiles=0, edges_found=False, profiles=profiles, reason=reason)
+
+
+def _checked_gray(linear_gray) -> np.ndarray:
+    arr = np.asarray(linear_gray)
+    if arr.ndim != 2:
+        raise ValueError(f"linear_gray must be a 2-D (H, W) array, got shape {arr.shape}")
+    if min(arr.shape) < 16:
+        raise ValueError(f"linear_gray is too small to hold a shadow edge: shape {arr.shape}")
+    if not np.issubdtype(arr.dtype, np.number) or np.issubdtype(arr.dtype, np.complexfloating):
+        raise ValueError(f"linear_gray must hold real numbers, got dtype {arr.dtype}")
+    arr = arr.astype(np.float64)
+    if not np.isfinite(arr).any():
+        raise ValueError("linear_gray has no finite pixel")
+    return arr
+
+
+def _checked_mask(mask, shape) -> np.ndarray | None:
+    if mask is None:
+        return None
+    m = np.asarray(mask)
+    if m.shape != shape:
+        raise ValueError(f"mask shape {m.shape} does not match the image shape {shape}")
+    return m.astype(bool)
+
+
+def _checked_rgb(rgb, shape) -> np.ndarray | None:
+    if rgb is None:
+        return None
+    arr = np.asarray(rgb, dtype=np.float64)
+    if arr.shape != (*shape, 3):
+        raise ValueError(f"linear_rgb must have shape {(*shape, 3)}, got {arr.shape}")
+    return arr
