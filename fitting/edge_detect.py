@@ -36,6 +36,9 @@ MIN_CHAIN_PX = 20
 # few pixels clears the high one.
 CANNY_HIGH_LOG_PER_PX = 0.04
 CANNY_LOW_LOG_PER_PX = 0.015
+# Half the base (px) over which the bend of an edge is measured: a bit more
+# than a profile strip's half-width, so a bend inside a strip shows.
+TURN_BASE_PX = 5.0
 
 
 @dataclass(frozen=True)
@@ -57,11 +60,14 @@ class EdgeCandidates:
     points_uv: (N, 2) float, pixel coordinates (u, v) of edge pixels.
     normals_uv: (N, 2) float, unit vectors across the edge towards the brighter side.
     sigma_px: (N,) float, Gaussian scale (px) of the Canny pass that found the point.
+    turn_deg: (N,) float, angle (degrees) between the edge normals TURN_BASE_PX
+        before and after the point along the edge: large at corners and tight curves.
     """
 
     points_uv: np.ndarray
     normals_uv: np.ndarray
     sigma_px: np.ndarray
+    turn_deg: np.ndarray
 
     def __len__(self) -> int:
         return int(self.points_uv.shape[0])
@@ -121,7 +127,7 @@ def detect_edge_candidates(img: LogImage, max_points: int, rng: np.random.Genera
     filled = _fill_invalid(log, img.valid)
     # Canny must not fire at the boundary of ignored regions: erode the valid area.
     usable = ndimage.binary_erosion(img.valid, iterations=2, border_value=0)
-    pts, nrm, sig = [], [], []
+    pts, nrm, sig, turn = [], [], [], []
     for sigma in sigmas_px:
         # skimage's canny thresholds the magnitude of scipy's Sobel of the smoothed
         # image, 8 times the per-pixel derivative: thresholds below are scaled to
@@ -143,16 +149,18 @@ def detect_edge_candidates(img: LogImage, max_points: int, rng: np.random.Genera
         g = np.stack([gx[rows, cols], gy[rows, cols]], axis=1)
         gnorm = np.linalg.norm(g, axis=1)
         ok = gnorm > 0
-        pts.append(np.stack([cols[ok], rows[ok]], axis=1).astype(float))
-        nrm.append(g[ok] / gnorm[ok, None])
+        p = np.stack([cols[ok], rows[ok]], axis=1).astype(float)
+        n = g[ok] / gnorm[ok, None]
+        pts.append(p)
+        nrm.append(n)
         sig.append(np.full(int(ok.sum()), float(sigma)))
+        turn.append(_turn_deg(gx, gy, p, n))
     if not pts:
-        return EdgeCandidates(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0))
+        return EdgeCandidates(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), np.zeros(0))
     points = np.concatenate(pts)
-    normals = np.concatenate(nrm)
-    sigma = np.concatenate(sig)
     keep = _spread_evenly(points, max_points, rng)
-    return EdgeCandidates(points[keep], normals[keep], sigma[keep])
+    return EdgeCandidates(points[keep], np.concatenate(nrm)[keep], np.concatenate(sig)[keep],
+                          np.concatenate(turn)[keep])
 
 
 def sample_profiles(linear: np.ndarray, valid: np.ndarray, points_uv: np.ndarray, normals_uv: np.ndarray,
@@ -245,6 +253,20 @@ def _strip_coords(points_uv, normals_uv, half_span_px, step_px, half_width_px):
     u = points_uv[:, None, None, 0] + s * normals_uv[:, None, None, 0] + t * tangents[:, None, None, 0]
     v = points_uv[:, None, None, 1] + s * normals_uv[:, None, None, 1] + t * tangents[:, None, None, 1]
     return offsets, np.stack([v.ravel(), u.ravel()]), (n, offsets.size, t_off.size)
+
+
+def _turn_deg(gx: np.ndarray, gy: np.ndarray, points_uv: np.ndarray, normals_uv: np.ndarray) -> np.ndarray:
+    """Angle (deg) between the gradient directions TURN_BASE_PX to either side of each point along its edge."""
+    tangents = np.stack([-normals_uv[:, 1], normals_uv[:, 0]], axis=1)
+    ends = []
+    for sign in (-1.0, 1.0):
+        q = points_uv + sign * TURN_BASE_PX * tangents
+        coords = [q[:, 1], q[:, 0]]
+        g = np.stack([ndimage.map_coordinates(gx, coords, order=1, mode="nearest"),
+                      ndimage.map_coordinates(gy, coords, order=1, mode="nearest")], axis=1)
+        ends.append(g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300))
+    cos = np.clip(np.sum(ends[0] * ends[1], axis=1), -1.0, 1.0)
+    return np.degrees(np.arccos(cos))
 
 
 def _fill_invalid(log: np.ndarray, valid: np.ndarray) -> np.ndarray:

@@ -20,12 +20,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import optimize
+from scipy import optimize, special
 
 from fitting.edge_detect import (detect_edge_candidates, high_pass_log, log_image, max_half_span_inside,
                                  sample_profiles, sample_strips)
 
-__all__ = ["EdgeMeasurement", "EdgeProfile", "RampFit", "measure_shadow_edges", "fit_edge_profile", "ramp_log_model"]
+__all__ = ["EdgeMeasurement", "EdgeProfile", "RampFit", "measure_shadow_edges", "fit_edge_profile", "ramp_alpha",
+           "ramp_log_model"]
 
 NO_EDGE_REASON = "no shadow edge found"
 
@@ -44,6 +45,7 @@ MAX_SLOPE_STEP_FRACTION = 0.5  # |b| * (span) / |log rho|: larger means shading 
 TEXTURE_RATIO_LOW = 0.15   # dark-side / lit-side log texture; diffuse light in the umbra flattens relief texture (0.2-0.9 seen on asphalt)
 TEXTURE_RATIO_HIGH = 2.5   # ... times 1/sqrt(rho), the growth of shot noise in the darker side
 COLOUR_TOL_LOG = 0.75      # |log ratio in a channel - log ratio in gray|: skylit shadows are bluer
+MAX_TURN_DEG = 10.0        # edge bend over +-TURN_BASE_PX along it; more is a corner (widths read 20-30 % high)
 MODE_BANDWIDTH_LOG = 0.05  # kernel density bandwidth for the dominant log-rho mode
 MODE_WINDOW_LOG = 0.25     # profiles farther than this (log) from the mode are other edges
 MIN_PROFILES = 5           # fewer shadow-like profiles than this is not a measurement
@@ -54,6 +56,11 @@ BOOTSTRAP_RESAMPLES = 400
 # biased by +0.004 to +0.008); this prior lets b absorb only a gradient the
 # whole profile supports (vignetting, gentle shading are ~1e-4 per px).
 SLOPE_SIGMA_PER_PX = 3e-4
+# Profiles are read with bilinear interpolation, which blurs along the normal
+# with a triangle kernel of variance 1/6 px^2 whatever the direction; the model
+# includes it (as a Gaussian of that variance) so that w is the ramp's width
+# in the image. Without it a 4 px ramp read 4.3 px (w^2 grows by 12 x 1/6 = 2).
+SAMPLING_BLUR_PX = float(np.sqrt(1.0 / 6.0))
 
 
 @dataclass(frozen=True)
@@ -113,10 +120,27 @@ class EdgeMeasurement:
     reason: str | None
 
 
-def ramp_log_model(s: np.ndarray, a: float, b: float, s0: float, w: float, rho: float) -> np.ndarray:
-    """log I(s) of a linear shadow ramp: a + b (s - s0) + log(1 - alpha (1 - rho)), alpha = clip(1/2 - (s - s0)/w, 0, 1)."""
-    alpha = np.clip(0.5 - (s - s0) / w, 0.0, 1.0)
-    return a + b * (s - s0) + np.log1p(-alpha * (1.0 - rho))
+def ramp_alpha(s: np.ndarray, s0: float, w: float, blur_px: float = 0.0) -> np.ndarray:
+    """Linear ramp alpha(s) = clip(1/2 - (s - s0) / w, 0, 1), convolved with a Gaussian of std blur_px.
+
+    With G(z) = E[max(z + e, 0)], e ~ N(0, blur^2), = z Phi(z / blur) + blur phi(z / blur),
+    the blurred ramp is (G(w/2 - x) - G(-w/2 - x)) / w, x = s - s0 (closed form).
+    """
+    x = np.asarray(s, float) - s0
+    if blur_px <= 0.0:
+        return np.clip(0.5 - x / w, 0.0, 1.0)
+    return (_expected_ramp(0.5 * w - x, blur_px) - _expected_ramp(-0.5 * w - x, blur_px)) / w
+
+
+def ramp_log_model(s: np.ndarray, a: float, b: float, s0: float, w: float, rho: float,
+                   blur_px: float = 0.0) -> np.ndarray:
+    """log I(s) = a + b (s - s0) + log(1 - alpha(s) (1 - rho)), alpha the (blurred) linear ramp of ``ramp_alpha``."""
+    return a + b * (np.asarray(s, float) - s0) + np.log1p(-ramp_alpha(s, s0, w, blur_px) * (1.0 - rho))
+
+
+def _expected_ramp(z: np.ndarray, sigma: float) -> np.ndarray:
+    t = z / sigma
+    return z * special.ndtr(t) + sigma * np.exp(-0.5 * t * t) / np.sqrt(2.0 * np.pi)
 
 
 @dataclass(frozen=True)
@@ -133,8 +157,13 @@ class RampFit:
 
 
 def fit_edge_profile(s: np.ndarray, y: np.ndarray, max_width_px: float,
-                     slope_sigma_per_px: float | None = None) -> RampFit | None:
+                     slope_sigma_per_px: float | None = SLOPE_SIGMA_PER_PX,
+                     blur_px: float = SAMPLING_BLUR_PX) -> RampFit | None:
     """Robust least-squares fit of ``ramp_log_model`` to one log profile y(s) (s increasing towards lit).
+
+    s: (S,) increasing sample offsets (px); y: (S,) log values. slope_sigma_per_px:
+    std of the Gaussian prior on the slope b (None: free). blur_px: known
+    Gaussian blur of the samples along s (default: the bilinear resampling's).
 
     Start from the plateaus (outer quarters of the span) and the extent of the
     20-80 % part of the step; soft-L1 loss at the profile's noise level so that
@@ -158,22 +187,26 @@ def fit_edge_profile(s: np.ndarray, y: np.ndarray, max_width_px: float,
     noise = max(1.4826 * float(np.median(np.abs(np.diff(y) - np.median(np.diff(y))))) / np.sqrt(2.0), 1e-3)
 
     prior = 0.0 if slope_sigma_per_px is None else noise / slope_sigma_per_px
+    blur = max(blur_px, 1e-3)      # the closed form needs blur > 0; 1e-3 px is a sharp ramp
 
     def residual(p):
-        return np.append(ramp_log_model(s, *p) - y, prior * p[1])
+        return np.append(ramp_log_model(s, *p, blur_px=blur) - y, prior * p[1])
 
     def jacobian(p):
         a, b, s0, w, rho = p
-        t = (s - s0) / w
-        alpha = np.clip(0.5 - t, 0.0, 1.0)
-        inside = (alpha > 0.0) & (alpha < 1.0)
+        x = s - s0
+        alpha = ramp_alpha(s, s0, w, blur)
+        hi_edge = special.ndtr((0.5 * w - x) / blur)
+        lo_edge = special.ndtr((-0.5 * w - x) / blur)
+        dalpha_ds0 = (hi_edge - lo_edge) / w
+        dalpha_dw = 0.5 * (hi_edge + lo_edge) / w - alpha / w
         g = 1.0 - alpha * (1.0 - rho)
         dm_dalpha = -(1.0 - rho) / g
         jac = np.zeros((s.size + 1, 5))
         jac[:-1, 0] = 1.0
-        jac[:-1, 1] = s - s0
-        jac[:-1, 2] = -b + np.where(inside, dm_dalpha / w, 0.0)
-        jac[:-1, 3] = np.where(inside, dm_dalpha * t / w, 0.0)
+        jac[:-1, 1] = x
+        jac[:-1, 2] = -b + dm_dalpha * dalpha_ds0
+        jac[:-1, 3] = dm_dalpha * dalpha_dw
         jac[:-1, 4] = alpha / g
         jac[-1, 1] = prior
         return jac
@@ -184,7 +217,7 @@ def fit_edge_profile(s: np.ndarray, y: np.ndarray, max_width_px: float,
     sol = optimize.least_squares(residual, p0, jac=jacobian, bounds=(lo, hi), loss="soft_l1",
                                  f_scale=3.0 * noise, x_scale="jac", max_nfev=200)
     a, b, s0, w, rho = (float(v) for v in sol.x)
-    fitted = ramp_log_model(s, a, b, s0, w, rho)
+    fitted = ramp_log_model(s, a, b, s0, w, rho, blur_px=blur)
     return RampFit(a, b, s0, w, rho, float(np.sqrt(np.mean((fitted - y) ** 2))), fitted)
 
 
@@ -269,7 +302,12 @@ def _fit_candidates(images: _Images, candidates) -> list[EdgeProfile]:
     """Sample, fit and screen every candidate (two passes: the second spans the fitted ramp)."""
     max_half = max(MIN_HALF_SPAN_PX, 0.25 * min(images.gray.shape))
     profiles: list[EdgeProfile] = []
-    for point, normal, sigma in zip(candidates.points_uv, candidates.normals_uv, candidates.sigma_px):
+    for point, normal, sigma, turn in zip(candidates.points_uv, candidates.normals_uv, candidates.sigma_px,
+                                          candidates.turn_deg):
+        if turn > MAX_TURN_DEG:
+            # A strip across a corner mixes two edge directions: the ramp reads wide.
+            profiles.append(_rejected(point, normal, f"edge bends {turn:.0f} deg within the strip (corner or tight curve)"))
+            continue
         room = max_half_span_inside(point, normal, images.gray.shape, STRIP_HALF_WIDTH_PX)
         half1 = min(3.0 * sigma + 6.0, max_half, room)
         first = _profile_fit(images, point, normal, half1)
@@ -311,7 +349,7 @@ def _profile_fit(images: _Images, point, normal, half_span_px: float):
         half *= 0.7
     s = samples.offsets_px
     y = np.log(np.maximum(samples.values[0], 1e-300))
-    fit = fit_edge_profile(s, y, max_width_px=1.2 * half, slope_sigma_per_px=SLOPE_SIGMA_PER_PX)
+    fit = fit_edge_profile(s, y, max_width_px=1.2 * half)
     if fit is None:
         return "no darker side"
     return fit, s, y
