@@ -141,6 +141,20 @@ def test_kept_profiles_sit_on_the_shadow_outline_with_normals_towards_the_light(
     assert len(kept) >= 30
 
 
+def test_corners_are_left_out():
+    """A saw-tooth shadow: strips across its 90-degree corners would mix two edge directions and read wide."""
+    teeth = [(20 + 20 * i, 30 if i % 2 == 0 else 60) for i in range(9)]
+    poly = teeth + [(180, 130), (20, 130)]
+    rng = np.random.default_rng(2)
+    img = expose(albedo("paper", rng, 160, 200) * shading(poly, 0.3, 5.0, 160, 200), rng)
+    m = measure_shadow_edges(img, max_profiles=300)
+    kept = np.array([p.position_uv for p in m.profiles if p.kept])
+    to_vertex = np.min(np.linalg.norm(kept[:, None, :] - np.array(poly, float)[None], axis=-1), axis=1)
+    assert len(kept) >= 50 and to_vertex.min() > 8.0
+    assert m.penumbra_px == pytest.approx(5.0, rel=0.05)
+    assert any("bends" in (p.reject_reason or "") for p in m.profiles)
+
+
 def test_penumbra_in_metres_scales_the_pixel_width():
     img = shadow_photo("paper", rho=0.4, width_px=6.0, seed=5)
     a = measure_shadow_edges(img, max_profiles=120)
@@ -218,6 +232,45 @@ def test_mask_excludes_an_object_and_its_pixels_never_count():
     again = measure_shadow_edges(other, mask=mask, max_profiles=200)
     assert again.rho == masked.rho and again.penumbra_px == masked.penumbra_px
     assert again.n_profiles == masked.n_profiles
+
+
+def _outline(region, px=3):
+    return ndimage.binary_dilation(region, iterations=px) & ~ndimage.binary_erosion(region, iterations=px)
+
+
+def test_albedo_edge_between_smooth_paper_and_rough_ground_is_not_a_shadow():
+    """A sheet of paper on concrete (albedo ratio 0.41, a longer outline than the shadow's) and a shadow over both.
+
+    Shading cannot change fine log texture, so a step from rough to smooth is
+    two materials, not a shadow. Realistic noise (5000 electrons at white).
+    """
+    rng = np.random.default_rng(0)
+    h, w = 180, 230
+    sheet = np.zeros((h, w), bool)
+    sheet[30:150, 20:130] = True
+    alb = np.where(sheet, albedo("paper", rng, h, w), albedo("concrete", rng, h, w))
+    shadow = [(100, 60), (210, 66), (206, 125), (104, 118)]
+    img = expose(alb * shading(shadow, 0.3, 6.0, h, w), rng, photons=5000.0)
+    m = measure_shadow_edges(img, max_profiles=300)
+    assert m.rho == pytest.approx(0.3, abs=0.02)
+    assert m.penumbra_px == pytest.approx(6.0, rel=0.15)
+    assert sum("texture" in (p.reject_reason or "") for p in m.profiles) >= 30
+
+
+def test_a_minority_of_other_consistent_edges_is_left_out_of_rho_and_width():
+    """A gray card (albedo ratio 0.6, sharp outline) on paper beside a soft shadow (rho 0.3, 8 px ramp)."""
+    rng = np.random.default_rng(1)
+    h, w = 160, 200
+    card = np.zeros((h, w), bool)
+    card[100:145, 110:185] = True
+    alb = albedo("paper", rng, h, w) * np.where(card, 0.6, 1.0)
+    img = expose(alb * shading([(20, 20), (150, 26), (146, 80), (24, 76)], 0.3, 8.0, h, w), rng)
+    m = measure_shadow_edges(img, max_profiles=300)
+    assert m.rho == pytest.approx(0.3, abs=0.005)
+    assert m.penumbra_px == pytest.approx(8.0, rel=0.08)
+    card_outline = _outline(card)
+    assert not any(card_outline[v, u] for u, v in (np.round(p.position_uv).astype(int) for p in m.profiles if p.kept))
+    assert sum("mode" in (p.reject_reason or "") for p in m.profiles) >= 20
 
 
 def test_saturation_level_masks_clipped_pixels_in_any_channel():
