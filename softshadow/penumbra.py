@@ -88,7 +88,8 @@ def profile_alpha(u, profile: str = "linear"):
 def penumbra_coordinate(points: Float[Array, "n 3"], a: Float[Array, "n 3"], b: Float[Array, "n 3"],
                         outward_sign: Float[Array, " n"], light: Float[Array, "3"], range_k,
                         inside: Float[Array, " n"], rule: str = "edge",
-                        paper_normal: Float[Array, "n 3"] | None = None, with_slope: bool = False):
+                        paper_normal: Float[Array, "n 3"] | None = None, with_slope: bool = False,
+                        near_boundary: Float[Array, " n"] | None = None):
     """Normalised penumbra coordinate u (n,) of each point against its own edge segment (a, b).
 
     With ``with_slope`` also returns du/dT (n,), the factor between u and the
@@ -101,7 +102,8 @@ def penumbra_coordinate(points: Float[Array, "n 3"], a: Float[Array, "n 3"], b: 
     along the light, lies beside the segment (the CONVENTIONS definition), and
     from the angular distance to the end vertex beyond the ends (so convex
     corners are rounded); its sign comes from the edge's plane near the segment
-    (within half a penumbra half-width) and from ``inside`` (1 in the hard shadow,
+    (within half a penumbra half-width, where the plan found the shadow's boundary:
+    ``near_boundary``) and from ``inside`` (1 in the hard shadow,
     0 outside) elsewhere, so a concave corner never lights up the umbra.
     """
     t = b - a
@@ -149,6 +151,8 @@ def penumbra_coordinate(points: Float[Array, "n 3"], a: Float[Array, "n 3"], b: 
     # side (so it follows the edge as the sun or pose moves); elsewhere the hard shadow's,
     # so k = 0 gives exactly the hard shadow and concave corners never light the umbra.
     near_plane = (~beyond) & (~upstream) & (tan_plane < 0.5 * 0.5 * (t_out + t_in))
+    if near_boundary is not None:  # only where the plan saw the hard shadow's boundary itself
+        near_plane = near_plane & (near_boundary > 0.5)
     side = jnp.where(near_plane, jnp.where(num < 0, -1.0, 1.0), jnp.where(inside > 0.5, -1.0, 1.0))
     tan_x = side * magnitude
     u = (2.0 * tan_x - t_out + t_in) / (t_out + t_in)
@@ -161,7 +165,7 @@ def penumbra_coordinate(points: Float[Array, "n 3"], a: Float[Array, "n 3"], b: 
 def edge_coordinate(points, edge_ids: Int[Array, "n K"], edge_vertices_world: Float[Array, "s 2 3"],
                     outward_sign: Float[Array, " s"], light, range_k, inside: Float[Array, " n"],
                     rule: str = "edge", paper_normal_world: Float[Array, "s 3"] | None = None,
-                    with_slope: bool = False):
+                    with_slope: bool = False, near_boundary: Float[Array, " n"] | None = None):
     """Penumbra coordinate u (n,) at points (n, 3) against their candidate edges (n, K).
 
     Each point takes the candidate nearest in penumbra units (smallest |u|): the
@@ -173,8 +177,11 @@ def edge_coordinate(points, edge_ids: Int[Array, "n K"], edge_vertices_world: Fl
     ev = edge_vertices_world[flat]
     pn = None if paper_normal_world is None else paper_normal_world[flat]
     rep = lambda x: jnp.repeat(x, n_cand, axis=0)
+    # Only the nearest boundary edge (the first candidate) may set the side from its plane.
+    nb = None if near_boundary is None else (
+        near_boundary[:, None] * (jnp.arange(n_cand) == 0)[None, :]).reshape(-1)
     u, slope = penumbra_coordinate(rep(points), ev[:, 0], ev[:, 1], outward_sign[flat], light,
-                                   range_k, rep(inside), rule, pn, with_slope=True)
+                                   range_k, rep(inside), rule, pn, with_slope=True, near_boundary=nb)
     u = u.reshape(n_pts, n_cand)
     best = jnp.argmin(jnp.abs(u), axis=1)[:, None]
     u_best = jnp.take_along_axis(u, best, axis=1)[:, 0]
@@ -186,10 +193,11 @@ def edge_coordinate(points, edge_ids: Int[Array, "n K"], edge_vertices_world: Fl
 def edge_alpha(points, edge_ids: Int[Array, "n K"], edge_vertices_world: Float[Array, "s 2 3"],
                outward_sign: Float[Array, " s"], light, range_k, inside: Float[Array, " n"],
                rule: str = "edge", profile: str = "linear",
-               paper_normal_world: Float[Array, "s 3"] | None = None):
+               paper_normal_world: Float[Array, "s 3"] | None = None,
+               near_boundary: Float[Array, " n"] | None = None):
     """Alpha (n,) at points (n, 3) against their candidate edges (n, K); see ``edge_coordinate``."""
     u = edge_coordinate(points, edge_ids, edge_vertices_world, outward_sign, light, range_k, inside,
-                        rule, paper_normal_world)
+                        rule, paper_normal_world, near_boundary=near_boundary)
     return profile_alpha(u, profile)
 
 

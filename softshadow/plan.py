@@ -56,13 +56,16 @@ class PointPlan(eqx.Module):
     """Per-point discrete choices.
 
     edge_id (n, K) candidate governing edges; hard (n,) 0/1 in the hard shadow;
-    active (n,) in a penumbra band (elsewhere alpha is ``hard``).
+    active (n,) in a penumbra band (elsewhere alpha is ``hard``); near_boundary (n,)
+    0/1 within a quarter penumbra of the hard shadow's boundary, where the side may
+    follow the edge's plane as the sun or pose moves.
     """
 
     edges: EdgeSet
     edge_id: Int[Array, "n K"]
     hard: Float[Array, " n"]
     active: Bool[Array, " n"]
+    near_boundary: Float[Array, " n"]
 
 
 def _concrete_geometry(occ: Occluder, pose: Pose, sun: Sun):
@@ -158,6 +161,7 @@ def plan_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k
     edge_id = np.zeros((size, N_CANDIDATES), np.int32)
     hard = np.zeros(size)
     active = np.zeros(size, bool)
+    near_boundary = np.zeros(size)
     if n and len(sil.vertex_ids):
         widths = edge_band_widths(a, b, direction, light, range_k_max)
         lo, hi = points[:, :2].min(0), points[:, :2].max(0)
@@ -179,8 +183,10 @@ def plan_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k
             if len(near):
                 hard[near] = _exact_hard(world, light, sil, points[near])
             active[:n] = ok & (dist <= band)
+            near_boundary[:n] = ok & (dist <= 0.25 * widths[np.maximum(label, 0)]
+                                      + 1.5 * raster.grid.pixel_m)
     return PointPlan(_pack_edges(occ, sil), jnp.asarray(edge_id), jnp.asarray(hard),
-                     jnp.asarray(active))
+                     jnp.asarray(active), jnp.asarray(near_boundary))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -209,6 +215,7 @@ def plan_grid(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, range_k_max
     h, w = grid.height, grid.width
     hard = np.zeros((h, w))
     band_idx = np.zeros(0, np.int64)
+    near_b = np.zeros(0, bool)
     raster = None
     edge_label = np.zeros(0, np.int32)
     if len(sil.vertex_ids):
@@ -223,6 +230,8 @@ def plan_grid(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, range_k_max
         dist = raster.boundary_dist_px[crop]
         band = (label >= 0) & (dist <= 1.5 * widths[np.maximum(label, 0)] / grid.pixel_m + margin_px)
         band_idx = np.flatnonzero(band)
+        near_b = (dist.ravel()[band_idx] <= 0.25 * widths[np.maximum(label.ravel()[band_idx], 0)]
+                  / grid.pixel_m + 1.5)
         rows_b, cols_b = np.divmod(band_idx, w)
         edge_label = candidate_labels(raster.edge_label, rows_b + pad, cols_b + pad,
                                       max_candidates=N_CANDIDATES)
@@ -239,8 +248,10 @@ def plan_grid(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, range_k_max
     active[:m] = True
     hard_band = np.zeros(size)
     hard_band[:m] = hard.ravel()[band_idx]
+    near = np.zeros(size)
+    near[:m] = near_b
     plan = PointPlan(_pack_edges(occ, sil), jnp.asarray(edge_id), jnp.asarray(hard_band),
-                     jnp.asarray(active))
+                     jnp.asarray(active), jnp.asarray(near))
     return GridPlan(grid, hard, index, pts, plan, raster, m)
 
 
@@ -251,7 +262,7 @@ def plan_alpha(points: Float[Array, "n 3"], plan: PointPlan, pose: Pose, sun: Su
     ev = pose.apply(edges.vertices_local)
     paper = pose.apply_direction(edges.paper_normal_local) if rule == "paper" else None
     alpha = edge_alpha(points, plan.edge_id, ev, edges.outward_sign, sun.light, range_k,
-                       plan.hard, rule, profile, paper)
+                       plan.hard, rule, profile, paper, near_boundary=plan.near_boundary)
     return jnp.where(plan.active, alpha, plan.hard)
 
 
@@ -276,7 +287,8 @@ def plan_coordinate_light(points: Float[Array, "n 3"], plan: PointPlan, pose: Po
     if light.ndim == 2:
         light = jnp.repeat(light, plan.edge_id.shape[1], axis=0)
     u, slope = edge_coordinate(points, plan.edge_id, ev, edges.outward_sign, light, range_k,
-                               plan.hard, rule, paper, with_slope=True)
+                               plan.hard, rule, paper, with_slope=True,
+                               near_boundary=plan.near_boundary)
     u = jnp.where(plan.active, u, jnp.where(plan.hard > 0.5, -1e6, 1e6))
     if with_slope:
         return u, jnp.where(plan.active, slope, 0.0)
@@ -289,7 +301,7 @@ def concatenate_plans(plans: list[PointPlan], counts: list[int], pad_to: int | N
 
     counts: how many leading points of each plan are real (the rest is padding).
     """
-    verts, signs, papers, ids, hards, actives = [], [], [], [], [], []
+    verts, signs, papers, ids, hards, actives, nears = [], [], [], [], [], [], []
     offset = 0
     for plan, n in zip(plans, counts):
         e = plan.edges
@@ -299,6 +311,7 @@ def concatenate_plans(plans: list[PointPlan], counts: list[int], pad_to: int | N
         ids.append(np.asarray(plan.edge_id)[:n] + offset)
         hards.append(np.asarray(plan.hard)[:n])
         actives.append(np.asarray(plan.active)[:n])
+        nears.append(np.asarray(plan.near_boundary)[:n])
         offset += len(signs[-1])
     n_total = sum(counts)
     size = pad_to or bucket_size(n_total)
@@ -313,7 +326,8 @@ def concatenate_plans(plans: list[PointPlan], counts: list[int], pad_to: int | N
                     jnp.asarray(paper))
     return PointPlan(edges, jnp.asarray(pad(np.concatenate(ids), size, 0)),
                      jnp.asarray(pad(np.concatenate(hards), size, 0.0)),
-                     jnp.asarray(pad(np.concatenate(actives), size, False)))
+                     jnp.asarray(pad(np.concatenate(actives), size, False)),
+                     jnp.asarray(pad(np.concatenate(nears), size, 0.0)))
 
 
 plan_alpha_jit = jax.jit(plan_alpha, static_argnames=("rule", "profile"))
