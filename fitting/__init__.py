@@ -1,0 +1,33 @@
+"""fitting: range k and brightness rho of outdoor soft shadows, per time of day, from photos.
+
+Photos are read linearly (``photos``), timed and grouped (``exif``, ``grouping``),
+registered (scene cameras or a ChArUco board, ``markers``), sampled near the
+predicted shadow boundary (``samples``) and fitted with the differentiable
+renderer and optimistix (``model``, ``solve``); ``api`` runs whole folders and
+``report``/``plots`` write the Table-2 report. Fits run in float64: importing
+``fitting.api`` turns on JAX's 64-bit mode when a fit starts.
+"""
+
+from .api import FolderError, fit_folder, fit_photos
+from .edge_measure import EdgeMeasurement, measure_shadow_edges
+from .exif import intrinsics_from_exif, photo_time_from_exif, read_exif
+from .grouping import NO_TIME_REASON, PhotoGroup, group_photos, photo_time
+from .markers import (Registration, RegistrationError, board_from_spec, board_outline_world,
+                      board_world_points, register_board)
+from .photos import (IMAGE_EXTENSIONS, RAW_EXTENSIONS, Photo, PhotoError, linear_to_srgb, list_photos,
+                     read_photo, srgb_to_linear)
+from .report import PAPER_TABLE2, format_table, write_report, write_results_json, write_table2
+from .results import FitResults, GroupResult
+from .samples import NoShadowInView
+from .solve import FitOptions, fit_group
+from .views import PhotoView
+
+__all__ = [
+    "EdgeMeasurement", "FitOptions", "FitResults", "FolderError", "GroupResult", "IMAGE_EXTENSIONS",
+    "NO_TIME_REASON", "NoShadowInView", "PAPER_TABLE2", "Photo", "PhotoError", "PhotoGroup",
+    "PhotoView", "RAW_EXTENSIONS", "Registration", "RegistrationError", "board_from_spec",
+    "board_outline_world", "board_world_points", "fit_folder", "fit_group", "fit_photos",
+    "format_table", "group_photos", "intrinsics_from_exif", "linear_to_srgb", "list_photos",
+    "measure_shadow_edges", "photo_time", "photo_time_from_exif", "read_exif", "read_photo",
+    "register_board", "srgb_to_linear", "write_report", "write_results_json", "write_table2",
+]
