@@ -149,11 +149,13 @@ def _measure_without_scene(photo: Photo, when, scene: SceneSpec | None) -> Group
 def fit_photos(photos: list[Photo], scene: SceneSpec | None = None, options: FitOptions | None = None,
                half_size: bool = False, progress: Callable | None = None,
                done: dict[str, GroupResult] | None = None,
-               on_group: Callable[[GroupResult], None] | None = None) -> FitResults:
+               on_group: Callable[[GroupResult], None] | None = None, jobs: int = 1) -> FitResults:
     """Fit photos already decoded (``fitting.photos.read_photo``) with an optional scene.
 
     done: results of groups already fitted (by label), reused when their photos match.
     on_group: called with each group's result as soon as it is finished.
+    progress: a callable returning a progress bar (tqdm-like: update, close) for the groups.
+    jobs: groups fitted at once (threads).
     """
     _enable_x64()
     options = options or FitOptions()
@@ -183,12 +185,10 @@ def fit_photos(photos: list[Photo], scene: SceneSpec | None = None, options: Fit
     explicit = {n: scene.photo(n).group for n in by_name if scene.photo(n).group}
     groups, no_time = group_photos({n: times.get(n) for n in by_name}, explicit)
     skipped += [{"photo": n, "reason": r} for n, r in no_time]
-    iterator = progress(groups) if progress else groups
-    for group in iterator:
+    def fit_one(group: PhotoGroup) -> tuple[GroupResult, list[dict]]:
         if done and group.label in done and sorted(done[group.label].photos) == sorted(group.photos):
-            groups_out.append(done[group.label])
-            continue
-        views = []
+            return done[group.label], []
+        views, group_skipped = [], []
         for name in group.photos:
             photo = by_name[name]
             view = PhotoView(name, photo.gray, photo.saturated, time=times.get(name))
@@ -196,29 +196,53 @@ def fit_photos(photos: list[Photo], scene: SceneSpec | None = None, options: Fit
                 _camera_view(photo, scene.camera_for(name), view)
                 _sun_view(name, times.get(name), scene, view)
             except (SunBelowHorizonError, SceneError, ValueError) as exc:
-                skipped.append({"photo": name, "reason": str(exc).splitlines()[0]})
+                group_skipped.append({"photo": name, "reason": str(exc).splitlines()[0]})
                 continue
             views.append(view)
         kept = [v.name for v in views]
         if not views:
-            result = GroupResult(group.label, group.time, group.photos,
-                                 error="no usable photo in this group (see skipped)")
-        else:
-            try:
-                result = _fit_group_with_sun(model, pose, views, PhotoGroup(group.label, group.time, kept),
-                                             options)
-            except Exception as exc:  # a failed group must not lose the others
-                result = GroupResult(group.label, group.time, kept,
-                                     error=f"fit failed: {type(exc).__name__}: {exc}".splitlines()[0])
-        groups_out.append(result)
-        if on_group:
-            on_group(result)
+            return GroupResult(group.label, group.time, group.photos,
+                               error="no usable photo in this group (see skipped)"), group_skipped
+        try:
+            result = _fit_group_with_sun(model, pose, views, PhotoGroup(group.label, group.time, kept),
+                                         options)
+        except Exception as exc:  # a failed group must not lose the others
+            result = GroupResult(group.label, group.time, kept,
+                                 error=f"fit failed: {type(exc).__name__}: {exc}".splitlines()[0])
+        return result, group_skipped
+
+    ordered: dict[int, GroupResult] = {}
+    bar = progress(groups) if progress else None
+    if jobs > 1 and len(groups) > 1:
+        # Threads: XLA releases the GIL, and the compiled solver is shared between them.
+        with concurrent.futures.ThreadPoolExecutor(max_workers=jobs) as pool:
+            futures = {pool.submit(fit_one, g): i for i, g in enumerate(groups)}
+            for future in concurrent.futures.as_completed(futures):
+                result, more = future.result()
+                ordered[futures[future]] = result
+                skipped += more
+                if on_group:
+                    on_group(result)
+                if bar is not None:
+                    bar.update(1)
+    else:
+        for i, group in enumerate(groups):
+            result, more = fit_one(group)
+            ordered[i] = result
+            skipped += more
+            if on_group:
+                on_group(result)
+            if bar is not None:
+                bar.update(1)
+    if bar is not None:
+        bar.close()
+    groups_out += [ordered[i] for i in range(len(groups))]
     return FitResults(groups_out, skipped, _software())
 
 
 def fit_folder(path, scene: SceneSpec | str | Path | None = None, options: FitOptions | None = None,
                out_dir=None, force: bool = False, half_size: bool = False,
-               progress: Callable | None = None) -> FitResults:
+               progress: Callable | None = None, jobs: int = 1) -> FitResults:
     """Fit every time of day in a photo folder.
 
     scene: a SceneSpec, a path to a scene.toml, or None to read ``path/scene.toml`` if any.
@@ -267,6 +291,6 @@ def fit_folder(path, scene: SceneSpec | str | Path | None = None, options: FitOp
             tmp.write_text(json.dumps(result.to_json(), indent=1))
             tmp.replace(target)
 
-    results = fit_photos(photos, scene, options, half_size, progress, done, keep)
+    results = fit_photos(photos, scene, options, half_size, progress, done, keep, jobs)
     results.skipped = skipped + results.skipped
     return results

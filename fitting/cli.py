@@ -21,18 +21,18 @@ def _options(args):
 def _progress(total_label: str):
     from tqdm import tqdm
 
-    def wrap(groups):
-        return tqdm(groups, desc=total_label, unit="group", file=sys.stderr)
-    return wrap
+    def bar(groups):
+        return tqdm(total=len(groups), desc=total_label, unit="group", file=sys.stderr)
+    return bar
 
 
 def fit_and_report(photo_dir, out_dir, options, force=False, half_size=False, truth=None,
-                   reference=None):
+                   reference=None, jobs=1):
     """Fit a folder and write results.json, table2.md/.csv and plots; returns FitResults."""
     from .api import fit_folder
     from .report import write_report
     results = fit_folder(photo_dir, options=options, out_dir=out_dir, force=force,
-                         half_size=half_size, progress=_progress("fitting"))
+                         half_size=half_size, progress=_progress("fitting"), jobs=jobs)
     write_report(results, out_dir, reference=reference, truth=truth, plots=options.plots)
     return results
 
@@ -47,7 +47,7 @@ def run_fit(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     try:
         results = fit_and_report(args.photo_dir, out, _options(args), force=args.force,
-                                 half_size=args.half_size)
+                                 half_size=args.half_size, jobs=max(1, args.jobs))
     except FolderError as exc:
         print(f"softshadow fit: {exc}", file=sys.stderr)
         return 1

@@ -1,0 +1,108 @@
+"""Fitter benchmarks (speed against error), printed as JSON by ``softshadow bench --what fit``.
+
+- ``same_model``: top-down renders of the pillar by the project's own model (disk profile,
+  pixels integrate 4 x 4 point samples) with Gaussian noise, fitted over many noise seeds:
+  the spread of k and rho against the Cramer-Rao bound (the mean one-sigma error the fit
+  reports from its Jacobian, which is the bound for this Gaussian model).
+- ``table2``: the physical synthetic table2 preset, fitted end to end, against its truth.
+"""
+
+from __future__ import annotations
+
+import json
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["bench_same_model", "bench_table2", "bench_fit"]
+
+
+def _model_folder(folder: Path, k: float, rho: float, noise: float, seed: int, size: int = 192):
+    import cv2
+
+    from softshadow import GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun
+    from softshadow.scene_io import CameraSpec, ObjectSpec, PhotoSpec, SceneSpec, dump_scene
+    folder.mkdir(parents=True, exist_ok=True)
+    model = SoftShadowModel.from_mesh("pillar", profile="disk")
+    grid = GroundGrid.around((-0.9, 1.6), 2.6, size)
+    fine = GroundGrid.around((-0.9, 1.6), 2.6, 4 * size)
+    shading = np.asarray(model.ground_map(ShadowParams(k, rho), Sun(150.0, 40.0), Pose(), fine))
+    shading = shading.reshape(size, 4, size, 4).mean(axis=(1, 3))
+    rng = np.random.default_rng(seed)
+    img = np.clip(0.6 * shading + rng.normal(0, noise, shading.shape), 0, 1)
+    cv2.imwrite(str(folder / "top.png"), np.rint(img * 65535).astype(np.uint16))
+    dump_scene(SceneSpec(object=ObjectSpec("pillar"), photos={"top.png": PhotoSpec(
+        group="g", sun_azimuth_deg=150.0, sun_elevation_deg=40.0,
+        camera=CameraSpec("topdown", pixel_m=grid.pixel_m, origin_m=grid.origin_m))}),
+        folder / "scene.toml")
+
+
+def bench_same_model(seeds: int = 20, k: float = 0.012, rho: float = 0.25, noise: float = 0.01) -> dict:
+    from .api import fit_folder
+    from .solve import FitOptions
+    options = FitOptions(profiles=("disk",), blur=(False,), robust=False, plots=False)
+    ks, rhos, k_se, rho_se, secs = [], [], [], [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        for seed in range(seeds):
+            folder = Path(tmp) / f"s{seed}"
+            _model_folder(folder, k, rho, noise, seed)
+            (g,) = fit_folder(folder, options=options).groups
+            ks.append(g.range_k)
+            rhos.append(g.rho)
+            k_se.append(g.range_stderr)
+            rho_se.append(g.rho_stderr)
+            secs.append(g.seconds)
+    ks, rhos = np.array(ks), np.array(rhos)
+    return {
+        "truth": {"range_k": k, "rho": rho, "noise_sigma": noise, "seeds": seeds},
+        "range_k": {"mean": float(ks.mean()), "std": float(ks.std(ddof=1)),
+                    "crb": float(np.mean(k_se)), "std_over_crb": float(ks.std(ddof=1) / np.mean(k_se)),
+                    "bias_over_crb": float((ks.mean() - k) / np.mean(k_se))},
+        "rho": {"mean": float(rhos.mean()), "std": float(rhos.std(ddof=1)),
+                "crb": float(np.mean(rho_se)), "std_over_crb": float(rhos.std(ddof=1) / np.mean(rho_se)),
+                "bias_over_crb": float((rhos.mean() - rho) / np.mean(rho_se))},
+        "group_seconds_after_compile": {"median": float(np.median(secs[1:])),
+                                        "first_with_compile": float(secs[0])},
+    }
+
+
+def bench_table2(size=(1600, 1200), seed: int = 0) -> dict:
+    from data_synth import synthesize
+
+    from .api import fit_folder
+    out = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp) / "table2"
+        t0 = time.perf_counter()
+        synthesize(folder, preset="table2", seed=seed, size=size, progress=False)
+        out["synth_seconds"] = round(time.perf_counter() - t0, 2)
+        truth = json.loads((folder / "truth.json").read_text())
+        t1 = time.perf_counter()
+        results = fit_folder(folder)
+        out["fit_seconds_wall"] = round(time.perf_counter() - t1, 2)
+    by_photos = {tuple(sorted(g.photos)): g for g in results.groups}
+    rows = []
+    for t in truth["groups"]:
+        g = by_photos.get(tuple(sorted(t["photos"])))
+        if g is None or not g.fitted:
+            rows.append({"label": t["label"], "error": "not fitted"})
+            continue
+        rows.append({"label": t["label"], "range_k": g.range_k, "truth_range_k": t["range_k"],
+                     "k_rel_error": (g.range_k - t["range_k"]) / t["range_k"],
+                     "rho": g.rho, "truth_rho": t["rho"], "rho_abs_error": g.rho - t["rho"],
+                     "range_stderr": g.range_stderr, "rho_stderr": g.rho_stderr,
+                     "group_seconds": g.seconds})
+    out["size"] = list(size)
+    out["groups"] = rows
+    return out
+
+
+def bench_fit(quick: bool = False) -> dict:
+    return {"same_model": bench_same_model(seeds=6 if quick else 20),
+            "table2": bench_table2(size=(800, 600) if quick else (1600, 1200))}
+
+
+if __name__ == "__main__":
+    print(json.dumps(bench_fit(), indent=1))
