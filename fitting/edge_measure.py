@@ -45,7 +45,11 @@ MAX_SLOPE_STEP_FRACTION = 0.5  # |b| * (span) / |log rho|: larger means shading 
 TEXTURE_RATIO_LOW = 0.15   # dark-side / lit-side log texture; diffuse light in the umbra flattens relief texture (0.2-0.9 seen on asphalt)
 TEXTURE_RATIO_HIGH = 2.5   # ... times 1/sqrt(rho), the growth of shot noise in the darker side
 COLOUR_TOL_LOG = 0.75      # |log ratio in a channel - log ratio in gray|: skylit shadows are bluer
-MAX_TURN_DEG = 10.0        # edge bend over +-TURN_BASE_PX along it; more is a corner (widths read 20-30 % high)
+NORMAL_SHIFT_MAX_PX = 4.0  # search range of a strip line's ramp shift when straightening the normal
+# Edge bend over +-TURN_BASE_PX (5 px) along the edge: more is a corner, where a
+# strip mixes two edge directions (widths within 4 px of a vertex read 20-50 %
+# high). 35 deg keeps circles down to a radius of about 16 px.
+MAX_TURN_DEG = 35.0
 MODE_BANDWIDTH_LOG = 0.05  # kernel density bandwidth for the dominant log-rho mode
 MODE_WINDOW_LOG = 0.25     # profiles farther than this (log) from the mode are other edges
 MIN_PROFILES = 5           # fewer shadow-like profiles than this is not a measurement
@@ -305,8 +309,7 @@ def _fit_candidates(images: _Images, candidates) -> list[EdgeProfile]:
     for point, normal, sigma, turn in zip(candidates.points_uv, candidates.normals_uv, candidates.sigma_px,
                                           candidates.turn_deg):
         if turn > MAX_TURN_DEG:
-            # A strip across a corner mixes two edge directions: the ramp reads wide.
-            profiles.append(_rejected(point, normal, f"edge bends {turn:.0f} deg within the strip (corner or tight curve)"))
+            profiles.append(_rejected(point, normal, f"edge bends {turn:.0f} deg within 10 px (a corner)"))
             continue
         room = max_half_span_inside(point, normal, images.gray.shape, STRIP_HALF_WIDTH_PX)
         half1 = min(3.0 * sigma + 6.0, max_half, room)
@@ -314,7 +317,9 @@ def _fit_candidates(images: _Images, candidates) -> list[EdgeProfile]:
         if isinstance(first, str):
             profiles.append(_rejected(point, normal, first))
             continue
-        # Re-centre on the fitted ramp and span enough plateau on both sides of it.
+        # Straighten the normal (the smoothed gradient leans near corners and in
+        # texture), re-centre on the fitted ramp and span enough plateau beyond it.
+        normal = _refined_normal(images, point, normal, first[1][-1], first[0])
         centre = point + first[0].s0 * normal
         room = max_half_span_inside(centre, normal, images.gray.shape, STRIP_HALF_WIDTH_PX)
         half2 = min(first[0].w * (0.5 + PLATEAU_PER_WIDTH) + PLATEAU_EXTRA_PX, max_half, room)
@@ -330,6 +335,41 @@ def _fit_candidates(images: _Images, candidates) -> list[EdgeProfile]:
                                     reject_reason=reason, offsets_px=s - fit.s0, observed_log=y,
                                     fitted_log=fit.fitted))
     return profiles
+
+
+def _refined_normal(images: _Images, point, normal, half_span_px: float, fit: RampFit) -> np.ndarray:
+    """The edge normal corrected by the tilt of the ramp across the strip's lines.
+
+    Each of the strip's 2 T + 1 lines is matched (least squares over a shift
+    and an offset, so line-to-line albedo does not matter) to the fitted
+    ramp; a straight line through the shifts against the lines' positions
+    gives the edge's slope k relative to the tangent, and the normal becomes
+    normalize(n - k t). With fewer than 4 usable lines the normal is kept.
+    """
+    grid = sample_strips(images.gray, point[None], normal[None], half_span_px, STEP_PX, STRIP_HALF_WIDTH_PX)[0]
+    good = sample_strips(images.valid.astype(float), point[None], normal[None], half_span_px, STEP_PX,
+                         STRIP_HALF_WIDTH_PX)[0] > 0.999
+    lines = good.all(axis=0)                                                   # (T,)
+    if lines.sum() < 4:
+        return normal
+    s = np.arange(grid.shape[0]) * STEP_PX - half_span_px
+    logs = np.log(np.maximum(grid[:, lines], 1e-300)).T                        # (L, S)
+    shifts = np.arange(-NORMAL_SHIFT_MAX_PX, NORMAL_SHIFT_MAX_PX + 1e-9, 0.1)
+    templates = np.stack([ramp_log_model(s - d, fit.a, fit.b, fit.s0, fit.w, fit.rho, SAMPLING_BLUR_PX)
+                          for d in shifts])                                     # (D, S)
+    diff = logs[:, None, :] - templates[None, :, :]                            # (L, D, S)
+    cost = diff.var(axis=2)                                                     # offset per line is free
+    best = shifts[np.argmin(cost, axis=1)]                                      # (L,)
+    t = np.arange(-STRIP_HALF_WIDTH_PX, STRIP_HALF_WIDTH_PX + 1, dtype=float)[lines]
+    (k, c), resid = np.polyfit(t, best, 1, full=True)[:2]
+    # Texture makes single lines' shifts noisy: tilt only when the tilt is clear
+    # (|k| over twice its standard error), else trust the smoothed gradient.
+    k_err = np.sqrt((resid[0] if resid.size else 0.0) / (t.size - 2) / np.sum((t - t.mean()) ** 2))
+    if abs(k) <= 2.0 * k_err:
+        return normal
+    tangent = np.array([-normal[1], normal[0]])
+    refined = normal - k * tangent
+    return refined / np.linalg.norm(refined)
 
 
 def _profile_fit(images: _Images, point, normal, half_span_px: float):
