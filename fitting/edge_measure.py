@@ -11,8 +11,10 @@ fitted with
 
 s the signed distance (px) along the edge normal towards the lit side, s0 the
 ramp centre, w the full width of the linear ramp (alpha from 1 to 0) and b a
-local shading slope. Profiles that do not look like a shadow edge on a single
-surface are rejected, the rest are combined robustly. See docs/edge_measure.md.
+local shading slope (with a weak prior); alpha is convolved with the known
+blur of the bilinear resampling. Profiles that do not look like a shadow edge
+on a single surface are rejected, the rest are combined robustly (median of
+the dominant log-rho mode). See docs/edge_measure.md.
 """
 
 from __future__ import annotations
@@ -42,9 +44,16 @@ TEXTURE_SIGMA_PX = 1.0     # high-pass scale of the same-surface texture test
 SMOOTH_TEXTURE_LOG = 3e-3  # texture below this (log units) on both sides: too smooth to compare
 MAX_RESIDUAL_PER_STEP = 0.2    # rms fit residual / |log rho|: above it the profile holds more than one step
 MAX_SLOPE_STEP_FRACTION = 0.5  # |b| * (span) / |log rho|: larger means shading or another edge dominates
-TEXTURE_RATIO_LOW = 0.15   # dark-side / lit-side log texture; diffuse light in the umbra flattens relief texture (0.2-0.9 seen on asphalt)
-TEXTURE_RATIO_HIGH = 2.5   # ... times 1/sqrt(rho), the growth of shot noise in the darker side
-COLOUR_TOL_LOG = 0.75      # |log ratio in a channel - log ratio in gray|: skylit shadows are bluer
+# Same-surface test on the fine log texture, dark side over lit side. Low bound:
+# diffuse sky light in the umbra flattens relief texture (0.2-0.9 measured on
+# sunlit asphalt, DSC_0569). High bound: times 1/sqrt(rho), the growth of shot
+# noise on the darker side.
+TEXTURE_RATIO_LOW = 0.15
+TEXTURE_RATIO_HIGH = 2.5
+# |log step in a channel - log step of the channel sum|. Skylit umbrae are
+# bluer: shadow edges on DSC_0569 gave -0.45 (R), +0.35 (B), at most 0.67;
+# yellow paint on asphalt gave 0.83-1.3 in blue.
+COLOUR_TOL_LOG = 0.75
 NORMAL_SHIFT_MAX_PX = 4.0  # search range of a strip line's ramp shift when straightening the normal
 # Edge bend over +-TURN_BASE_PX (5 px) along the edge: more is a corner, where a
 # strip mixes two edge directions (widths within 4 px of a vertex read 20-50 %
@@ -74,7 +83,7 @@ class EdgeProfile:
     position_uv: (2,) pixel (u, v) of the fitted ramp centre s0.
     normal_uv: (2,) unit vector across the edge, from the shadow towards the lit side.
     rho: fitted lit-to-umbra ratio of this profile (linear).
-    width_px: full width w of the fitted linear ramp, along the normal, in pixels.
+    width_px: full width w of the fitted linear ramp (alpha 1 -> 0), along the normal, in pixels.
     residual: rms of the fit residual, in natural-log units.
     kept: True when the profile passed every shadow-edge test and the mode window.
     reject_reason: why it was not kept (None when kept).
@@ -103,8 +112,10 @@ class EdgeMeasurement:
         umbra / lit on the same surface; NaN when nothing was measured.
     rho_stderr: one-sigma uncertainty of that median (block bootstrap over
         profiles); not the spread of rho over the scene.
-    penumbra_px: median full width of the fitted linear ramp (alpha 1 -> 0) across
-        the edge, in image pixels along the edge normal, camera blur included.
+    penumbra_px: median full width w of the fitted linear ramp (alpha from 1 to
+        0; 1.25 times its 10-90 % width) across the edge, in image pixels along
+        the edge normal. The blur of this module's own resampling is modelled
+        out; the camera's (pixel aperture, optics, demosaicing) is included.
     penumbra_px_iqr: interquartile range of the widths (px).
     penumbra_m: penumbra_px * pixel_m when pixel_m is given, else None.
     n_profiles: number of kept profiles.
