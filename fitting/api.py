@@ -132,7 +132,7 @@ def _measure_without_scene(photo: Photo, when, scene: SceneSpec | None) -> Group
     pixel_m = None
     if scene is not None and scene.camera is not None and scene.camera.kind == "topdown":
         pixel_m = scene.camera.pixel_m
-    m = measure_shadow_edges(photo.gray, mask=photo.saturated, pixel_m=pixel_m)
+    m = measure_shadow_edges(photo.gray, mask=photo.saturated, pixel_m=pixel_m, linear_rgb=photo.linear)
     result.seconds = _time.perf_counter() - start
     if not m.edges_found:
         result.error = m.reason or "no shadow edge found"

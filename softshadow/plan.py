@@ -33,7 +33,7 @@ __all__ = ["EdgeSet", "PointPlan", "plan_points", "plan_grid", "plan_alpha", "pl
            "bucket_size"]
 
 MAX_RASTER_SIDE = 2048
-N_CANDIDATES = 4
+N_CANDIDATES = 5
 
 
 def bucket_size(n: int, minimum: int = 64) -> int:
@@ -176,7 +176,8 @@ def plan_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k
             cr = np.clip(np.rint(raster.grid.to_pixel(points)).astype(np.int64), 0,
                          [raster.grid.width - 1, raster.grid.height - 1])
             edge_id[:n] = np.maximum(candidate_labels(raster.edge_label, cr[:, 1], cr[:, 0],
-                                                      max_candidates=N_CANDIDATES), 0)
+                                                      max_candidates=N_CANDIDATES,
+                                                      neighbours=raster.edge_neighbours), 0)
             hard[:n] = h
             # Near the boundary a raster pixel is too coarse for the side: test exactly.
             near = np.nonzero(dist <= 2.0 * raster.grid.pixel_m)[0]
@@ -234,7 +235,7 @@ def plan_grid(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, range_k_max
                   / grid.pixel_m + 1.5)
         rows_b, cols_b = np.divmod(band_idx, w)
         edge_label = candidate_labels(raster.edge_label, rows_b + pad, cols_b + pad,
-                                      max_candidates=N_CANDIDATES)
+                                      max_candidates=N_CANDIDATES, neighbours=raster.edge_neighbours)
     m = len(band_idx)
     size = bucket_size(m, 256)
     index = np.full(size, h * w, np.int64)

@@ -52,6 +52,7 @@ class ShadowRaster:
     hard: np.ndarray
     edge_label: np.ndarray
     boundary_dist_px: np.ndarray
+    edge_neighbours: np.ndarray | None = None  # (S, 2) outline edges sharing each end vertex, -1: none
 
     def lookup(self, xy: np.ndarray):
         """(hard, edge_label, boundary distance in metres) at world points (N, 2+), nearest pixel.
@@ -117,7 +118,7 @@ def draw_segment_labels(shape: tuple[int, int], start: np.ndarray, end: np.ndarr
         t0 = np.where(flat, t0, np.maximum(t0, np.minimum(ta, tb)))
         t1 = np.where(flat, t1, np.minimum(t1, np.maximum(ta, tb)))
         t1 = np.where(outside, -1.0, t1)
-    keep = t1 >= t0
+    keep = (t1 >= t0) & np.all(np.isfinite(start), 1) & np.all(np.isfinite(end), 1)
     idx = np.nonzero(keep)[0]
     if not len(idx):
         return label
@@ -131,6 +132,33 @@ def draw_segment_labels(shape: tuple[int, int], start: np.ndarray, end: np.ndarr
     ok = (pts[:, 0] >= 0) & (pts[:, 0] < w) & (pts[:, 1] >= 0) & (pts[:, 1] < h)
     label[pts[ok, 1], pts[ok, 0]] = idx[seg[ok]] + 1
     return label
+
+
+def _along_outline(hard: np.ndarray, start: np.ndarray, end: np.ndarray, offset_px: float = 1.5,
+                   samples: int = 5) -> np.ndarray:
+    """Which segments (S,) have the hard shadow on one side and not the other somewhere.
+
+    Tested at a few points along each segment, ``offset_px`` to either side; segments
+    wholly outside the raster count as on the outline (they may govern points near the frame).
+    """
+    h, w = hard.shape
+    d = end - start
+    length = np.linalg.norm(d, axis=1)
+    normal = np.stack([-d[:, 1], d[:, 0]], 1) / np.maximum(length, 1e-12)[:, None]
+    t = (np.arange(samples) + 0.5) / samples
+    mid = start[:, None, :] + t[None, :, None] * d[:, None, :]
+
+    def side(sign):
+        q = np.rint(mid + sign * offset_px * normal[:, None, :]).astype(np.int64)
+        inside = (q[..., 0] >= 0) & (q[..., 0] < w) & (q[..., 1] >= 0) & (q[..., 1] < h)
+        value = hard[np.clip(q[..., 1], 0, h - 1), np.clip(q[..., 0], 0, w - 1)] > 0
+        return value, inside
+
+    a, ia = side(1.0)
+    b, ib = side(-1.0)
+    both = ia & ib
+    differs = (a != b) & both
+    return differs.any(1) | ~both.any(1)
 
 
 def rasterise_shadow(grid: GroundGrid, world_vertices: np.ndarray, light: np.ndarray,
@@ -148,7 +176,13 @@ def rasterise_shadow(grid: GroundGrid, world_vertices: np.ndarray, light: np.nda
     hard = hard.astype(np.uint8)
 
     ids = silhouette.vertex_ids
-    label_img = draw_segment_labels((h, w), px[ids[:, 0]], px[ids[:, 1]])
+    start, end = px[ids[:, 0]], px[ids[:, 1]]
+    # Only edges that run along the hard shadow's outline govern points: a silhouette line
+    # whose shadow falls inside the shadow (an open box's far rim, a fold of the dragon) has
+    # the shadow on both sides of it.
+    on_outline = _along_outline(hard, start, end)
+    label_img = draw_segment_labels((h, w), np.where(on_outline[:, None], start, np.nan),
+                                    np.where(on_outline[:, None], end, np.nan))
     kernel = np.ones((3, 3), np.uint8)
     dil = cv2.dilate(hard, kernel, borderType=cv2.BORDER_REPLICATE)
     ero = cv2.erode(hard, kernel, borderType=cv2.BORDER_REPLICATE)
@@ -162,11 +196,32 @@ def rasterise_shadow(grid: GroundGrid, world_vertices: np.ndarray, light: np.nda
                                                     labelType=cv2.DIST_LABEL_PIXEL)
     seed_labels = label_img[seeds]  # row-major order, as OpenCV numbers the zero pixels
     edge_label = seed_labels[nearest - 1] - 1
-    return ShadowRaster(grid, hard, edge_label.astype(np.int32), dist.astype(np.float32))
+    return ShadowRaster(grid, hard, edge_label.astype(np.int32), dist.astype(np.float32),
+                        _end_neighbours(ids, on_outline))
+
+
+def _end_neighbours(ids: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """For each edge (S,), an outline edge sharing its first and its second vertex (-1: none).
+
+    Short edges can vanish under their neighbours' pixels in the label raster; adding the
+    neighbours of the nearest edge to the candidates brings them back.
+    """
+    out = -np.ones((len(ids), 2), np.int64)
+    owner: dict[int, list[int]] = {}
+    for e in np.flatnonzero(keep):
+        for v in ids[e]:
+            owner.setdefault(int(v), []).append(int(e))
+    for e in np.flatnonzero(keep):
+        for j in (0, 1):
+            others = [o for o in owner.get(int(ids[e, j]), []) if o != e]
+            if others:
+                out[e, j] = others[0]
+    return out
 
 
 def candidate_labels(edge_label: np.ndarray, rows: np.ndarray, cols: np.ndarray,
-                     radii=(2, 6), max_candidates: int = 4) -> np.ndarray:
+                     radii=(2, 6), max_candidates: int = 4,
+                     neighbours: np.ndarray | None = None) -> np.ndarray:
     """Up to K distinct edge labels (n, K) around each pixel (rows, cols) of a label image.
 
     The pixel's own label comes first; the others are labels found at ``radii``
@@ -180,6 +235,10 @@ def candidate_labels(edge_label: np.ndarray, rows: np.ndarray, cols: np.ndarray,
     samples = np.stack([edge_label[np.clip(rows + dr, 0, h - 1), np.clip(cols + dc, 0, w - 1)]
                         for dr, dc in offsets], axis=1)  # (n, S)
     first = samples[:, :1]
+    if neighbours is not None and len(neighbours):
+        # The nearest edge's neighbours along the outline come right after it.
+        nb = np.where(first >= 0, neighbours[np.maximum(first[:, 0], 0)], -1)  # (n, 2)
+        samples = np.concatenate([first, nb, samples[:, 1:]], axis=1)
     samples = np.where(samples < 0, first, samples)
     order = np.sort(samples[:, 1:], axis=1)
     fresh = np.concatenate([np.ones((len(order), 1), bool), order[:, 1:] != order[:, :-1]], axis=1)
