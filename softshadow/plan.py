@@ -118,6 +118,15 @@ def _pack_edges(occ: Occluder, sil) -> EdgeSet:
     return EdgeSet(jnp.asarray(verts), jnp.asarray(sign), jnp.asarray(paper))
 
 
+def _clean_outline(raster: ShadowRaster, label: np.ndarray) -> np.ndarray:
+    """Whether each point's nearest edge lies on the outline along (nearly) all its length,
+    so that its own plane may decide the side (a rough edge half inside the shadow may not)."""
+    frac = raster.edge_outline_fraction
+    if frac is None:
+        return np.zeros(len(label), bool)
+    return (label >= 0) & (frac[np.maximum(label, 0)] >= 0.99)
+
+
 def _exact_hard(world, light, sil, points) -> np.ndarray:
     """Hard shadow (N,) 0/1 at points by winding number against the projected fill edges."""
     ground = project_to_ground(world, light)
@@ -185,7 +194,7 @@ def plan_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k
                 hard[near] = _exact_hard(world, light, sil, points[near])
             active[:n] = ok & (dist <= band)
             near_boundary[:n] = ok & (dist <= 0.25 * widths[np.maximum(label, 0)]
-                                      + 1.5 * raster.grid.pixel_m)
+                                      + 1.5 * raster.grid.pixel_m) & _clean_outline(raster, label)
     return PointPlan(_pack_edges(occ, sil), jnp.asarray(edge_id), jnp.asarray(hard),
                      jnp.asarray(active), jnp.asarray(near_boundary))
 
@@ -231,8 +240,9 @@ def plan_grid(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, range_k_max
         dist = raster.boundary_dist_px[crop]
         band = (label >= 0) & (dist <= 1.5 * widths[np.maximum(label, 0)] / grid.pixel_m + margin_px)
         band_idx = np.flatnonzero(band)
-        near_b = (dist.ravel()[band_idx] <= 0.25 * widths[np.maximum(label.ravel()[band_idx], 0)]
-                  / grid.pixel_m + 1.5)
+        lab_b = label.ravel()[band_idx]
+        near_b = ((dist.ravel()[band_idx] <= 0.25 * widths[np.maximum(lab_b, 0)] / grid.pixel_m + 1.5)
+                  & _clean_outline(raster, lab_b))
         rows_b, cols_b = np.divmod(band_idx, w)
         edge_label = candidate_labels(raster.edge_label, rows_b + pad, cols_b + pad,
                                       max_candidates=N_CANDIDATES, neighbours=raster.edge_neighbours)

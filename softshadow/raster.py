@@ -53,6 +53,7 @@ class ShadowRaster:
     edge_label: np.ndarray
     boundary_dist_px: np.ndarray
     edge_neighbours: np.ndarray | None = None  # (S, 2) outline edges sharing each end vertex, -1: none
+    edge_outline_fraction: np.ndarray | None = None  # (S,) how much of each edge is on the outline
 
     def lookup(self, xy: np.ndarray):
         """(hard, edge_label, boundary distance in metres) at world points (N, 2+), nearest pixel.
@@ -136,7 +137,7 @@ def draw_segment_labels(shape: tuple[int, int], start: np.ndarray, end: np.ndarr
 
 def _along_outline(hard: np.ndarray, start: np.ndarray, end: np.ndarray, offset_px: float = 1.5,
                    samples: int = 5) -> np.ndarray:
-    """Which segments (S,) have the hard shadow on one side and not the other somewhere.
+    """Fraction (S,) of each segment with the hard shadow on one side and not the other.
 
     Tested at a few points along each segment, ``offset_px`` to either side; segments
     wholly outside the raster count as on the outline (they may govern points near the frame).
@@ -158,7 +159,8 @@ def _along_outline(hard: np.ndarray, start: np.ndarray, end: np.ndarray, offset_
     b, ib = side(-1.0)
     both = ia & ib
     differs = (a != b) & both
-    return differs.any(1) | ~both.any(1)
+    n = both.sum(1)
+    return np.where(n > 0, differs.sum(1) / np.maximum(n, 1), 1.0)
 
 
 def rasterise_shadow(grid: GroundGrid, world_vertices: np.ndarray, light: np.ndarray,
@@ -180,7 +182,8 @@ def rasterise_shadow(grid: GroundGrid, world_vertices: np.ndarray, light: np.nda
     # Only edges that run along the hard shadow's outline govern points: a silhouette line
     # whose shadow falls inside the shadow (an open box's far rim, a fold of the dragon) has
     # the shadow on both sides of it.
-    on_outline = _along_outline(hard, start, end)
+    outline_fraction = _along_outline(hard, start, end)
+    on_outline = outline_fraction > 0
     label_img = draw_segment_labels((h, w), np.where(on_outline[:, None], start, np.nan),
                                     np.where(on_outline[:, None], end, np.nan))
     kernel = np.ones((3, 3), np.uint8)
@@ -197,7 +200,7 @@ def rasterise_shadow(grid: GroundGrid, world_vertices: np.ndarray, light: np.nda
     seed_labels = label_img[seeds]  # row-major order, as OpenCV numbers the zero pixels
     edge_label = seed_labels[nearest - 1] - 1
     return ShadowRaster(grid, hard, edge_label.astype(np.int32), dist.astype(np.float32),
-                        _end_neighbours(ids, on_outline))
+                        _end_neighbours(ids, on_outline), outline_fraction)
 
 
 def _end_neighbours(ids: np.ndarray, keep: np.ndarray) -> np.ndarray:
