@@ -33,6 +33,9 @@ __all__ = ["EdgeSet", "PointPlan", "plan_points", "plan_grid", "plan_alpha", "pl
            "bucket_size"]
 
 MAX_RASTER_SIDE = 2048
+# The wedge reaches half its width on each side of the outline; the band adds a fifth for the
+# candidates' different depths along the light, plus a margin of raster pixels.
+BAND_FRACTION = 0.6
 N_CANDIDATES = 5
 
 
@@ -181,7 +184,7 @@ def plan_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k
         if raster is not None:
             h, label, dist = raster.lookup(points)
             ok = label >= 0
-            band = 1.5 * widths[np.maximum(label, 0)] + margin_px * raster.grid.pixel_m
+            band = BAND_FRACTION * widths[np.maximum(label, 0)] + margin_px * raster.grid.pixel_m
             cr = np.clip(np.rint(raster.grid.to_pixel(points)).astype(np.int64), 0,
                          [raster.grid.width - 1, raster.grid.height - 1])
             edge_id[:n] = np.maximum(candidate_labels(raster.edge_label, cr[:, 1], cr[:, 0],
@@ -238,7 +241,8 @@ def plan_grid(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, range_k_max
         hard = raster.hard[crop].astype(np.float64)
         label = raster.edge_label[crop]
         dist = raster.boundary_dist_px[crop]
-        band = (label >= 0) & (dist <= 1.5 * widths[np.maximum(label, 0)] / grid.pixel_m + margin_px)
+        band = (label >= 0) & (dist <= BAND_FRACTION * widths[np.maximum(label, 0)] / grid.pixel_m
+                               + margin_px)
         band_idx = np.flatnonzero(band)
         lab_b = label.ravel()[band_idx]
         near_b = ((dist.ravel()[band_idx] <= 0.25 * widths[np.maximum(lab_b, 0)] / grid.pixel_m + 1.5)
