@@ -51,7 +51,7 @@ class FitOptions:
     range_k_max: float = 0.03
     max_samples_per_photo: int = 2500
     robust: bool = True
-    max_steps: int = 40
+    max_steps: int = 60
     seed: int = 0
     plots: bool = True
     verbose: bool = False
