@@ -422,9 +422,13 @@ CONSISTENCY_SCENES = [
 ]
 
 
-@pytest.mark.xfail(reason="known limitation: the discrete plan depends on its raster's resolution; "
-                   "holes and edges below a raster pixel (the ball's short edges, the dragon's small gaps) "
-                   "are seen by the finer raster of at_points and not by a coarse map", strict=False)
+RESOLUTION_LIMITATION = pytest.mark.xfail(
+    reason="known limitation: the discrete plan depends on its raster's resolution; holes and edges "
+           "below a raster pixel (the ball's short edges, the dragon's small gaps) are seen by the "
+           "finer raster of at_points and not by a coarse map", strict=False)
+
+
+@RESOLUTION_LIMITATION
 @pytest.mark.parametrize("name,sun,grid", CONSISTENCY_SCENES, ids=[s[0] for s in CONSISTENCY_SCENES])
 def test_ground_map_equals_values_at_its_pixel_centres(name, sun, grid):
     mdl = builtin_model(name)
@@ -438,9 +442,7 @@ def test_ground_map_equals_values_at_its_pixel_centres(name, sun, grid):
                                f"{points[np.argmax(diff)]:.4f}")
 
 
-@pytest.mark.xfail(reason="known limitation: the discrete plan depends on its raster's resolution; "
-                   "holes and edges below a raster pixel (the ball's short edges, the dragon's small gaps) "
-                   "are seen by the finer raster of at_points and not by a coarse map", strict=False)
+@RESOLUTION_LIMITATION
 @pytest.mark.parametrize("name,sun,grid", CONSISTENCY_SCENES, ids=[s[0] for s in CONSISTENCY_SCENES])
 def test_camera_looking_straight_down_sees_the_ground_map(name, sun, grid):
     mdl = builtin_model(name)
