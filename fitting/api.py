@@ -10,7 +10,6 @@ group. With ``out_dir`` every finished group is written at once to
 from __future__ import annotations
 
 import concurrent.futures
-import dataclasses
 import datetime as _dt
 import json
 import re
@@ -28,7 +27,7 @@ from softshadow.render import SoftShadowModel
 from softshadow.scene_io import CameraSpec, SceneError, SceneSpec, load_scene
 from softshadow.sun import SunBelowHorizonError, check_sun_above_horizon, solar_position
 
-from .exif import intrinsics_from_exif, read_exif
+from .exif import intrinsics_from_exif
 from .grouping import PhotoGroup, group_photos, photo_time
 from .photos import Photo, PhotoError, list_photos, read_photo
 from .results import FitResults, GroupResult

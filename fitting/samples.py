@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 
 from softshadow.params import Pose, Sun
-from softshadow.plan import PointPlan, edge_band_widths, plan_points
+from softshadow.plan import PointPlan, edge_band_widths
 from softshadow.raster import project_to_ground
 from softshadow.occluder import silhouette
 from softshadow.render import SoftShadowModel, object_mask

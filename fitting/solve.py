@@ -259,7 +259,6 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
     result.sun_source = used[0].sun_source
     # Penumbra width in pixels at the solution; identifiability.
     pred, alpha, u, slope = (np.asarray(x) for x in predict(value, arrays, pose, cfg))
-    photo_of = np.asarray(arrays.photo)
     widths = []
     start_i = 0
     for i, s in enumerate(samples):

@@ -14,7 +14,6 @@ from __future__ import annotations
 import json
 import resource
 import statistics
-import sys
 import time
 
 __all__ = ["bench_render", "run_bench"]
