@@ -129,7 +129,7 @@ def test_board_registration_and_fitted_sun_from_a_synthetic_folder(tmp_path):
 
     from data_synth import synthesize
     from fitting.api import fit_folder
-    folder = synthesize(tmp_path / "markers", preset="pillar", seed=1, size=(640, 480),
+    folder = synthesize(tmp_path / "markers", preset="pillar", seed=1, size=(800, 600),
                         cameras="markers", progress=False)
     text = (folder / "scene.toml").read_text()
     (folder / "scene.toml").write_text(re.sub(r"\[site\][^\[]*", "", text, count=1))
@@ -140,7 +140,7 @@ def test_board_registration_and_fitted_sun_from_a_synthetic_folder(tmp_path):
     assert g.reprojection_error_px is not None and g.reprojection_error_px < 1.0
     assert abs(g.sun_azimuth_deg - truth["sun_azimuth_deg"]) < 0.5
     assert abs(g.sun_elevation_deg - truth["sun_elevation_deg"]) < 0.5
-    # At 640x480 the penumbra spans only 2-3 pixels, so k is loose here; the accuracy
+    # At 800x600 the penumbra spans only 2-4 pixels, so k is loose here; the accuracy
     # targets are checked at full size by the Mitsuba tests and the benchmark.
     assert abs(g.range_k - truth["range_k"]) / truth["range_k"] < 0.3
     assert abs(g.rho - truth["rho"]) < 0.02
