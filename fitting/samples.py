@@ -18,7 +18,7 @@ import numpy as np
 from softshadow.params import Pose, Sun
 from softshadow.plan import PointPlan, edge_band_widths
 from softshadow.raster import project_to_ground
-from softshadow.occluder import silhouette
+from softshadow.occluder import posed_vertices, silhouette
 from softshadow.render import SoftShadowModel, object_mask
 
 from .views import PhotoView
@@ -93,7 +93,8 @@ def _boundary_ground_points(model: SoftShadowModel, pose: Pose, sun: Sun, spacin
     """Points along the projected silhouette (M, 3) and their edge's ground width per unit k."""
     occ = model.occluder
     rotation = np.asarray(pose.rotation, np.float64)
-    world = (float(pose.scale) * occ.vertices) @ rotation.T + np.asarray(pose.position, np.float64)
+    world = posed_vertices(occ.vertices, np.asarray(pose.position, np.float64), rotation,
+                           float(pose.scale))
     light = np.asarray(sun.light, np.float64)
     sil = silhouette(occ, world, rotation, light)
     if not len(sil.vertex_ids):

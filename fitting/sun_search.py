@@ -10,7 +10,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from softshadow.occluder import silhouette
+from softshadow.occluder import posed_vertices, silhouette
 from softshadow.params import Pose
 from softshadow.raster import project_to_ground, winding_at_points
 from softshadow.render import SoftShadowModel, object_mask
@@ -40,7 +40,8 @@ def search_sun(model: SoftShadowModel, pose: Pose, view: PhotoView, width: int =
     pts = ground[use, :2]
     occ = model.occluder
     rotation = np.asarray(pose.rotation, np.float64)
-    world = (float(pose.scale) * occ.vertices) @ rotation.T + np.asarray(pose.position, np.float64)
+    world = posed_vertices(occ.vertices, np.asarray(pose.position, np.float64), rotation,
+                           float(pose.scale))
     best = (0.0, 45.0, -np.inf)
     for el in elevations:
         for az in np.arange(0.0, 360.0, azimuth_step):

@@ -166,10 +166,8 @@ class SoftShadowModel:
         pixel_m = float(np.percentile(footprint[use], 5)) if use.any() else 0.01
         shading = jnp.full(camera.height * camera.width, jnp.nan)
         if len(pts):
-            values = self.at_points(params, sun, pose, pts, range_k_max=_band_k(params, range_k_max)
-                                    if range_k_max is None else range_k_max,
-                                    plan=self.plan_points(sun, pose, pts, _band_k(params, range_k_max),
-                                                          pixel_m=max(pixel_m, 1e-4)))
+            plan = self.plan_points(sun, pose, pts, _band_k(params, range_k_max), pixel_m=max(pixel_m, 1e-4))
+            values = self.at_points(params, sun, pose, pts, plan=plan)
             shading = shading.at[np.flatnonzero(use)].set(values)
         return CameraRender(shading.reshape(camera.height, camera.width), mask,
                             valid.reshape(camera.height, camera.width),

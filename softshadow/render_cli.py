@@ -67,9 +67,8 @@ def render_scene_file(args):
     cam = scene.camera_for(name) if name else scene.camera
     w, h = (int(v) for v in args.size.lower().split("x"))
     if cam is not None and cam.kind == "explicit":
-        camera = cam.pinhole(w, h) if cam.K is None else None
         from .camera import PinholeCamera
-        K = np.asarray(cam.K)
+        K = np.asarray(cam.K)  # without --size, the image the principal point is the centre of
         width = int(round(2 * (K[0, 2] + 0.5))) if args.size == "512x512" else w
         height = int(round(2 * (K[1, 2] + 0.5))) if args.size == "512x512" else h
         camera = PinholeCamera(K, cam.R, cam.t, width, height, cam.dist)
