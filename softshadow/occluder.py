@@ -17,6 +17,7 @@ shadow is a line of zero area, so the hard shadow does not depend on the tie.
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numpy as np
 import trimesh
@@ -76,6 +77,23 @@ class Occluder:
     def n_faces(self) -> int:
         return len(self.faces)
 
+    @functools.cached_property
+    def two_faced(self) -> bool:
+        """Every edge has exactly two faces (a closed mesh, not necessarily oriented)."""
+        return self.edge_faces.shape[1] == 2 and bool(np.all(self.edge_faces >= 0))
+
+    @functools.cached_property
+    def edge_face_dir(self) -> np.ndarray:
+        """(E, M) +-1: whether the face in each slot of ``edge_faces`` runs along the edge
+        in its sorted vertex order (0 in padding slots)."""
+        out = np.zeros(self.edge_faces.shape, np.int64)
+        order = np.argsort(self.face_edge_index.ravel(), kind="stable")
+        edge = self.face_edge_index.ravel()[order]
+        starts = np.flatnonzero(np.r_[True, edge[1:] != edge[:-1]])
+        slot = np.arange(len(order)) - np.repeat(starts, np.diff(np.r_[starts, len(order)]))
+        out[edge, slot] = self.face_edge_dir.ravel()[order]
+        return out
+
 
 def posed_vertices(vertices: np.ndarray, position, rotation: np.ndarray, scale: float) -> np.ndarray:
     """NumPy twin of ``Pose.apply`` for the discrete steps."""
@@ -105,35 +123,44 @@ def silhouette(occ: Occluder, world_vertices: np.ndarray, rotation: np.ndarray,
                light: np.ndarray) -> Silhouette:
     """Silhouette and boundary edges of the posed mesh under light direction ``light`` (3,)."""
     light = np.asarray(light, dtype=np.float64)
-    normals_w = occ.face_normals @ np.asarray(rotation).T
-    ndotl = normals_w @ light
+    rotation = np.asarray(rotation, dtype=np.float64)
+    # n_world . L = n . (R^T L): one matrix-vector product instead of rotating every normal.
+    ndotl = occ.face_normals @ (rotation.T @ light)
     lit = ndotl < -PARALLEL_TOL
     ef = occ.edge_faces
-    valid = ef >= 0
-    lit_e = np.where(valid, lit[np.maximum(ef, 0)], False)
-    n_valid = valid.sum(1)
-    n_lit = lit_e.sum(1)
-    is_sil = ((n_lit > 0) & (n_lit < n_valid)) | (n_valid == 1)
-    a = world_vertices[occ.edges[:, 0]]
-    b = world_vertices[occ.edges[:, 1]]
-    t = b - a
+    if occ.two_faced:  # every edge has exactly two faces
+        lit0, lit1 = lit[ef[:, 0]], lit[ef[:, 1]]
+        candidates = np.flatnonzero(lit0 != lit1)
+    else:
+        valid = ef >= 0
+        lit_e = np.where(valid, lit[np.maximum(ef, 0)], False)
+        n_valid = valid.sum(1)
+        n_lit = lit_e.sum(1)
+        candidates = np.flatnonzero(((n_lit > 0) & (n_lit < n_valid)) | (n_valid == 1))
+    a_all = world_vertices[occ.edges[candidates, 0]]
+    b_all = world_vertices[occ.edges[candidates, 1]]
+    t = b_all - a_all
     t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-300)
     cvec = np.cross(t, light)
     c = np.linalg.norm(cvec, axis=1)
-    is_sil &= c > PARALLEL_EDGE_TOL
-    idx = np.nonzero(is_sil)[0]
-    ef_s, lit_s, valid_s = ef[idx], lit_e[idx], valid[idx]
+    keep = c > PARALLEL_EDGE_TOL
+    idx = candidates[keep]
+    a, b, cvec, c = a_all[keep], b_all[keep], cvec[keep], c[keep]
+    ef_s = ef[idx]
+    valid_s = ef_s >= 0
+    lit_s = valid_s & lit[np.maximum(ef_s, 0)]
+    rows = np.arange(len(idx))
     # The face that is "the object" beside the edge, seen from the light: a lit face, or the only one.
     first_lit = np.argmax(lit_s, axis=1)
     has_lit = lit_s.any(1)
-    inner_face = np.where(has_lit, ef_s[np.arange(len(idx)), first_lit], ef_s[:, 0])
-    first_unlit = np.argmax(valid_s & ~lit_s, axis=1)
-    has_unlit = (valid_s & ~lit_s).any(1)
-    other_face = np.where(has_unlit, ef_s[np.arange(len(idx)), first_unlit], inner_face)
+    inner_face = np.where(has_lit, ef_s[rows, first_lit], ef_s[:, 0])
+    unlit_s = valid_s & ~lit_s
+    first_unlit = np.argmax(unlit_s, axis=1)
+    has_unlit = unlit_s.any(1)
+    other_face = np.where(has_unlit, ef_s[rows, first_unlit], inner_face)
     centroid = world_vertices[occ.faces[inner_face]].mean(1)
-    mid = 0.5 * (a[idx] + b[idx])
-    inward = centroid - mid
-    n = cvec[idx] / c[idx, None]
+    inward = centroid - 0.5 * (a + b)
+    n = cvec / c[:, None]
     sign = np.where(np.einsum("ij,ij->i", n, inward) > 0, -1.0, 1.0)
     paper = occ.face_normals[inner_face] + np.where((other_face != inner_face)[:, None],
                                                     occ.face_normals[other_face], 0.0)
@@ -142,10 +169,11 @@ def silhouette(occ: Occluder, world_vertices: np.ndarray, rotation: np.ndarray,
     layers = [lit] if occ.watertight else [lit, (~lit) & (np.abs(ndotl) > PARALLEL_TOL)]
     fill = []
     for faces in layers:
-        net = np.bincount(occ.face_edge_index[faces].ravel(), weights=occ.face_edge_dir[faces].ravel(),
-                          minlength=len(occ.edges))
-        keep = np.nonzero(net)[0]
-        fill.append((occ.edges[keep], net[keep]))
+        # Net count of the layer's faces running along each edge (their boundary, oriented).
+        on = np.where(occ.edge_faces >= 0, faces[np.maximum(occ.edge_faces, 0)], False)
+        net = np.where(on, occ.edge_face_dir, 0).sum(1)
+        keep_e = np.flatnonzero(net)
+        fill.append((occ.edges[keep_e], net[keep_e].astype(np.float64)))
     return Silhouette(ids, sign, paper, lit, tuple(fill))
 
 
@@ -168,37 +196,36 @@ def merge_collinear(ids: np.ndarray, world: np.ndarray, light: np.ndarray, sign:
     sorted_v = flat[order]
     starts = np.flatnonzero(np.r_[True, sorted_v[1:] != sorted_v[:-1]])
     counts = np.diff(np.r_[starts, len(flat)])
-    parent = np.arange(len(ids))
-
-    def find(i):
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
-    joined = False
-    for st in starts[counts == 2]:
-        e1, e2 = order[st] // 2, order[st + 1] // 2
-        if (abs(abs(t[e1] @ t[e2]) - 1.0) < tol and n[e1] @ n[e2] > 1.0 - tol
-                and paper[e1] @ paper[e2] > 1.0 - 1e-6):
-            parent[find(e1)] = find(e2)
-            joined = True
-    if not joined:
+    pair = starts[counts == 2]
+    e1, e2 = order[pair] // 2, order[pair + 1] // 2
+    join = ((np.abs(np.abs(np.einsum("ij,ij->i", t[e1], t[e2])) - 1.0) < tol)
+            & (np.einsum("ij,ij->i", n[e1], n[e2]) > 1.0 - tol)
+            & (np.einsum("ij,ij->i", paper[e1], paper[e2]) > 1.0 - 1e-6))
+    if not join.any():
         return ids, sign, paper
-    roots = np.array([find(i) for i in range(len(ids))])
-    out_ids, out_sign, out_paper = [], [], []
-    for r in np.unique(roots):
-        members = np.flatnonzero(roots == r)
-        if len(members) == 1:
-            out_ids.append(ids[members[0]])
-        else:
-            verts = ids[members].ravel()
-            # The chain's ends: extreme vertices along the common direction.
-            proj = world[verts] @ t[members[0]]
-            out_ids.append(np.array([verts[np.argmin(proj)], verts[np.argmax(proj)]]))
-            # Keep the tangent's orientation convention of the first member.
-            if (world[out_ids[-1][1]] - world[out_ids[-1][0]]) @ t[members[0]] < 0:
-                out_ids[-1] = out_ids[-1][::-1]
-        out_sign.append(sign[members[0]])
-        out_paper.append(paper[members[0]])
-    return np.array(out_ids), np.array(out_sign), np.array(out_paper)
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    m = len(ids)
+    graph = coo_matrix((np.ones(int(join.sum())), (e1[join], e2[join])), shape=(m, m))
+    _, roots = connected_components(graph, directed=False)
+    # One output edge per chain, in the order of each chain's first member.
+    _, first_member, inverse = np.unique(roots, return_index=True, return_inverse=True)
+    order_out = np.argsort(first_member, kind="stable")
+    lead = first_member[order_out]  # the chain's first member (its tangent's orientation is kept)
+    rank = np.empty_like(order_out)
+    rank[order_out] = np.arange(len(order_out))
+    chain = rank[inverse.ravel()]  # output index of each input edge
+    n_out = len(lead)
+    # The chain's ends: its extreme vertices along the lead member's direction.
+    proj = np.einsum("ijk,ik->ij", world[ids], t[lead[chain]])  # (m, 2)
+    verts = ids.ravel()
+    p = proj.ravel()
+    owner = np.repeat(chain, 2)
+    lo_order = np.lexsort((p, owner))
+    first_of = np.flatnonzero(np.r_[True, owner[lo_order][1:] != owner[lo_order][:-1]])
+    last_of = np.r_[first_of[1:] - 1, len(lo_order) - 1]
+    out_ids = np.stack([verts[lo_order[first_of]], verts[lo_order[last_of]]], 1)
+    single = np.bincount(chain, minlength=n_out) == 1
+    out_ids[single] = ids[lead[single]]
+    return out_ids, sign[lead], paper[lead]

@@ -8,11 +8,12 @@ from __future__ import annotations
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float
 
 from .sun import light_direction
 
-__all__ = ["ShadowParams", "Sun", "Pose", "rotation_matrix_xyz",
+__all__ = ["ShadowParams", "Sun", "Pose", "rotation_matrix_xyz", "rotation_matrix_xyz_np",
            "range_to_paper", "brightness_to_paper", "paper_to_range_k", "paper_to_rho"]
 
 
@@ -58,6 +59,16 @@ def rotation_matrix_xyz(rotation_deg) -> Float[Array, "3 3"]:
     Rx = jnp.stack([jnp.stack([one, zero, zero]), jnp.stack([zero, cx, -sx]), jnp.stack([zero, sx, cx])])
     Ry = jnp.stack([jnp.stack([cy, zero, sy]), jnp.stack([zero, one, zero]), jnp.stack([-sy, zero, cy])])
     Rz = jnp.stack([jnp.stack([cz, -sz, zero]), jnp.stack([sz, cz, zero]), jnp.stack([zero, zero, one])])
+    return Rz @ Ry @ Rx
+
+
+def rotation_matrix_xyz_np(rotation_deg) -> np.ndarray:
+    """NumPy twin of ``rotation_matrix_xyz`` (float64) for the discrete steps."""
+    rx, ry, rz = np.radians(np.asarray(rotation_deg, dtype=np.float64))
+    cx, sx, cy, sy, cz, sz = np.cos(rx), np.sin(rx), np.cos(ry), np.sin(ry), np.cos(rz), np.sin(rz)
+    Rx = np.array([[1.0, 0.0, 0.0], [0.0, cx, -sx], [0.0, sx, cx]])
+    Ry = np.array([[cy, 0.0, sy], [0.0, 1.0, 0.0], [-sy, 0.0, cy]])
+    Rz = np.array([[cz, -sz, 0.0], [sz, cz, 0.0], [0.0, 0.0, 1.0]])
     return Rz @ Ry @ Rx
 
 

@@ -28,6 +28,8 @@ at k = 0, at points on the edge line, and for points upstream of the edge.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -85,17 +87,118 @@ def profile_alpha(u, profile: str = "linear"):
     raise ValueError(f"unknown penumbra profile {profile!r}; choose one of {PROFILES}")
 
 
+def _split(v):
+    """Components (x, y, z) of vectors (..., 3): the arithmetic below is per component
+    (structure of arrays), which XLA vectorises far better than reductions over a size-3 axis."""
+    return v[..., 0], v[..., 1], v[..., 2]
+
+
+def _dot(u, v):
+    return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
+
+
+def _norm3(v, eps=_TINY):
+    sq = _dot(v, v)
+    ok = sq > eps
+    return jnp.where(ok, jnp.sqrt(jnp.where(ok, sq, 1.0)), 0.0)
+
+
+class _EdgeFrame(NamedTuple):
+    """Per-edge quantities for one light direction (components as 3-tuples of arrays).
+
+    a, b the segment's ends; n the outward normal; m the light direction across the edge
+    (both over c = |t x L|); along = seg_perp / |seg_perp|^2 (seg_perp: the segment seen
+    along the light), so that (x - a) . along is where x lies along the segment.
+    """
+
+    a: tuple
+    b: tuple
+    n: tuple
+    m: tuple
+    along: tuple
+    c: jax.Array
+    t_out: jax.Array
+    t_in: jax.Array
+
+
+def _edge_frame(a, b, outward_sign, light, k, rule: str, paper_normal=None) -> _EdgeFrame:
+    seg = tuple(bi - ai for ai, bi in zip(a, b))
+    length = jnp.maximum(_norm3(seg), 1e-12)
+    t = tuple(si / length for si in seg)
+    cvec = (t[1] * light[2] - t[2] * light[1], t[2] * light[0] - t[0] * light[2],
+            t[0] * light[1] - t[1] * light[0])
+    c = jnp.maximum(_norm3(cvec), 1e-12)
+    n = tuple(outward_sign * ci / c for ci in cvec)
+    lt = _dot(light, t)
+    m = tuple((li - lt * ti) / c for li, ti in zip(light, t))
+    sl = _dot(seg, light)
+    seg_perp = tuple(si - sl * li for si, li in zip(seg, light))
+    sp2 = _dot(seg_perp, seg_perp)
+    sp2 = jnp.where(sp2 > 1e-24, sp2, 1e-24)
+    along = tuple(pi / sp2 for pi in seg_perp)
+    if rule == "edge":
+        t_out = k / c
+        t_in = t_out
+    elif rule == "paper":
+        if paper_normal is None:
+            raise ValueError("the paper rule needs per-edge normals")
+        nn = _dot(paper_normal, n)
+        nm = _dot(paper_normal, m)
+        # N leans outward at a silhouette; guard the rare edge where it does not.
+        nn = jnp.maximum(nn, 1e-6)
+        t_out = k * nn / jnp.maximum(c + k * nm, 1e-9)
+        t_in = k * nn / jnp.maximum(c - k * nm, 1e-9)
+    else:
+        raise ValueError(f"unknown expansion rule {rule!r}; choose one of {RULES}")
+    return _EdgeFrame(a, b, n, m, along, c, t_out, t_in)
+
+
+def _coordinate(x, f: _EdgeFrame, light, inside, near_boundary):
+    """u and du/dT of points x (3-tuple) against edge frames f (see ``penumbra_coordinate``)."""
+    w = tuple(xi - ai for xi, ai in zip(x, f.a))
+    num = _dot(w, f.n)
+    den = _dot(w, f.m)
+    scale = _norm3(w) + 1e-12
+    # Angular distance (as a tangent, in units of 1/c) from the sun centre to the edge: to the
+    # edge's plane where the point lies beside the segment seen along L, else to the end vertex.
+    tan_plane = jnp.abs(_safe_div(num, den, 1e-9 * scale))
+    along = _dot(w, f.along)
+    after = along > 1.0
+    beyond = (along < 0.0) | after
+    end_vec = tuple(jnp.where(after, xi - bi, wi) for xi, bi, wi in zip(x, f.b, w))
+    end_depth = _dot(end_vec, light)
+    end_perp = tuple(ei - end_depth * li for ei, li in zip(end_vec, light))
+    end_scale = _norm3(end_vec) + 1e-12
+    tan_end = _safe_div(_norm3(end_perp), end_depth * f.c, 1e-9 * end_scale)
+    depth = jnp.where(beyond, end_depth, den)
+    upstream = depth <= 1e-9 * jnp.where(beyond, end_scale, scale)
+    magnitude = jnp.where(upstream, 1e6, jnp.minimum(jnp.where(beyond, tan_end, tan_plane), 1e6))
+    # The side: beside the segment and within half a half-width of its plane, the plane's own
+    # side (so it follows the edge as the sun or pose moves); elsewhere the hard shadow's,
+    # so k = 0 gives exactly the hard shadow and concave corners never light the umbra.
+    near_plane = (~beyond) & (~upstream) & (tan_plane < 0.5 * 0.5 * (f.t_out + f.t_in))
+    if near_boundary is not None:  # only where the plan saw the hard shadow's boundary itself
+        near_plane = near_plane & (near_boundary > 0.5)
+    side = jnp.where(near_plane, jnp.where(num < 0, -1.0, 1.0), jnp.where(inside > 0.5, -1.0, 1.0))
+    u = (2.0 * side * magnitude - f.t_out + f.t_in) / (f.t_out + f.t_in)
+    return jnp.clip(u, -1e6, 1e6), 2.0 / (f.t_out + f.t_in)
+
+
+def _range_k(range_k, dtype):
+    return jnp.maximum(jnp.asarray(range_k, dtype=dtype), _K_MIN)
+
+
 def penumbra_coordinate(points: Float[Array, "n 3"], a: Float[Array, "n 3"], b: Float[Array, "n 3"],
-                        outward_sign: Float[Array, " n"], light: Float[Array, "3"], range_k,
+                        outward_sign: Float[Array, " n"], light: Float[Array, "*n 3"], range_k,
                         inside: Float[Array, " n"], rule: str = "edge",
                         paper_normal: Float[Array, "n 3"] | None = None, with_slope: bool = False,
                         near_boundary: Float[Array, " n"] | None = None):
     """Normalised penumbra coordinate u (n,) of each point against its own edge segment (a, b).
 
-    With ``with_slope`` also returns du/dT (n,), the factor between u and the
-    angular tangent T it is made from (2 / (T_out + T_in), the only place k enters),
-    so a caller can scale a precomputed spatial gradient of T instead of
-    differentiating u again.
+    light: (3,), or (n, 3) one per point. With ``with_slope`` also returns du/dT (n,),
+    the factor between u and the angular tangent T it is made from (2 / (T_out + T_in),
+    the only place k enters), so a caller can scale a precomputed spatial gradient of T
+    instead of differentiating u again.
 
     u = +1 on the expanded silhouette, -1 on the contracted one, |u| > 1 outside
     the penumbra. Its size comes from the edge's plane where the point, seen
@@ -106,60 +209,11 @@ def penumbra_coordinate(points: Float[Array, "n 3"], a: Float[Array, "n 3"], b: 
     ``near_boundary``) and from ``inside`` (1 in the hard shadow,
     0 outside) elsewhere, so a concave corner never lights up the umbra.
     """
-    t = b - a
-    t = t / jnp.maximum(_norm(t), 1e-12)[:, None]
-    cvec = jnp.cross(t, light)
-    c = jnp.maximum(_norm(cvec), 1e-12)
-    n = outward_sign[:, None] * cvec / c[:, None]
-    m = (light - jnp.sum(light * t, -1, keepdims=True) * t) / c[:, None]
-    w = points - a
-    num = jnp.sum(w * n, -1)
-    den = jnp.sum(w * m, -1)
-    scale = _norm(w) + 1e-12
-    k = jnp.maximum(jnp.asarray(range_k, dtype=points.dtype), _K_MIN)
-    if rule == "edge":
-        t_out = k / c
-        t_in = t_out
-    elif rule == "paper":
-        if paper_normal is None:
-            raise ValueError("the paper rule needs per-edge normals")
-        nn = jnp.sum(paper_normal * n, -1)
-        nm = jnp.sum(paper_normal * m, -1)
-        # N leans outward at a silhouette; guard the rare edge where it does not.
-        nn = jnp.maximum(nn, 1e-6)
-        t_out = k * nn / jnp.maximum(c + k * nm, 1e-9)
-        t_in = k * nn / jnp.maximum(c - k * nm, 1e-9)
-    else:
-        raise ValueError(f"unknown expansion rule {rule!r}; choose one of {RULES}")
-    # Angular distance (as a tangent, in units of 1/c) from the sun centre to the edge: to the
-    # edge's plane where the point lies beside the segment seen along L, else to the end vertex.
-    tan_plane = jnp.abs(_safe_div(num, den, 1e-9 * scale))
-    seg = b - a
-    seg_perp = seg - jnp.sum(seg * light, -1, keepdims=True) * light
-    w_perp = w - jnp.sum(w * light, -1, keepdims=True) * light
-    along = _safe_div(jnp.sum(w_perp * seg_perp, -1), jnp.sum(seg_perp * seg_perp, -1), 1e-24)
-    beyond = (along < 0.0) | (along > 1.0)
-    end_vec = jnp.where((along > 1.0)[:, None], points - b, w)
-    end_perp = end_vec - jnp.sum(end_vec * light, -1, keepdims=True) * light
-    end_depth = jnp.sum(end_vec * light, -1)
-    end_scale = _norm(end_vec) + 1e-12
-    tan_end = _safe_div(_norm(end_perp), end_depth * c, 1e-9 * end_scale)
-    depth = jnp.where(beyond, end_depth, den)
-    upstream = depth <= 1e-9 * jnp.where(beyond, end_scale, scale)
-    magnitude = jnp.where(upstream, 1e6, jnp.minimum(jnp.where(beyond, tan_end, tan_plane), 1e6))
-    # The side: beside the segment and within half a half-width of its plane, the plane's own
-    # side (so it follows the edge as the sun or pose moves); elsewhere the hard shadow's,
-    # so k = 0 gives exactly the hard shadow and concave corners never light the umbra.
-    near_plane = (~beyond) & (~upstream) & (tan_plane < 0.5 * 0.5 * (t_out + t_in))
-    if near_boundary is not None:  # only where the plan saw the hard shadow's boundary itself
-        near_plane = near_plane & (near_boundary > 0.5)
-    side = jnp.where(near_plane, jnp.where(num < 0, -1.0, 1.0), jnp.where(inside > 0.5, -1.0, 1.0))
-    tan_x = side * magnitude
-    u = (2.0 * tan_x - t_out + t_in) / (t_out + t_in)
-    u = jnp.clip(u, -1e6, 1e6)
-    if with_slope:
-        return u, 2.0 / (t_out + t_in)
-    return u
+    L = _split(light)
+    f = _edge_frame(_split(a), _split(b), outward_sign, L, _range_k(range_k, points.dtype), rule,
+                    None if paper_normal is None else _split(paper_normal))
+    u, slope = _coordinate(_split(points), f, L, inside, near_boundary)
+    return (u, slope) if with_slope else u
 
 
 def edge_coordinate(points, edge_ids: Int[Array, "n K"], edge_vertices_world: Float[Array, "s 2 3"],
@@ -168,26 +222,50 @@ def edge_coordinate(points, edge_ids: Int[Array, "n K"], edge_vertices_world: Fl
                     with_slope: bool = False, near_boundary: Float[Array, " n"] | None = None):
     """Penumbra coordinate u (n,) at points (n, 3) against their candidate edges (n, K).
 
-    Each point takes the candidate nearest in penumbra units (smallest |u|): the
-    silhouette that the sun disk sees first. The choice is piecewise constant,
-    so gradients flow through the chosen edge exactly.
+    light: (3,), or (n, 3) one per point. Each point takes the candidate nearest in
+    penumbra units (smallest |u|): the silhouette that the sun disk sees first. The
+    choice is piecewise constant, so it is made without gradients over all candidates
+    (edge quantities computed once per edge where the light is shared), and u is then
+    evaluated, differentiably, for the chosen edge alone: gradients cost one edge per point.
     """
     n_pts, n_cand = edge_ids.shape
+    k = _range_k(range_k, points.dtype)
+    x = _split(points)
+    sg = jax.lax.stop_gradient
+    paper = paper_normal_world
+    # -- the choice: all candidates, no gradient --
     flat = edge_ids.reshape(-1)
-    ev = edge_vertices_world[flat]
-    pn = None if paper_normal_world is None else paper_normal_world[flat]
-    rep = lambda x: jnp.repeat(x, n_cand, axis=0)
+    rep = lambda v: jnp.repeat(v, n_cand, axis=0)
+    if light.ndim == 1:
+        L_c = _split(sg(light))
+        ev = sg(edge_vertices_world)
+        frames = _edge_frame(_split(ev[:, 0]), _split(ev[:, 1]), sg(outward_sign), L_c, sg(k), rule,
+                             None if paper is None else _split(sg(paper)))
+        columns = [*frames.a, *frames.b, *frames.n, *frames.m, *frames.along,
+                   frames.c, frames.t_out, frames.t_in]
+        table = jnp.stack([jnp.broadcast_to(col, frames.c.shape) for col in columns], axis=1)[flat]
+        col = [table[:, i] for i in range(table.shape[1])]
+        f_c = _EdgeFrame(tuple(col[0:3]), tuple(col[3:6]), tuple(col[6:9]), tuple(col[9:12]),
+                         tuple(col[12:15]), col[15], col[16], col[17])
+    else:
+        L_c = _split(rep(sg(light)))
+        ev = sg(edge_vertices_world)[flat]
+        f_c = _edge_frame(_split(ev[:, 0]), _split(ev[:, 1]), sg(outward_sign)[flat], L_c, sg(k), rule,
+                          None if paper is None else _split(sg(paper)[flat]))
     # Only the nearest boundary edge (the first candidate) may set the side from its plane.
-    nb = None if near_boundary is None else (
+    nb_c = None if near_boundary is None else (
         near_boundary[:, None] * (jnp.arange(n_cand) == 0)[None, :]).reshape(-1)
-    u, slope = penumbra_coordinate(rep(points), ev[:, 0], ev[:, 1], outward_sign[flat], light,
-                                   range_k, rep(inside), rule, pn, with_slope=True, near_boundary=nb)
-    u = u.reshape(n_pts, n_cand)
-    best = jnp.argmin(jnp.abs(u), axis=1)[:, None]
-    u_best = jnp.take_along_axis(u, best, axis=1)[:, 0]
-    if with_slope:
-        return u_best, jnp.take_along_axis(slope.reshape(n_pts, n_cand), best, axis=1)[:, 0]
-    return u_best
+    u_all, _ = _coordinate(tuple(rep(sg(xi)) for xi in x), f_c, L_c, rep(inside), nb_c)
+    best = jnp.argmin(jnp.abs(u_all.reshape(n_pts, n_cand)), axis=1)
+    # -- the value and its gradient: the chosen edge only --
+    eid = jnp.take_along_axis(edge_ids, best[:, None], axis=1)[:, 0]
+    ev = edge_vertices_world[eid]
+    L = _split(light)
+    f = _edge_frame(_split(ev[:, 0]), _split(ev[:, 1]), outward_sign[eid], L, k, rule,
+                    None if paper is None else _split(paper[eid]))
+    nb = None if near_boundary is None else jnp.where(best == 0, near_boundary, 0.0)
+    u, slope = _coordinate(x, f, L, inside, nb)
+    return (u, slope) if with_slope else u
 
 
 def edge_alpha(points, edge_ids: Int[Array, "n K"], edge_vertices_world: Float[Array, "s 2 3"],

@@ -21,7 +21,7 @@ from jaxtyping import Array, Bool, Float, Int
 
 from .camera import GroundGrid
 from .occluder import Occluder, posed_vertices, silhouette
-from .params import Pose, Sun
+from .params import Pose, Sun, rotation_matrix_xyz_np
 from .penumbra import edge_alpha, edge_coordinate
 from .raster import (ShadowRaster, candidate_labels, project_to_ground, rasterise_shadow,
                      winding_at_points)
@@ -30,7 +30,7 @@ from .sun import check_sun_above_horizon
 __all__ = ["EdgeSet", "PointPlan", "plan_points", "plan_grid", "plan_alpha", "plan_coordinate",
            "plan_coordinate_light", "concatenate_plans",
            "edge_band_widths",
-           "bucket_size"]
+           "bucket_size", "grid_bucket_size"]
 
 MAX_RASTER_SIDE = 2048
 # The wedge reaches half its width on each side of the outline; the band adds a fifth for the
@@ -72,12 +72,14 @@ class PointPlan(eqx.Module):
 
 
 def _concrete_geometry(occ: Occluder, pose: Pose, sun: Sun):
+    """Posed vertices (V, 3), rotation (3, 3) and light (3,) as NumPy float64 (no eager JAX ops)."""
     el = float(sun.elevation_deg)
     check_sun_above_horizon(el)
-    rotation = np.asarray(pose.rotation, dtype=np.float64)
+    rotation = rotation_matrix_xyz_np(np.asarray(pose.rotation_deg, np.float64))
     world = posed_vertices(occ.vertices, np.asarray(pose.position, np.float64), rotation,
                            float(pose.scale))
-    light = np.asarray(sun.light, dtype=np.float64)
+    az, el = np.radians(float(sun.azimuth_deg)), np.radians(el)
+    light = -np.array([np.sin(az) * np.cos(el), np.cos(az) * np.cos(el), np.sin(el)])
     return world, rotation, light
 
 
@@ -106,19 +108,20 @@ def _edge_data(occ, world, rotation, light, rule):
     return sil, a, b, direction
 
 
-def _pack_edges(occ: Occluder, sil) -> EdgeSet:
+def _pack_edges(occ: Occluder, sil, dtype=np.float64):
+    """(vertices_local (s, 2, 3), outward_sign (s,), paper_normal_local (s, 3)) padded to a bucket."""
     s = len(sil.vertex_ids)
     size = bucket_size(s, 16)
-    verts = np.zeros((size, 2, 3))
+    verts = np.zeros((size, 2, 3), dtype)
     verts[:, 1, 0] = 1.0  # padding edges are unit segments, never referenced
-    sign = np.ones(size)
-    paper = np.zeros((size, 3))
+    sign = np.ones(size, dtype)
+    paper = np.zeros((size, 3), dtype)
     paper[:, 2] = 1.0
     if s:
         verts[:s] = occ.vertices[sil.vertex_ids]
         sign[:s] = sil.outward_sign
         paper[:s] = sil.paper_normal_local
-    return EdgeSet(jnp.asarray(verts), jnp.asarray(sign), jnp.asarray(paper))
+    return verts, sign, paper
 
 
 def _clean_outline(raster: ShadowRaster, label: np.ndarray) -> np.ndarray:
@@ -198,7 +201,8 @@ def plan_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k
             active[:n] = ok & (dist <= band)
             near_boundary[:n] = ok & (dist <= 0.25 * widths[np.maximum(label, 0)]
                                       + 1.5 * raster.grid.pixel_m) & _clean_outline(raster, label)
-    return PointPlan(_pack_edges(occ, sil), jnp.asarray(edge_id), jnp.asarray(hard),
+    verts, sign, paper = jax.device_put(_pack_edges(occ, sil))
+    return PointPlan(EdgeSet(verts, sign, paper), jnp.asarray(edge_id), jnp.asarray(hard),
                      jnp.asarray(active), jnp.asarray(near_boundary))
 
 
@@ -206,18 +210,25 @@ def plan_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k
 class GridPlan:
     """Discrete choices on a whole ground map: the hard shadow and the band pixels to evaluate.
 
-    hard (H, W) float; band_index (m,) flat pixel indices padded with H*W;
-    band_points (m, 3); plan: the PointPlan of the band pixels; raster: the
-    padded ShadowRaster (for drawing silhouettes and debugging).
+    hard (H, W) uint8 0/1; band_index (m,) int32 flat pixel indices padded with H*W;
+    plan: the PointPlan of the band pixels (``band_points``); raster: the padded
+    ShadowRaster (for drawing silhouettes and debugging).
     """
 
     grid: GroundGrid
     hard: np.ndarray
     band_index: np.ndarray
-    band_points: np.ndarray
     plan: PointPlan
     raster: ShadowRaster | None
     n_band: int
+    hard_device: jax.Array | None = None  # hard and band_index already on the device
+    band_index_device: jax.Array | None = None
+
+    @property
+    def band_points(self) -> np.ndarray:
+        """World points (m, 3) of the band pixels (padding: the pixel one past the end)."""
+        rows, cols = np.divmod(self.band_index.astype(np.int64), self.grid.width)
+        return self.grid.to_world(cols, rows)
 
 
 def plan_grid(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, range_k_max: float,
@@ -226,11 +237,11 @@ def plan_grid(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, range_k_max
     world, rotation, light = _concrete_geometry(occ, pose, sun)
     sil, a, b, direction = _edge_data(occ, world, rotation, light, rule)
     h, w = grid.height, grid.width
-    hard = np.zeros((h, w))
+    hard = np.zeros((h, w), np.uint8)
     band_idx = np.zeros(0, np.int64)
     near_b = np.zeros(0, bool)
     raster = None
-    edge_label = np.zeros(0, np.int32)
+    edge_label = np.zeros((0, N_CANDIDATES), np.int64)
     if len(sil.vertex_ids):
         widths = edge_band_widths(a, b, direction, light, range_k_max)
         pad = int(min(np.ceil(1.5 * widths.max() / grid.pixel_m) + margin_px + 3, 512))
@@ -238,36 +249,47 @@ def plan_grid(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, range_k_max
                                            grid.origin_m[1] + pad * grid.pixel_m), w + 2 * pad, h + 2 * pad)
         raster = rasterise_shadow(padded, world, light, sil)
         crop = (slice(pad, pad + h), slice(pad, pad + w))
-        hard = raster.hard[crop].astype(np.float64)
-        label = raster.edge_label[crop]
+        hard = np.ascontiguousarray(raster.hard[crop])
         dist = raster.boundary_dist_px[crop]
-        band = (label >= 0) & (dist <= BAND_FRACTION * widths[np.maximum(label, 0)] / grid.pixel_m
-                               + margin_px)
-        band_idx = np.flatnonzero(band)
-        lab_b = label.ravel()[band_idx]
-        near_b = ((dist.ravel()[band_idx] <= 0.25 * widths[np.maximum(lab_b, 0)] / grid.pixel_m + 1.5)
-                  & _clean_outline(raster, lab_b))
+        band_px = BAND_FRACTION * widths / grid.pixel_m + margin_px  # per edge
+        # The widest band first (a cheap test on the distance alone), then each pixel's own edge's.
+        band_idx = np.flatnonzero(dist <= band_px.max())
         rows_b, cols_b = np.divmod(band_idx, w)
+        lab_b = raster.label_at(rows_b + pad, cols_b + pad)
+        dist_b = dist.ravel()[band_idx] if dist.flags.c_contiguous else dist[rows_b, cols_b]
+        keep = (lab_b >= 0) & (dist_b <= band_px[np.maximum(lab_b, 0)])
+        band_idx, rows_b, cols_b, lab_b, dist_b = (band_idx[keep], rows_b[keep], cols_b[keep],
+                                                    lab_b[keep], dist_b[keep])
+        near_b = ((dist_b <= 0.25 * widths[lab_b] / grid.pixel_m + 1.5) & _clean_outline(raster, lab_b))
         edge_label = candidate_labels(raster.edge_label, rows_b + pad, cols_b + pad,
                                       max_candidates=N_CANDIDATES, neighbours=raster.edge_neighbours)
     m = len(band_idx)
-    size = bucket_size(m, 256)
-    index = np.full(size, h * w, np.int64)
+    size = grid_bucket_size(m)
+    ftype = np.dtype(jnp.result_type(float))
+    index = np.full(size, h * w, np.int32)
     index[:m] = band_idx
-    rows, cols = np.divmod(band_idx, w)
-    pts = np.zeros((size, 3))
-    pts[:m] = grid.to_world(cols, rows)
     edge_id = np.zeros((size, N_CANDIDATES), np.int32)
-    edge_id[:m] = np.maximum(edge_label, 0) if m else 0
+    edge_id[:m] = np.maximum(edge_label, 0)
     active = np.zeros(size, bool)
     active[:m] = True
-    hard_band = np.zeros(size)
+    hard_band = np.zeros(size, ftype)
     hard_band[:m] = hard.ravel()[band_idx]
-    near = np.zeros(size)
+    near = np.zeros(size, ftype)
     near[:m] = near_b
-    plan = PointPlan(_pack_edges(occ, sil), jnp.asarray(edge_id), jnp.asarray(hard_band),
-                     jnp.asarray(active), jnp.asarray(near))
-    return GridPlan(grid, hard, index, pts, plan, raster, m)
+    edges = _pack_edges(occ, sil, ftype)
+    # One transfer for all arrays (one jnp.asarray each costs more).
+    hard_d, index_d, edge_id, hard_band, active, near, verts, sign, paper = jax.device_put(
+        (hard, index, edge_id, hard_band, active, near) + edges)
+    plan = PointPlan(EdgeSet(verts, sign, paper), edge_id, hard_band, active, near)
+    return GridPlan(grid, hard, index, plan, raster, m, hard_d, index_d)
+
+
+def grid_bucket_size(n: int, minimum: int = 256) -> int:
+    """Round a count up to one of four sizes per octave (waste <= 25 %, few distinct shapes)."""
+    if n <= minimum:
+        return minimum
+    step = 1 << (int(np.floor(np.log2(n))) - 2)
+    return -(-n // step) * step
 
 
 def plan_alpha(points: Float[Array, "n 3"], plan: PointPlan, pose: Pose, sun: Sun, range_k,
@@ -299,8 +321,6 @@ def plan_coordinate_light(points: Float[Array, "n 3"], plan: PointPlan, pose: Po
     edges = plan.edges
     ev = pose.apply(edges.vertices_local)
     paper = pose.apply_direction(edges.paper_normal_local) if rule == "paper" else None
-    if light.ndim == 2:
-        light = jnp.repeat(light, plan.edge_id.shape[1], axis=0)
     u, slope = edge_coordinate(points, plan.edge_id, ev, edges.outward_sign, light, range_k,
                                plan.hard, rule, paper, with_slope=True,
                                near_boundary=plan.near_boundary)

@@ -70,6 +70,10 @@ class ShadowRaster:
         dist = np.where(inside, self.boundary_dist_px[r, c] * self.grid.pixel_m, np.inf)
         return hard, label, dist
 
+    def label_at(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """Governing edge label at pixels (rows, cols) inside the raster."""
+        return self.edge_label[rows, cols]
+
 
 def winding_fill(shape: tuple[int, int], start: np.ndarray, end: np.ndarray,
                  weight: np.ndarray) -> np.ndarray:
@@ -189,36 +193,48 @@ def rasterise_shadow(grid: GroundGrid, world_vertices: np.ndarray, light: np.nda
     kernel = np.ones((3, 3), np.uint8)
     dil = cv2.dilate(hard, kernel, borderType=cv2.BORDER_REPLICATE)
     ero = cv2.erode(hard, kernel, borderType=cv2.BORDER_REPLICATE)
-    boundary = cv2.dilate(dil - ero, kernel) > 0
-    seeds = boundary & (label_img > 0)
-    if not seeds.any():
+    boundary = cv2.dilate(dil - ero, kernel)
+    # Seeds: outline edge pixels near the hard shadow's boundary; the distance transform
+    # measures the distance to the zero pixels of src.
+    src = np.where((boundary > 0) & (label_img > 0), np.uint8(0), np.uint8(1))
+    seed_index = np.flatnonzero(src.reshape(-1) == 0)  # row-major, as OpenCV numbers them
+    if not len(seed_index):
         return ShadowRaster(grid, hard, -np.ones((h, w), np.int32),
                             np.full((h, w), np.inf, np.float32))
-    src = np.where(seeds, 0, 1).astype(np.uint8)
     dist, nearest = cv2.distanceTransformWithLabels(src, cv2.DIST_L2, cv2.DIST_MASK_5,
                                                     labelType=cv2.DIST_LABEL_PIXEL)
-    seed_labels = label_img[seeds]  # row-major order, as OpenCV numbers the zero pixels
-    edge_label = seed_labels[nearest - 1] - 1
-    return ShadowRaster(grid, hard, edge_label.astype(np.int32), dist.astype(np.float32),
-                        _end_neighbours(ids, on_outline), outline_fraction)
+    # DT label l > 0 is the l-th seed; the lookup table maps it to its edge index.
+    lut = np.empty(len(seed_index) + 1, np.int32)
+    lut[0] = -1
+    lut[1:] = label_img.reshape(-1)[seed_index] - 1
+    edge_label = lut[nearest]
+    return ShadowRaster(grid, hard, edge_label, dist, _end_neighbours(ids, on_outline), outline_fraction)
 
 
 def _end_neighbours(ids: np.ndarray, keep: np.ndarray) -> np.ndarray:
     """For each edge (S,), an outline edge sharing its first and its second vertex (-1: none).
 
-    Short edges can vanish under their neighbours' pixels in the label raster; adding the
-    neighbours of the nearest edge to the candidates brings them back.
+    Of several, the lowest-numbered other one. Short edges can vanish under their
+    neighbours' pixels in the label raster; adding the neighbours of the nearest edge to
+    the candidates brings them back.
     """
     out = -np.ones((len(ids), 2), np.int64)
-    owner: dict[int, list[int]] = {}
-    for e in np.flatnonzero(keep):
-        for v in ids[e]:
-            owner.setdefault(int(v), []).append(int(e))
-    for e in np.flatnonzero(keep):
-        for j in (0, 1):
-            others = [o for o in owner.get(int(ids[e, j]), []) if o != e]
-            if others:
-                out[e, j] = others[0]
+    kept = np.flatnonzero(keep)
+    if not len(kept):
+        return out
+    vert = ids[kept].ravel()
+    edge = np.repeat(kept, 2)
+    order = np.argsort(vert, kind="stable")  # within a vertex: ascending edge
+    vs, es = vert[order], edge[order]
+    run_start = np.flatnonzero(np.r_[True, vs[1:] != vs[:-1]])
+    run_of = np.cumsum(np.r_[True, vs[1:] != vs[:-1]]) - 1
+    run_len = np.diff(np.r_[run_start, len(vs)])
+    first = es[run_start]
+    second = np.where(run_len >= 2, es[np.minimum(run_start + 1, len(vs) - 1)], -1)
+    other = np.where(es != first[run_of], first[run_of], second[run_of])
+    result = np.empty_like(other)
+    result[order] = other
+    out[kept] = result.reshape(-1, 2)
     return out
 
 
@@ -227,33 +243,42 @@ def candidate_labels(edge_label: np.ndarray, rows: np.ndarray, cols: np.ndarray,
                      neighbours: np.ndarray | None = None) -> np.ndarray:
     """Up to K distinct edge labels (n, K) around each pixel (rows, cols) of a label image.
 
-    The pixel's own label comes first; the others are labels found at ``radii``
-    pixels in 8 directions (the Voronoi cells next door), so the penumbra
-    formula can pick the edge nearest in angle rather than in ground distance.
-    Missing slots repeat the first label; -1 where the pixel has no label.
+    The pixel's own label comes first; then, nearest first, its neighbours along the
+    outline (``neighbours``) and the labels found at ``radii`` pixels in 8 directions
+    (the Voronoi cells next door), so the penumbra formula can pick the edge nearest in
+    angle rather than in ground distance. Missing slots repeat the first label; -1 where
+    the pixel has no label.
     """
     h, w = edge_label.shape
-    offsets = [(0, 0)] + [(dr * r, dc * r) for r in radii for dr in (-1, 0, 1) for dc in (-1, 0, 1)
-                          if (dr, dc) != (0, 0)]
-    samples = np.stack([edge_label[np.clip(rows + dr, 0, h - 1), np.clip(cols + dc, 0, w - 1)]
-                        for dr, dc in offsets], axis=1)  # (n, S)
-    first = samples[:, :1]
+    flat = edge_label.reshape(-1)
+    rows = np.asarray(rows, np.int64)
+    cols = np.asarray(cols, np.int64)
+    offsets = [(dr * r, dc * r) for r in radii for dr in (-1, 0, 1) for dc in (-1, 0, 1)
+               if (dr, dc) != (0, 0)]
+    reach = max(radii)
+    first = flat[rows * w + cols]
+    columns = [first]
     if neighbours is not None and len(neighbours):
-        # The nearest edge's neighbours along the outline come right after it.
-        nb = np.where(first >= 0, neighbours[np.maximum(first[:, 0], 0)], -1)  # (n, 2)
-        samples = np.concatenate([first, nb, samples[:, 1:]], axis=1)
-    samples = np.where(samples < 0, first, samples)
-    order = np.sort(samples[:, 1:], axis=1)
-    fresh = np.concatenate([np.ones((len(order), 1), bool), order[:, 1:] != order[:, :-1]], axis=1)
-    fresh &= order != first
-    # Stable pick of the first K-1 fresh labels per row.
-    rank = np.cumsum(fresh, axis=1)
-    out = np.repeat(first, max_candidates, axis=1)
-    for j in range(1, max_candidates):
-        pick = fresh & (rank == j)
-        has = pick.any(1)
-        out[has, j] = order[has, np.argmax(pick[has], axis=1)]
-    return out
+        nb = neighbours[np.maximum(first, 0)]
+        columns += [np.where(first >= 0, nb[:, 0], -1), np.where(first >= 0, nb[:, 1], -1)]
+    if len(rows) and rows.min() >= reach and rows.max() < h - reach and cols.min() >= reach \
+            and cols.max() < w - reach:
+        ring = flat[np.add.outer(np.array([dr * w + dc for dr, dc in offsets]), rows * w + cols)]
+        columns += list(ring)
+    else:
+        columns += [flat[np.clip(rows + dr, 0, h - 1) * w + np.clip(cols + dc, 0, w - 1)]
+                    for dr, dc in offsets]
+    # Greedy, column by column: a label joins the first free slot unless already there.
+    slots = [first.copy() for _ in range(max_candidates)]
+    count = np.ones(len(first), np.int8)
+    for j, v in enumerate(columns[1:], start=1):
+        fresh = v >= 0
+        for q in range(min(j, max_candidates)):
+            fresh &= v != slots[q]
+        for q in range(1, min(j, max_candidates - 1) + 1):
+            np.copyto(slots[q], v, where=fresh & (count == q))
+        count += fresh
+    return np.stack(slots, axis=1)
 
 
 def winding_at_points(points: np.ndarray, start: np.ndarray, end: np.ndarray, weight: np.ndarray,

@@ -38,11 +38,16 @@ def _band_k(params: ShadowParams, range_k_max: float | None) -> float:
 
 
 @functools.partial(jax.jit, static_argnames=("rule", "profile", "shape"))
-def _ground_map_core(hard_flat, band_index, band_points, plan: PointPlan, pose: Pose, sun: Sun,
-                     params: ShadowParams, rule: str, profile: str, shape):
-    alpha_band = plan_alpha(band_points, plan, pose, sun, params.range_k, rule, profile)
-    alpha = jnp.concatenate([hard_flat, jnp.zeros(1, hard_flat.dtype)])
-    alpha = alpha.at[band_index].set(alpha_band.astype(alpha.dtype))[:-1]
+def _ground_map_core(hard, band_index, origin_x, origin_y, pixel_m, plan: PointPlan, pose: Pose,
+                     sun: Sun, params: ShadowParams, rule: str, profile: str, shape):
+    dtype = params.rho.dtype
+    # Band pixel centres from their flat indices (cheaper than shipping (m, 3) points).
+    rows, cols = jnp.divmod(band_index, shape[1])
+    points = jnp.stack([origin_x + cols.astype(dtype) * pixel_m, origin_y - rows.astype(dtype) * pixel_m,
+                        jnp.zeros(band_index.shape, dtype)], axis=1)
+    alpha_band = plan_alpha(points, plan, pose, sun, params.range_k, rule, profile)
+    # Padding entries index one past the end and are dropped.
+    alpha = hard.reshape(-1).astype(dtype).at[band_index].set(alpha_band.astype(dtype), mode="drop")
     return shade(alpha, params.rho).reshape(shape)
 
 
@@ -134,10 +139,11 @@ class SoftShadowModel:
         """
         if plan is None:
             plan = self.plan_grid(sun, pose, grid, _band_k(params, range_k_max))
-        dtype = jnp.result_type(float)
-        return _ground_map_core(jnp.asarray(plan.hard.ravel(), dtype), jnp.asarray(plan.band_index),
-                                jnp.asarray(plan.band_points, dtype), plan.plan, pose, sun, params,
-                                self.rule, self.profile, (grid.height, grid.width))
+        hard = plan.hard if plan.hard_device is None else plan.hard_device
+        index = plan.band_index if plan.band_index_device is None else plan.band_index_device
+        return _ground_map_core(hard, index, grid.origin_m[0], grid.origin_m[1],
+                                grid.pixel_m, plan.plan, pose, sun, params, self.rule, self.profile,
+                                (grid.height, grid.width))
 
     def at_points(self, params: ShadowParams, sun: Sun, pose: Pose, points,
                   plan: PointPlan | None = None, range_k_max: float | None = None) -> jax.Array:
