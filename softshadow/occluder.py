@@ -28,6 +28,7 @@ __all__ = ["Occluder", "Silhouette", "silhouette", "posed_vertices"]
 
 PARALLEL_TOL = 1e-7   # |n . L| below this: a face seen exactly edge-on from the sun
 PARALLEL_EDGE_TOL = 1e-6  # |t x L| below this: an edge along the light projects to a point
+COLLINEAR_TOL = 1e-9  # ||t1 . t2| - 1| below this: two edges are collinear (merge_collinear)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -83,6 +84,47 @@ class Occluder:
         return self.edge_faces.shape[1] == 2 and bool(np.all(self.edge_faces >= 0))
 
     @functools.cached_property
+    def edge_tangent(self) -> np.ndarray:
+        """(E, 3) unit direction of each edge, from its first to its second vertex (mesh frame)."""
+        t = self.vertices[self.edges[:, 1]] - self.vertices[self.edges[:, 0]]
+        return t / np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-300)
+
+    @functools.cached_property
+    def edge_inward(self) -> np.ndarray:
+        """(E, M, 3) each slot's face centroid minus the edge's midpoint (mesh frame; 0 in padding)."""
+        centroid = self.vertices[self.faces].mean(1)
+        mid = 0.5 * (self.vertices[self.edges[:, 0]] + self.vertices[self.edges[:, 1]])
+        out = centroid[np.maximum(self.edge_faces, 0)] - mid[:, None, :]
+        return np.where((self.edge_faces >= 0)[..., None], out, 0.0)
+
+    @functools.cached_property
+    def edge_paper_normal(self) -> np.ndarray:
+        """(E, 3) the seed's normal normalize(N1 + N2) of a two-faced edge (mesh frame)."""
+        ef = np.maximum(self.edge_faces[:, :2], 0)
+        both = (self.edge_faces[:, 1] >= 0) & (ef[:, 1] != ef[:, 0])
+        paper = self.face_normals[ef[:, 0]] + np.where(both[:, None], self.face_normals[ef[:, 1]], 0.0)
+        return paper / np.maximum(np.linalg.norm(paper, axis=1, keepdims=True), 1e-12)
+
+    @functools.cached_property
+    def collinear_pairs(self) -> np.ndarray:
+        """(P, 3) pairs of edges sharing a vertex and collinear within ``merge_collinear``'s
+        tolerance, with that vertex: only these can ever merge, whatever the pose and sun."""
+        vert = self.edges.ravel()
+        edge = np.repeat(np.arange(len(self.edges)), 2)
+        order = np.argsort(vert, kind="stable")
+        vert, edge = vert[order], edge[order]
+        t = self.edge_tangent
+        found = []
+        for shift in range(1, len(vert)):
+            same = np.flatnonzero(vert[shift:] == vert[:-shift])
+            if not len(same):
+                break
+            a, b = edge[same], edge[same + shift]
+            hit = np.abs(np.abs(np.einsum("ij,ij->i", t[a], t[b])) - 1.0) < COLLINEAR_TOL
+            found.append(np.stack([a[hit], b[hit], vert[same[hit]]], 1))
+        return np.concatenate(found) if found else np.zeros((0, 3), np.int64)
+
+    @functools.cached_property
     def edge_face_dir(self) -> np.ndarray:
         """(E, M) +-1: whether the face in each slot of ``edge_faces`` runs along the edge
         in its sorted vertex order (0 in padding slots)."""
@@ -121,56 +163,77 @@ class Silhouette:
 
 def silhouette(occ: Occluder, world_vertices: np.ndarray, rotation: np.ndarray,
                light: np.ndarray) -> Silhouette:
-    """Silhouette and boundary edges of the posed mesh under light direction ``light`` (3,)."""
+    """Silhouette and boundary edges of the posed mesh under light direction ``light`` (3,).
+
+    Directions are compared in the mesh frame (the light rotated into it), with the
+    per-edge geometry cached on the occluder; a uniform positive scale changes none of them.
+    """
     light = np.asarray(light, dtype=np.float64)
     rotation = np.asarray(rotation, dtype=np.float64)
-    # n_world . L = n . (R^T L): one matrix-vector product instead of rotating every normal.
-    ndotl = occ.face_normals @ (rotation.T @ light)
+    light_local = rotation.T @ light
+    ndotl = occ.face_normals @ light_local
     lit = ndotl < -PARALLEL_TOL
     ef = occ.edge_faces
-    if occ.two_faced:  # every edge has exactly two faces
+    if occ.two_faced:
         lit0, lit1 = lit[ef[:, 0]], lit[ef[:, 1]]
         candidates = np.flatnonzero(lit0 != lit1)
     else:
         valid = ef >= 0
-        lit_e = np.where(valid, lit[np.maximum(ef, 0)], False)
+        lit_e = valid & lit[np.maximum(ef, 0)]
         n_valid = valid.sum(1)
         n_lit = lit_e.sum(1)
         candidates = np.flatnonzero(((n_lit > 0) & (n_lit < n_valid)) | (n_valid == 1))
-    a_all = world_vertices[occ.edges[candidates, 0]]
-    b_all = world_vertices[occ.edges[candidates, 1]]
-    t = b_all - a_all
-    t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-300)
-    cvec = np.cross(t, light)
-    c = np.linalg.norm(cvec, axis=1)
+    t = occ.edge_tangent[candidates]
+    cvec = np.cross(t, light_local)
+    c = np.sqrt(np.einsum("ij,ij->i", cvec, cvec))
     keep = c > PARALLEL_EDGE_TOL
-    idx = candidates[keep]
-    a, b, cvec, c = a_all[keep], b_all[keep], cvec[keep], c[keep]
-    ef_s = ef[idx]
-    valid_s = ef_s >= 0
-    lit_s = valid_s & lit[np.maximum(ef_s, 0)]
-    rows = np.arange(len(idx))
+    idx, t, cvec, c = candidates[keep], t[keep], cvec[keep], c[keep]
     # The face that is "the object" beside the edge, seen from the light: a lit face, or the only one.
-    first_lit = np.argmax(lit_s, axis=1)
-    has_lit = lit_s.any(1)
-    inner_face = np.where(has_lit, ef_s[rows, first_lit], ef_s[:, 0])
-    unlit_s = valid_s & ~lit_s
-    first_unlit = np.argmax(unlit_s, axis=1)
-    has_unlit = unlit_s.any(1)
-    other_face = np.where(has_unlit, ef_s[rows, first_unlit], inner_face)
-    centroid = world_vertices[occ.faces[inner_face]].mean(1)
-    inward = centroid - 0.5 * (a + b)
+    if occ.two_faced:  # one face lit, the other not: the seed's normal is the cached pair's
+        inner_slot = (~lit[ef[idx, 0]]).astype(np.intp)
+        paper = occ.edge_paper_normal[idx]
+    else:
+        ef_s = ef[idx]
+        valid_s = ef_s >= 0
+        lit_s = valid_s & lit[np.maximum(ef_s, 0)]
+        rows = np.arange(len(idx))
+        inner_slot = np.where(lit_s.any(1), np.argmax(lit_s, axis=1), 0)
+        unlit_s = valid_s & ~lit_s
+        other_slot = np.where(unlit_s.any(1), np.argmax(unlit_s, axis=1), inner_slot)
+        inner_face, other_face = ef_s[rows, inner_slot], ef_s[rows, other_slot]
+        paper = occ.face_normals[inner_face] + np.where((other_face != inner_face)[:, None],
+                                                        occ.face_normals[other_face], 0.0)
+        paper /= np.maximum(np.sqrt(np.einsum("ij,ij->i", paper, paper)), 1e-12)[:, None]
     n = cvec / c[:, None]
+    inward = occ.edge_inward[idx, inner_slot]  # inner face's centroid minus the edge's midpoint
     sign = np.where(np.einsum("ij,ij->i", n, inward) > 0, -1.0, 1.0)
-    paper = occ.face_normals[inner_face] + np.where((other_face != inner_face)[:, None],
-                                                    occ.face_normals[other_face], 0.0)
-    paper /= np.maximum(np.linalg.norm(paper, axis=1, keepdims=True), 1e-12)
-    ids, sign, paper = merge_collinear(occ.edges[idx], world_vertices, light, sign, paper)
+    ids = occ.edges[idx]
+    pairs = occ.collinear_pairs
+    if len(pairs):
+        # The mesh's collinear pairs with both edges on the silhouette, at a vertex no other
+        # silhouette edge uses.
+        position = np.full(len(occ.edges), -1, np.int64)
+        position[idx] = np.arange(len(idx))
+        e1, e2 = position[pairs[:, 0]], position[pairs[:, 1]]
+        both = (e1 >= 0) & (e2 >= 0)
+        if both.any():
+            degree = np.bincount(ids.ravel(), minlength=len(occ.vertices))
+            both &= degree[pairs[:, 2]] == 2
+            ids, sign, paper = merge_collinear(ids, world_vertices, light, sign, paper,
+                                               tangent=t, normal=sign[:, None] * n,
+                                               pairs=(e1[both], e2[both]))
     layers = [lit] if occ.watertight else [lit, (~lit) & (np.abs(ndotl) > PARALLEL_TOL)]
     fill = []
     for faces in layers:
+        if faces is lit and occ.two_faced:
+            # Only edges with one lit face can have a non-zero net count.
+            cand_ef = ef[candidates]
+            net = (np.where(lit[cand_ef], occ.edge_face_dir[candidates], 0)).sum(1)
+            keep_e = candidates[net != 0]
+            fill.append((occ.edges[keep_e], net[net != 0].astype(np.float64)))
+            continue
         # Net count of the layer's faces running along each edge (their boundary, oriented).
-        on = np.where(occ.edge_faces >= 0, faces[np.maximum(occ.edge_faces, 0)], False)
+        on = (ef >= 0) & faces[np.maximum(ef, 0)]
         net = np.where(on, occ.edge_face_dir, 0).sum(1)
         keep_e = np.flatnonzero(net)
         fill.append((occ.edges[keep_e], net[keep_e].astype(np.float64)))
@@ -178,26 +241,35 @@ def silhouette(occ: Occluder, world_vertices: np.ndarray, rotation: np.ndarray,
 
 
 def merge_collinear(ids: np.ndarray, world: np.ndarray, light: np.ndarray, sign: np.ndarray,
-                    paper: np.ndarray, tol: float = 1e-9):
+                    paper: np.ndarray, tol: float = COLLINEAR_TOL, tangent: np.ndarray | None = None,
+                    normal: np.ndarray | None = None, pairs: tuple[np.ndarray, np.ndarray] | None = None):
     """Join chains of collinear silhouette edges (a subdivided box edge) into single edges.
 
     Two edges meeting at a vertex used by no other silhouette edge are joined when they
     point the same way, face the same way and share the seed's normal. Fewer, longer edges
-    make a plan hold over larger sun and pose moves, and cost less.
+    make a plan hold over larger sun and pose moves, and cost less. ``tangent`` and
+    ``normal`` (unit, outward), in any one frame, save recomputing them from ``world``;
+    ``pairs`` (two index arrays into ``ids``), the edge pairs meeting at a vertex no other
+    edge uses, if already known.
     """
     if len(ids) < 2:
         return ids, sign, paper
-    t = world[ids[:, 1]] - world[ids[:, 0]]
-    t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-300)
-    n = np.cross(t, light)
-    n = sign[:, None] * n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
-    flat = ids.ravel()
-    order = np.argsort(flat, kind="stable")
-    sorted_v = flat[order]
-    starts = np.flatnonzero(np.r_[True, sorted_v[1:] != sorted_v[:-1]])
-    counts = np.diff(np.r_[starts, len(flat)])
-    pair = starts[counts == 2]
-    e1, e2 = order[pair] // 2, order[pair + 1] // 2
+    if tangent is None or normal is None:
+        tangent = world[ids[:, 1]] - world[ids[:, 0]]
+        tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-300)
+        normal = np.cross(tangent, light)
+        normal = sign[:, None] * normal / np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    t, n = tangent, normal
+    if pairs is None:
+        flat = ids.ravel()
+        order = np.argsort(flat, kind="stable")
+        sorted_v = flat[order]
+        starts = np.flatnonzero(np.r_[True, sorted_v[1:] != sorted_v[:-1]])
+        counts = np.diff(np.r_[starts, len(flat)])
+        pair = starts[counts == 2]
+        e1, e2 = order[pair] // 2, order[pair + 1] // 2
+    else:
+        e1, e2 = pairs
     join = ((np.abs(np.abs(np.einsum("ij,ij->i", t[e1], t[e2])) - 1.0) < tol)
             & (np.einsum("ij,ij->i", n[e1], n[e2]) > 1.0 - tol)
             & (np.einsum("ij,ij->i", paper[e1], paper[e2]) > 1.0 - 1e-6))
@@ -218,7 +290,8 @@ def merge_collinear(ids: np.ndarray, world: np.ndarray, light: np.ndarray, sign:
     chain = rank[inverse.ravel()]  # output index of each input edge
     n_out = len(lead)
     # The chain's ends: its extreme vertices along the lead member's direction.
-    proj = np.einsum("ijk,ik->ij", world[ids], t[lead[chain]])  # (m, 2)
+    lead_t = world[ids[lead, 1]] - world[ids[lead, 0]]  # the lead member's direction, world frame
+    proj = np.einsum("ijk,ik->ij", world[ids], lead_t[chain])  # (m, 2)
     verts = ids.ravel()
     p = proj.ravel()
     owner = np.repeat(chain, 2)

@@ -37,6 +37,8 @@ MAX_RASTER_SIDE = 2048
 # candidates' different depths along the light, plus a margin of raster pixels.
 BAND_FRACTION = 0.6
 N_CANDIDATES = 5
+CANDIDATE_RADII_PX = (2, 6)  # rings of label samples around a pixel (raster.candidate_labels)
+CANDIDATE_REACH_PX = max(CANDIDATE_RADII_PX)
 
 
 def bucket_size(n: int, minimum: int = 64) -> int:
@@ -86,12 +88,13 @@ def _concrete_geometry(occ: Occluder, pose: Pose, sun: Sun):
 def edge_band_widths(world_a: np.ndarray, world_b: np.ndarray, outward: np.ndarray,
                      light: np.ndarray, range_k: float) -> np.ndarray:
     """Ground width (m) of each edge's penumbra wedge at k, the larger of its two ends (S,)."""
-    widths = np.zeros(len(world_a))
-    for p in (world_a, world_b):
-        outer = project_to_ground(p, _normalise(light + range_k * outward))
-        inner = project_to_ground(p, _normalise(light - range_k * outward))
-        widths = np.maximum(widths, np.linalg.norm(outer - inner, axis=-1))
-    return widths
+    # A point p projects along d to p_xy - p_z d_xy / d_z, so the two projections of an end
+    # (along L + k n and L - k n) lie |p_z| |r_out - r_in| apart, with r = d_xy / d_z.
+    d_out = light + range_k * outward
+    d_in = light - range_k * outward
+    r = d_out[:, :2] / d_out[:, 2:] - d_in[:, :2] / d_in[:, 2:]
+    height = np.maximum(np.abs(world_a[:, 2]), np.abs(world_b[:, 2]))
+    return height * np.hypot(r[:, 0], r[:, 1])
 
 
 def _normalise(v):
@@ -191,6 +194,7 @@ def plan_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k
             cr = np.clip(np.rint(raster.grid.to_pixel(points)).astype(np.int64), 0,
                          [raster.grid.width - 1, raster.grid.height - 1])
             edge_id[:n] = np.maximum(candidate_labels(raster.edge_label, cr[:, 1], cr[:, 0],
+                                                      radii=CANDIDATE_RADII_PX,
                                                       max_candidates=N_CANDIDATES,
                                                       neighbours=raster.edge_neighbours), 0)
             hard[:n] = h
@@ -211,8 +215,10 @@ class GridPlan:
     """Discrete choices on a whole ground map: the hard shadow and the band pixels to evaluate.
 
     hard (H, W) uint8 0/1; band_index (m,) int32 flat pixel indices padded with H*W;
-    plan: the PointPlan of the band pixels (``band_points``); raster: the padded
-    ShadowRaster (for drawing silhouettes and debugging).
+    plan: the PointPlan of the band pixels (``band_points``), with NumPy arrays for
+    the jitted evaluation to take; raster: the ShadowRaster
+    of the shadow's window (the grid padded by the band's reach, cropped to the shadow),
+    for debugging.
     """
 
     grid: GroundGrid
@@ -221,8 +227,6 @@ class GridPlan:
     plan: PointPlan
     raster: ShadowRaster | None
     n_band: int
-    hard_device: jax.Array | None = None  # hard and band_index already on the device
-    band_index_device: jax.Array | None = None
 
     @property
     def band_points(self) -> np.ndarray:
@@ -245,27 +249,41 @@ def plan_grid(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, range_k_max
     if len(sil.vertex_ids):
         widths = edge_band_widths(a, b, direction, light, range_k_max)
         pad = int(min(np.ceil(1.5 * widths.max() / grid.pixel_m) + margin_px + 3, 512))
-        padded = GroundGrid(grid.pixel_m, (grid.origin_m[0] - pad * grid.pixel_m,
-                                           grid.origin_m[1] + pad * grid.pixel_m), w + 2 * pad, h + 2 * pad)
-        raster = rasterise_shadow(padded, world, light, sil)
-        crop = (slice(pad, pad + h), slice(pad, pad + w))
-        hard = np.ascontiguousarray(raster.hard[crop])
-        dist = raster.boundary_dist_px[crop]
-        band_px = BAND_FRACTION * widths / grid.pixel_m + margin_px  # per edge
-        # The widest band first (a cheap test on the distance alone), then each pixel's own edge's.
-        band_idx = np.flatnonzero(dist <= band_px.max())
-        rows_b, cols_b = np.divmod(band_idx, w)
-        lab_b = raster.label_at(rows_b + pad, cols_b + pad)
-        dist_b = dist.ravel()[band_idx] if dist.flags.c_contiguous else dist[rows_b, cols_b]
-        keep = (lab_b >= 0) & (dist_b <= band_px[np.maximum(lab_b, 0)])
-        band_idx, rows_b, cols_b, lab_b, dist_b = (band_idx[keep], rows_b[keep], cols_b[keep],
-                                                    lab_b[keep], dist_b[keep])
-        near_b = ((dist_b <= 0.25 * widths[lab_b] / grid.pixel_m + 1.5) & _clean_outline(raster, lab_b))
-        edge_label = candidate_labels(raster.edge_label, rows_b + pad, cols_b + pad,
-                                      max_candidates=N_CANDIDATES, neighbours=raster.edge_neighbours)
+        # Raster only the shadow's window: the projected mesh's bounding box plus the band's
+        # reach and the candidates' sampling radius, within the grid padded by pad.
+        ground = project_to_ground(world, light)
+        px = grid.to_pixel(ground)
+        reach = pad + CANDIDATE_REACH_PX + 1
+        c0 = int(max(np.floor(px[:, 0].min()) - reach, -pad))
+        c1 = int(min(np.ceil(px[:, 0].max()) + reach, w - 1 + pad))
+        r0 = int(max(np.floor(px[:, 1].min()) - reach, -pad))
+        r1 = int(min(np.ceil(px[:, 1].max()) + reach, h - 1 + pad))
+        if c1 >= c0 and r1 >= r0:
+            window = GroundGrid(grid.pixel_m, (grid.origin_m[0] + c0 * grid.pixel_m,
+                                               grid.origin_m[1] - r0 * grid.pixel_m), c1 - c0 + 1, r1 - r0 + 1)
+            raster = rasterise_shadow(window, world, light, sil, ground)
+            # The part of the grid inside the window, in grid (g) and window (w) pixels.
+            gr0, gr1, gc0, gc1 = max(r0, 0), min(r1, h - 1), max(c0, 0), min(c1, w - 1)
+            if gr1 >= gr0 and gc1 >= gc0:
+                sub = (slice(gr0 - r0, gr1 - r0 + 1), slice(gc0 - c0, gc1 - c0 + 1))
+                hard[gr0:gr1 + 1, gc0:gc1 + 1] = raster.hard[sub]
+                dist = raster.boundary_dist_px[sub]
+                band_px = BAND_FRACTION * widths / grid.pixel_m + margin_px  # per edge
+                # The widest band first (a cheap test on the distance alone), then each pixel's own edge's.
+                rows_s, cols_s = np.nonzero(dist <= band_px.max())
+                rows_w, cols_w = rows_s + (gr0 - r0), cols_s + (gc0 - c0)
+                lab_b = raster.edge_label[rows_w, cols_w]
+                dist_b = dist[rows_s, cols_s]
+                keep = (lab_b >= 0) & (dist_b <= band_px[np.maximum(lab_b, 0)])
+                rows_w, cols_w, lab_b, dist_b = rows_w[keep], cols_w[keep], lab_b[keep], dist_b[keep]
+                band_idx = (rows_w + r0) * w + (cols_w + c0)
+                near_b = ((dist_b <= 0.25 * widths[lab_b] / grid.pixel_m + 1.5)
+                          & _clean_outline(raster, lab_b))
+                edge_label = candidate_labels(raster.edge_label, rows_w, cols_w, radii=CANDIDATE_RADII_PX,
+                                              max_candidates=N_CANDIDATES, neighbours=raster.edge_neighbours)
     m = len(band_idx)
     size = grid_bucket_size(m)
-    ftype = np.dtype(jnp.result_type(float))
+    ftype = _float_dtype()
     index = np.full(size, h * w, np.int32)
     index[:m] = band_idx
     edge_id = np.zeros((size, N_CANDIDATES), np.int32)
@@ -276,12 +294,14 @@ def plan_grid(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, range_k_max
     hard_band[:m] = hard.ravel()[band_idx]
     near = np.zeros(size, ftype)
     near[:m] = near_b
-    edges = _pack_edges(occ, sil, ftype)
-    # One transfer for all arrays (one jnp.asarray each costs more).
-    hard_d, index_d, edge_id, hard_band, active, near, verts, sign, paper = jax.device_put(
-        (hard, index, edge_id, hard_band, active, near) + edges)
-    plan = PointPlan(EdgeSet(verts, sign, paper), edge_id, hard_band, active, near)
-    return GridPlan(grid, hard, index, plan, raster, m, hard_d, index_d)
+    # NumPy arrays, not device arrays: a jitted call takes them far more cheaply than
+    # jax.device_put or jnp.asarray would.
+    plan = PointPlan(EdgeSet(*_pack_edges(occ, sil, ftype)), edge_id, hard_band, active, near)
+    return GridPlan(grid, hard, index, plan, raster, m)
+
+
+def _float_dtype():
+    return np.dtype(np.float64 if jax.config.jax_enable_x64 else np.float32)
 
 
 def grid_bucket_size(n: int, minimum: int = 256) -> int:

@@ -89,53 +89,59 @@ def winding_fill(shape: tuple[int, int], start: np.ndarray, end: np.ndarray,
     hi_row = np.clip(np.ceil(np.maximum(y0, y1)), 0, h).astype(np.int64)
     counts = np.maximum(hi_row - lo_row, 0)
     total = int(counts.sum())
-    acc = np.zeros(h * (w + 1))
-    if total:
-        seg = np.repeat(np.arange(len(start)), counts)
-        rows = lo_row[seg] + (np.arange(total) - np.repeat(np.cumsum(counts) - counts, counts))
-        frac = (rows - y0[seg]) / (y1[seg] - y0[seg])
-        x = start[seg, 0] + frac * (end[seg, 0] - start[seg, 0])
-        cols = np.clip(np.ceil(x), 0, w).astype(np.int64)
-        signed = np.where(y1 > y0, 1.0, -1.0)[seg] * weight[seg]
-        acc = np.bincount(rows * (w + 1) + cols, weights=signed, minlength=h * (w + 1))
-    winding = np.cumsum(acc.reshape(h, w + 1), axis=1)[:, :w]
+    if not total:
+        return np.zeros((h, w), bool)
+    seg = np.repeat(np.arange(len(start)), counts)
+    rows = lo_row[seg] + (np.arange(total) - np.repeat(np.cumsum(counts) - counts, counts))
+    x0, dx = start[:, 0], end[:, 0] - start[:, 0]
+    frac = (rows - y0[seg]) / (y1 - y0)[seg]
+    cols = np.clip(np.ceil(x0[seg] + frac * dx[seg]), 0, w).astype(np.int64)
+    signed = (np.where(y1 > y0, 1.0, -1.0) * weight)[seg]
+    acc = np.bincount(rows * (w + 1) + cols, weights=signed, minlength=h * (w + 1)).reshape(h, w + 1)
+    winding = np.cumsum(acc, axis=1, out=acc)[:, :w]
     return np.abs(winding) > 0.5
 
 
-def draw_segment_labels(shape: tuple[int, int], start: np.ndarray, end: np.ndarray) -> np.ndarray:
-    """Label image (H, W) int32: pixels on segment i hold i + 1, others 0 (sampled every 0.5 px)."""
+def draw_segment_labels(shape: tuple[int, int], start: np.ndarray, end: np.ndarray,
+                        values: np.ndarray | None = None) -> np.ndarray:
+    """Label image (H, W) int32: pixels on segment i hold values[i] (default i + 1), others 0.
+
+    Segments are sampled every 0.5 px; later segments win where they overlap.
+    """
     h, w = shape
     label = np.zeros((h, w), np.int32)
     if not len(start):
         return label
-    lo = np.array([-1.0, -1.0])
-    hi = np.array([w, h], dtype=float)
+    if values is None:
+        values = np.arange(1, len(start) + 1)
+    x0, y0, x1, y1 = start[:, 0], start[:, 1], end[:, 0], end[:, 1]
     # Clip each segment to the raster (parametric slab clipping) so off-frame edges cost nothing.
-    d = end - start
     t0 = np.zeros(len(start))
     t1 = np.ones(len(start))
-    for axis in (0, 1):
+    for p0, d, hi in ((x0, x1 - x0, float(w)), (y0, y1 - y0, float(h))):
         with np.errstate(divide="ignore", invalid="ignore"):
-            ta = (lo[axis] - start[:, axis]) / d[:, axis]
-            tb = (hi[axis] - start[:, axis]) / d[:, axis]
-        flat = d[:, axis] == 0
-        outside = flat & ((start[:, axis] < lo[axis]) | (start[:, axis] > hi[axis]))
+            ta = (-1.0 - p0) / d
+            tb = (hi - p0) / d
+        flat = d == 0
+        outside = flat & ((p0 < -1.0) | (p0 > hi))
         t0 = np.where(flat, t0, np.maximum(t0, np.minimum(ta, tb)))
-        t1 = np.where(flat, t1, np.minimum(t1, np.maximum(ta, tb)))
-        t1 = np.where(outside, -1.0, t1)
-    keep = (t1 >= t0) & np.all(np.isfinite(start), 1) & np.all(np.isfinite(end), 1)
-    idx = np.nonzero(keep)[0]
+        t1 = np.where(flat | outside, np.where(outside, -1.0, t1), np.minimum(t1, np.maximum(ta, tb)))
+    keep = (t1 >= t0) & np.isfinite(x0 + y0 + x1 + y1)
+    idx = np.flatnonzero(keep)
     if not len(idx):
         return label
-    a = start[idx] + t0[idx, None] * d[idx]
-    b = start[idx] + t1[idx, None] * d[idx]
-    n = np.ceil(2.0 * np.linalg.norm(b - a, axis=1)).astype(np.int64) + 1
+    dx, dy = (x1 - x0)[idx], (y1 - y0)[idx]
+    ax, ay = x0[idx] + t0[idx] * dx, y0[idx] + t0[idx] * dy
+    span = t1[idx] - t0[idx]
+    bx, by = dx * span, dy * span  # clipped segment, relative to its start
+    n = np.ceil(2.0 * np.hypot(bx, by)).astype(np.int64) + 1
     seg = np.repeat(np.arange(len(idx)), n)
     step = np.arange(len(seg)) - np.repeat(np.cumsum(n) - n, n)
-    frac = step / np.maximum(n[seg] - 1, 1)
-    pts = np.rint(a[seg] + frac[:, None] * (b[seg] - a[seg])).astype(np.int64)
-    ok = (pts[:, 0] >= 0) & (pts[:, 0] < w) & (pts[:, 1] >= 0) & (pts[:, 1] < h)
-    label[pts[ok, 1], pts[ok, 0]] = idx[seg[ok]] + 1
+    frac = step / np.maximum(n - 1, 1)[seg]
+    col = np.rint(ax[seg] + frac * bx[seg]).astype(np.int64)
+    row = np.rint(ay[seg] + frac * by[seg]).astype(np.int64)
+    ok = (col >= 0) & (col < w) & (row >= 0) & (row < h)
+    label.reshape(-1)[row[ok] * w + col[ok]] = values[idx][seg[ok]]
     return label
 
 
@@ -147,39 +153,45 @@ def _along_outline(hard: np.ndarray, start: np.ndarray, end: np.ndarray, offset_
     wholly outside the raster count as on the outline (they may govern points near the frame).
     """
     h, w = hard.shape
-    d = end - start
-    length = np.linalg.norm(d, axis=1)
-    normal = np.stack([-d[:, 1], d[:, 0]], 1) / np.maximum(length, 1e-12)[:, None]
+    flat = hard.reshape(-1)
+    dx, dy = (end - start).T
+    length = np.maximum(np.hypot(dx, dy), 1e-12)
     t = (np.arange(samples) + 0.5) / samples
-    mid = start[:, None, :] + t[None, :, None] * d[:, None, :]
+    mx = start[:, :1] + dx[:, None] * t
+    my = start[:, 1:] + dy[:, None] * t
+    ox = (-offset_px * dy / length)[:, None]
+    oy = (offset_px * dx / length)[:, None]
 
     def side(sign):
-        q = np.rint(mid + sign * offset_px * normal[:, None, :]).astype(np.int64)
-        inside = (q[..., 0] >= 0) & (q[..., 0] < w) & (q[..., 1] >= 0) & (q[..., 1] < h)
-        value = hard[np.clip(q[..., 1], 0, h - 1), np.clip(q[..., 0], 0, w - 1)] > 0
+        qx = np.rint(mx + sign * ox).astype(np.int64)
+        qy = np.rint(my + sign * oy).astype(np.int64)
+        inside = (qx >= 0) & (qx < w) & (qy >= 0) & (qy < h)
+        value = flat[np.clip(qy, 0, h - 1) * w + np.clip(qx, 0, w - 1)] > 0
         return value, inside
 
     a, ia = side(1.0)
     b, ib = side(-1.0)
     both = ia & ib
-    differs = (a != b) & both
-    n = both.sum(1)
-    return np.where(n > 0, differs.sum(1) / np.maximum(n, 1), 1.0)
+    n = np.count_nonzero(both, axis=1)
+    differs = np.count_nonzero((a != b) & both, axis=1)
+    return np.where(n > 0, differs / np.maximum(n, 1), 1.0)
 
 
 def rasterise_shadow(grid: GroundGrid, world_vertices: np.ndarray, light: np.ndarray,
-                     silhouette) -> ShadowRaster:
+                     silhouette, ground: np.ndarray | None = None) -> ShadowRaster:
     """Hard shadow, governing silhouette edge and boundary distance for every pixel of ``grid``.
 
     world_vertices (V, 3); light (3,) unit with light[2] < 0; silhouette: an
-    ``occluder.Silhouette`` for this pose and light.
+    ``occluder.Silhouette`` for this pose and light; ground: the vertices projected
+    along the light (V, 2), if already known.
     """
     h, w = grid.height, grid.width
-    px = grid.to_pixel(project_to_ground(world_vertices, light))
-    hard = np.zeros((h, w), bool)
+    px = grid.to_pixel(project_to_ground(world_vertices, light) if ground is None else ground)
+    hard = None
     for edges, weights in silhouette.fill_edges:
-        hard |= winding_fill((h, w), px[edges[:, 0]], px[edges[:, 1]], weights)
-    hard = hard.astype(np.uint8)
+        layer = winding_fill((h, w), px[edges[:, 0]], px[edges[:, 1]], weights)
+        hard = layer if hard is None else hard | layer
+    hard = np.zeros((h, w), np.uint8) if hard is None else hard.view(np.uint8)
 
     ids = silhouette.vertex_ids
     start, end = px[ids[:, 0]], px[ids[:, 1]]
@@ -188,8 +200,8 @@ def rasterise_shadow(grid: GroundGrid, world_vertices: np.ndarray, light: np.nda
     # the shadow on both sides of it.
     outline_fraction = _along_outline(hard, start, end)
     on_outline = outline_fraction > 0
-    label_img = draw_segment_labels((h, w), np.where(on_outline[:, None], start, np.nan),
-                                    np.where(on_outline[:, None], end, np.nan))
+    outline = np.flatnonzero(on_outline)
+    label_img = draw_segment_labels((h, w), start[outline], end[outline], outline + 1)
     kernel = np.ones((3, 3), np.uint8)
     dil = cv2.dilate(hard, kernel, borderType=cv2.BORDER_REPLICATE)
     ero = cv2.erode(hard, kernel, borderType=cv2.BORDER_REPLICATE)
@@ -256,29 +268,33 @@ def candidate_labels(edge_label: np.ndarray, rows: np.ndarray, cols: np.ndarray,
     offsets = [(dr * r, dc * r) for r in radii for dr in (-1, 0, 1) for dc in (-1, 0, 1)
                if (dr, dc) != (0, 0)]
     reach = max(radii)
-    first = flat[rows * w + cols]
+    index = rows * w + cols
+    first = flat[index]
     columns = [first]
     if neighbours is not None and len(neighbours):
         nb = neighbours[np.maximum(first, 0)]
         columns += [np.where(first >= 0, nb[:, 0], -1), np.where(first >= 0, nb[:, 1], -1)]
     if len(rows) and rows.min() >= reach and rows.max() < h - reach and cols.min() >= reach \
             and cols.max() < w - reach:
-        ring = flat[np.add.outer(np.array([dr * w + dc for dr, dc in offsets]), rows * w + cols)]
-        columns += list(ring)
+        columns += [flat[index + (dr * w + dc)] for dr, dc in offsets]
     else:
         columns += [flat[np.clip(rows + dr, 0, h - 1) * w + np.clip(cols + dc, 0, w - 1)]
                     for dr, dc in offsets]
-    # Greedy, column by column: a label joins the first free slot unless already there.
-    slots = [first.copy() for _ in range(max_candidates)]
-    count = np.ones(len(first), np.int8)
+    # Greedy, column by column: a label takes the next free slot unless already in one.
+    n, k = len(first), max_candidates
+    slots = np.empty((k, n), first.dtype)
+    slots[:] = first
+    count = np.ones(n, np.intp)
     for j, v in enumerate(columns[1:], start=1):
         fresh = v >= 0
-        for q in range(min(j, max_candidates)):
+        for q in range(min(j, k)):
             fresh &= v != slots[q]
-        for q in range(1, min(j, max_candidates - 1) + 1):
-            np.copyto(slots[q], v, where=fresh & (count == q))
-        count += fresh
-    return np.stack(slots, axis=1)
+        if j >= k:
+            fresh &= count < k
+        sel = np.flatnonzero(fresh)
+        slots.reshape(-1)[count[sel] * n + sel] = v[sel]
+        count[sel] += 1
+    return slots.T.copy()
 
 
 def winding_at_points(points: np.ndarray, start: np.ndarray, end: np.ndarray, weight: np.ndarray,

@@ -139,9 +139,7 @@ class SoftShadowModel:
         """
         if plan is None:
             plan = self.plan_grid(sun, pose, grid, _band_k(params, range_k_max))
-        hard = plan.hard if plan.hard_device is None else plan.hard_device
-        index = plan.band_index if plan.band_index_device is None else plan.band_index_device
-        return _ground_map_core(hard, index, grid.origin_m[0], grid.origin_m[1],
+        return _ground_map_core(plan.hard, plan.band_index, grid.origin_m[0], grid.origin_m[1],
                                 grid.pixel_m, plan.plan, pose, sun, params, self.rule, self.profile,
                                 (grid.height, grid.width))
 
