@@ -15,6 +15,8 @@ pixel's 1/12).
 
 from __future__ import annotations
 
+import functools
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -22,13 +24,13 @@ import numpy as np
 from jaxtyping import Array, Float, Int
 
 from softshadow.params import Pose
-from softshadow.penumbra import blurred_profile_alpha
+from softshadow.penumbra import PROFILES, edge_coordinate, profile_alpha
 from softshadow.plan import PointPlan, plan_coordinate_light
 from softshadow.sun import light_direction
 
 __all__ = ["GroupArrays", "FitConfig", "K_SCALE", "k_from_raw", "raw_from_k", "rho_from_raw",
            "raw_from_rho", "predict", "angular_pixel_gradient", "residuals", "pseudo_huber",
-           "sample_light"]
+           "sample_light", "chosen_coordinate", "blurred_alpha", "predict_jit", "edge_terms", "shadow_alpha"]
 
 K_SCALE = 0.01
 
@@ -75,25 +77,23 @@ class GroupArrays(eqx.Module):
 
 
 class FitConfig(eqx.Module):
-    """Choices of a fit. Only ``rule`` is static; the switches are traced (0/1), so every
-    combination shares one compiled solver: disk (profile: 0 linear, 1 disk), fit_blur,
+    """Choices of a fit. ``profile`` and ``rule`` are static (one compiled solver each); the
+    switches are traced (0/1), so their combinations share one compiled solver: fit_blur,
     fit_sun (a switched-off term keeps its parameter with zero effect), huber_delta (0: plain
     least squares)."""
 
-    disk: Float[Array, ""]
     fit_blur: Float[Array, ""]
     fit_sun: Float[Array, ""]
     huber_delta: Float[Array, ""]
+    profile: str = eqx.field(static=True, default="linear")
     rule: str = eqx.field(static=True, default="edge")
 
     @classmethod
     def make(cls, profile="linear", fit_blur=False, fit_sun=False, huber_delta=0.0, rule="edge"):
-        f = lambda x: jnp.asarray(float(x))
-        return cls(f(profile == "disk"), f(fit_blur), f(fit_sun), f(huber_delta), rule)
-
-    @property
-    def profile(self) -> str:
-        return "disk" if float(self.disk) > 0.5 else "linear"
+        if profile not in PROFILES:
+            raise ValueError(f"unknown penumbra profile {profile!r}; choose one of {PROFILES}")
+        f = lambda x: jnp.asarray(float(x), dtype=jnp.float64)
+        return cls(f(fit_blur), f(fit_sun), f(huber_delta), profile, rule)
 
 
 def pseudo_huber(r, delta):
@@ -132,29 +132,129 @@ def angular_pixel_gradient(group: GroupArrays, pose: Pose, k, rule: str = "edge"
     return jnp.where(ok, slope / jnp.where(ok, dudt, 1.0), 0.0)
 
 
-def predict(params: dict, group: GroupArrays, pose: Pose, config: FitConfig):
-    """Predicted linear values (n,), alpha (n,), u (n,) and |du/dpixel| (n,) at every sample."""
-    k = k_from_raw(params["raw_k"])
-    rho = rho_from_raw(params["raw_rho"])
-    light = sample_light(group, params["sun_delta_deg"], config.fit_sun)
-    u, dudt = plan_coordinate_light(group.ground, group.plan, pose, light, k, config.rule,
-                                    with_slope=True)
+def chosen_coordinate(group: GroupArrays, pose: Pose, light, k, rule: str):
+    """Penumbra coordinate u (n,) and du/dT (n,) against each sample's governing edge.
+
+    The choice among the plan's candidate edges (smallest |u|) is made without
+    gradients, then u is evaluated once, for the chosen edge only. Same values and
+    gradients as evaluating every candidate (the choice is piecewise constant), but
+    the Jacobian the solver builds carries one edge per sample instead of all of them.
+    """
+    plan = group.plan
+    ev = pose.apply(plan.edges.vertices_local)
+    paper = pose.apply_direction(plan.edges.paper_normal_local) if rule == "paper" else None
+    n_cand = plan.edge_id.shape[1]
+    frozen = jax.lax.stop_gradient((ev, paper, light, k))
+    no_side = jnp.zeros_like(plan.near_boundary)
+    u_each = jnp.stack([
+        edge_coordinate(group.ground, plan.edge_id[:, c:c + 1], frozen[0], plan.edges.outward_sign,
+                        frozen[2], frozen[3], plan.hard, rule, frozen[1],
+                        near_boundary=plan.near_boundary if c == 0 else no_side)
+        for c in range(n_cand)], axis=1)
+    # Ties (edges meeting at a vertex give the same u beyond it, with different slopes) go to
+    # the earlier candidate, so rounding cannot flip the choice and make the loss jump.
+    score = jnp.abs(u_each) + 1e-9 * (1.0 + jnp.abs(u_each)) * jnp.arange(n_cand)
+    best = jnp.argmin(score, axis=1)
+    edge_id = jnp.take_along_axis(plan.edge_id, best[:, None], axis=1)
+    near = jnp.where(best == 0, plan.near_boundary, 0.0)
+    u, dudt = edge_coordinate(group.ground, edge_id, ev, plan.edges.outward_sign, light, k,
+                              plan.hard, rule, paper, with_slope=True, near_boundary=near)
+    u = jnp.where(plan.active, u, jnp.where(plan.hard > 0.5, -1e6, 1e6))
+    return u, jnp.where(plan.active, dudt, 0.0)
+
+
+_GH_NODES, _GH_WEIGHTS = np.polynomial.hermite_e.hermegauss(12)
+_GH_WEIGHTS = _GH_WEIGHTS / _GH_WEIGHTS.sum()
+
+
+def _profile_slope(u, profile: str):
+    """d alpha / d u of ``profile_alpha`` (0 outside the ramp)."""
+    if profile == "linear":
+        return jnp.where(jnp.abs(u) < 1.0, -0.5, 0.0)
+    uc = jnp.clip(u, -1.0, 1.0)
+    return -2.0 * jnp.sqrt(jnp.maximum(1.0 - uc * uc, 0.0)) / jnp.pi
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(2,))
+def blurred_alpha(u, tau, profile: str):
+    """Alpha (n,) of ``profile`` seen through a Gaussian blur of tau (n,) in u units
+    (12-node Gauss-Hermite). Its JVP is two n-vectors (d/du, d/dtau) made in the primal
+    pass, so each Jacobian column costs O(n), not O(12 n)."""
+    x = u[:, None] + tau[:, None] * _GH_NODES
+    return profile_alpha(x, profile) @ _GH_WEIGHTS
+
+
+@blurred_alpha.defjvp
+def _blurred_alpha_jvp(profile, primals, tangents):
+    (u, tau), (du, dtau) = primals, tangents
+    x = u[:, None] + tau[:, None] * _GH_NODES
+    slope = _profile_slope(x, profile)
+    d_u = slope @ _GH_WEIGHTS
+    d_tau = slope @ (_GH_WEIGHTS * _GH_NODES)
+    return profile_alpha(x, profile) @ _GH_WEIGHTS, d_u * du + d_tau * dtau
+
+
+def _shape_vector(params: dict) -> Float[Array, "4"]:
+    """The parameters the shadow's shape depends on: raw_k, sun azimuth and elevation
+    corrections (degrees) and raw_blur. The rest (levels, gradients, rho) enter linearly."""
+    return jnp.stack([params["raw_k"], params["sun_delta_deg"][0], params["sun_delta_deg"][1],
+                      params["raw_blur"]])
+
+
+def edge_terms(shape: Float[Array, "4"], group: GroupArrays, pose: Pose, config: FitConfig):
+    """Alpha (n,), penumbra coordinate u (n,) and |du/dpixel| (n,) from the shape vector."""
+    k = k_from_raw(shape[0])
+    light = sample_light(group, shape[1:3], config.fit_sun)
+    u, dudt = chosen_coordinate(group, pose, light, k, config.rule)
     # Blur variance (px^2) added to the pixel's own 1/12, free in sign so that "no blur" is an
     # interior point (a regular minimum, quick to converge) rather than a boundary.
-    variance = 1.0 / 12.0 + config.fit_blur * params["raw_blur"]
+    variance = 1.0 / 12.0 + config.fit_blur * shape[3]
     slope = dudt * group.grad_t_pixel
     tau = jnp.sqrt(jnp.maximum(variance, 1e-3)) * slope
-    alpha = ((1.0 - config.disk) * blurred_profile_alpha(u, tau, "linear")
-             + config.disk * blurred_profile_alpha(u, tau, "disk"))
+    return blurred_alpha(u, tau, config.profile), u, slope
+
+
+@jax.custom_jvp
+def shadow_alpha(shape: Float[Array, "4"], group: GroupArrays, pose: Pose, config: FitConfig):
+    """Alpha (n,) as ``edge_terms``, differentiable in ``shape`` only (the fit's constants
+    group, pose and config get no derivative).
+
+    Its JVP forms the (n, 4) Jacobian once, in the primal pass; the solver's Jacobian with
+    respect to all the fit's parameters (4 + 4 per photo + rho) then costs one small
+    matrix product per column instead of a pass through the edge geometry each.
+    """
+    return edge_terms(shape, group, pose, config)[0]
+
+
+@shadow_alpha.defjvp
+def _shadow_alpha_jvp(primals, tangents):
+    shape, group, pose, config = primals
+    alpha, linear = jax.linearize(lambda s: edge_terms(s, group, pose, config)[0], shape)
+    jac = jax.vmap(linear, out_axes=1)(jnp.eye(shape.shape[0], dtype=shape.dtype))
+    return alpha, jac @ tangents[0]
+
+
+def _shaded(params: dict, group: GroupArrays, alpha):
+    """Linear values (n,): each photo's lit level and gradient times the shadow factor."""
+    rho = rho_from_raw(params["raw_rho"])
     level = jnp.exp(params["log_level"][group.photo, group.albedo_class])
     level = level * (1.0 + jnp.sum(group.uv_norm * params["gradient"][group.photo], -1))
-    return level * (1.0 - alpha * (1.0 - rho)), alpha, u, slope
+    return level * (1.0 - alpha * (1.0 - rho))
+
+
+def predict(params: dict, group: GroupArrays, pose: Pose, config: FitConfig):
+    """Predicted linear values (n,), alpha (n,), u (n,) and |du/dpixel| (n,) at every sample."""
+    alpha, u, slope = edge_terms(_shape_vector(params), group, pose, config)
+    return _shaded(params, group, alpha), alpha, u, slope
+
+
+predict_jit = eqx.filter_jit(predict)
 
 
 def residuals(params: dict, args):
     """Weighted residuals relative to each photo's lit level (robust-transformed if asked)."""
     group, pose, config = args
-    pred, _, _, _ = predict(params, group, pose, config)
+    pred = _shaded(params, group, shadow_alpha(_shape_vector(params), group, pose, config))
     r = group.weight * (group.observed - pred) / group.scale[group.photo]
     robust = pseudo_huber(r, jnp.maximum(config.huber_delta, 1e-12))
     return jnp.where(config.huber_delta > 0, robust, r)

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Mapping
 
 import numpy as np
+from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 from matplotlib.ticker import MultipleLocator
 from matplotlib.transforms import offset_copy
@@ -50,11 +51,20 @@ def _plots_dir(out_dir) -> Path:
     return path
 
 
+def _fixed_margins(fig: Figure, left: float, right: float, bottom: float, top: float,
+                   **spacing) -> None:
+    """Margins in inches (a fixed layout: a constrained one costs an extra draw per figure)."""
+    w, h = fig.get_size_inches()
+    fig.subplots_adjust(left=left / w, right=1 - right / w, bottom=bottom / h, top=1 - top / h,
+                        **spacing)
+
+
 def _save(fig: Figure, path: Path) -> Path:
     """Save atomically (temporary name in the same folder, then replace)."""
     tmp = path.with_name(f".{path.name}.tmp.png")
     try:
-        fig.savefig(tmp, dpi=_DPI)
+        # Light PNG compression: several times faster to write, files somewhat larger.
+        fig.savefig(tmp, dpi=_DPI, pil_kwargs={"compress_level": 1})
         tmp.replace(path)
     finally:
         tmp.unlink(missing_ok=True)
@@ -111,7 +121,8 @@ def plot_profiles(group: GroupResult, out_dir) -> Path | None:
     n = len(data)
     cols = min(n, 3)
     rows = math.ceil(n / cols)
-    fig = Figure(figsize=(4.2 * cols, 3.2 * rows + 0.4), layout="constrained")
+    fig = Figure(figsize=(4.2 * cols, 3.2 * rows + 0.4))
+    _fixed_margins(fig, left=0.75, right=0.15, bottom=0.55, top=0.75, wspace=0.08, hspace=0.45)
     axes = fig.subplots(rows, cols, squeeze=False, sharey=True)
     for ax, p in zip(axes.flat, data):
         d = np.asarray(p.distance_px, float).ravel()
@@ -126,10 +137,14 @@ def plot_profiles(group: GroupResult, out_dir) -> Path | None:
         fit = fit[keep] if fit.size == same else fit
         ids = ids[keep] if ids.size == same else ids
         if ids.size == d.size:
+            lines = []
             for pid in np.unique(ids)[:MAX_PROFILE_LINES]:
                 sel = ids == pid
                 order = np.argsort(d[sel])
-                ax.plot(d[sel][order], obs[sel][order], color="0.6", lw=0.5, alpha=0.35, zorder=1)
+                lines.append(np.column_stack([d[sel][order], obs[sel][order]]))
+            # One collection, not one artist per profile: drawing cost stays flat.
+            ax.add_collection(LineCollection(lines, colors="0.6", linewidths=0.5, alpha=0.35,
+                                             zorder=1))
         ax.scatter(d, obs, s=3, color="tab:blue", alpha=0.35, lw=0, label="observed", zorder=2)
         if fit.size == d.size:
             ax.scatter(d, fit, s=2, color="tab:orange", alpha=0.5, lw=0, label="fitted", zorder=3)
@@ -191,7 +206,8 @@ def plot_overlay(group: GroupResult, overlay: OverlayPlotData, out_dir, stem: st
 
     aspect = h / w
     width_in = 7.0
-    fig = Figure(figsize=(width_in, width_in * aspect + 0.6), layout="constrained")
+    fig = Figure(figsize=(width_in, width_in * aspect + 0.9))
+    _fixed_margins(fig, left=0.7, right=0.2, bottom=0.55, top=0.6)
     ax = fig.subplots()
     ax.imshow(gray, cmap="gray", vmin=0.0, vmax=1.0, extent=extent, interpolation="nearest")
 

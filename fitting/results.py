@@ -71,6 +71,7 @@ class GroupResult:
     converged: bool = False
     identifiable: bool = True
     seconds: float = 0.0
+    solve_seconds: float | None = None  # the least-squares part of ``seconds`` (no sampling, plots)
     profile: str | None = None  # penumbra profile used: "linear" or "disk"
     blur_px: float | None = None
     penumbra_px: float | None = None

@@ -146,11 +146,12 @@ def select_samples(model: SoftShadowModel, pose: Pose, view: PhotoView, range_k_
     sun_shift = np.deg2rad(sun_margin_deg) * depth * 2
     half = np.ceil((0.75 * range_k_max * width_per_k + sun_shift) / px_size) + 3
     band_px = int(np.clip(np.percentile(half, 90), min_band_px, max_band_px))
-    boundary_img = np.zeros((h, w), np.uint8)
+    # The band: pixels within band_px of a boundary point (a distance transform costs the
+    # same for any band width; a dilation with a disk of that radius does not).
+    not_boundary = np.ones((h, w), np.uint8)
     ib = np.rint(uvb).astype(int)
-    boundary_img[ib[:, 1], ib[:, 0]] = 1
-    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * band_px + 1, 2 * band_px + 1))
-    band = cv2.dilate(boundary_img, kernel) > 0
+    not_boundary[ib[:, 1], ib[:, 0]] = 0
+    band = cv2.distanceTransform(not_boundary, cv2.DIST_L2, cv2.DIST_MASK_PRECISE) <= band_px
     exclude = view.saturated.copy() | ~np.isfinite(view.gray)
     if view.ignore is not None:
         exclude |= view.ignore

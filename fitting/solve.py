@@ -11,23 +11,22 @@ from __future__ import annotations
 
 import dataclasses
 import time as _time
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
-from jax.flatten_util import ravel_pytree
 
-from softshadow.params import Pose
-from softshadow.plan import bucket_size
+import equinox as eqx
+
+from softshadow.params import Pose, Sun
+from softshadow.plan import bucket_size, concatenate_plans
 from softshadow.render import SoftShadowModel
 
-from softshadow.params import Sun
-
-from softshadow.plan import concatenate_plans
-
-from .model import (FitConfig, GroupArrays, angular_pixel_gradient, k_from_raw, predict, raw_from_k,
-                    raw_from_rho, residuals, rho_from_raw)
+from .overlay import fitted_alpha_image
+from .model import (K_SCALE, FitConfig, GroupArrays, angular_pixel_gradient, predict, raw_from_k,
+                    raw_from_rho, residuals)
 from .results import GroupResult, OverlayPlotData, ProfilePlotData
 from .samples import NoShadowInView, PhotoSamples, select_samples
 from .views import PhotoView
@@ -102,10 +101,29 @@ def _initial_params(samples: list[PhotoSamples], fit_sun: bool) -> tuple[dict, f
                 other = s.observed[hard < 0.5]
                 log_level[i, c] = np.log(max(np.percentile(other, 75) if len(other) else 1.0, 1e-9))
     rho0 = float(np.clip(np.median(ratios) if ratios else 0.3, 0.02, 0.98))
-    params = {"raw_k": jnp.asarray(0.0), "raw_rho": jnp.asarray(float(raw_from_rho(rho0))),
-              "log_level": jnp.asarray(log_level), "gradient": jnp.zeros((len(samples), 2)),
-              "raw_blur": jnp.asarray(0.0), "sun_delta_deg": jnp.zeros(2)}
+    f64 = lambda x: jnp.asarray(x, dtype=jnp.float64)  # not weakly typed: one compiled solver
+    params = {"raw_k": f64(0.0), "raw_rho": f64(raw_from_rho(rho0)), "log_level": f64(log_level),
+              "gradient": f64(np.zeros((len(samples), 2))), "raw_blur": f64(0.0),
+              "sun_delta_deg": f64(np.zeros(2))}
     return params, rho0
+
+
+class Trial(NamedTuple):
+    """One solve: its BIC, solution, convergence, configuration, residual sum of squares,
+    residuals (n,), Jacobian (n, p) and ``predict``'s outputs at the solution."""
+
+    bic: float
+    value: dict
+    converged: bool
+    config: FitConfig
+    rss: float
+    residuals: np.ndarray
+    jac: np.ndarray
+    diagnostics: tuple
+
+
+def _bic(rss: float, n: int, n_free: int) -> float:
+    return n * np.log(max(rss, 1e-300) / n) + n_free * np.log(n)
 
 
 def _n_free(config: FitConfig, n_photos: int) -> int:
@@ -113,51 +131,78 @@ def _n_free(config: FitConfig, n_photos: int) -> int:
     return 2 + 4 * n_photos + int(float(config.fit_blur)) + 2 * int(float(config.fit_sun))
 
 
-@jax.jit
-def _sum_sq(params, args):
-    return jnp.sum(residuals(params, args) ** 2)
+def _k_np(raw) -> float:
+    """k from raw_k in NumPy (post-processing stays out of JAX's eager dispatch)."""
+    return float(K_SCALE * np.logaddexp(0.0, float(raw)))
 
 
+def _rho_np(raw) -> float:
+    return float(1.0 / (1.0 + np.exp(-float(raw))))
+
+
+@eqx.filter_jit
+def _prepare(params: dict, raw_ks, args):
+    """The samples' |dT/dpixel| (n,) and, with it, the sum of squares (m,) for each raw_k of a
+    grid, the other parameters fixed (one compiled program for both)."""
+    group, pose, config = args
+    grad_t_pixel = angular_pixel_gradient(group, pose, 0.01, config.rule)
+    args = (dataclasses.replace(group, grad_t_pixel=grad_t_pixel), pose, config)
+    losses = jax.vmap(lambda rk: jnp.sum(residuals(dict(params, raw_k=rk), args) ** 2))(raw_ks)
+    return grad_t_pixel, losses
+
+
+
+
+@eqx.filter_jit
 def _solve(params: dict, args, max_steps: int):
-    solver = optx.LevenbergMarquardt(rtol=1e-5, atol=1e-6)
+    """Levenberg-Marquardt from ``params``. Returns the solution, whether it converged, the
+    number of steps, and at the solution the residuals (n,), their Jacobian (n, p) (flattened
+    parameters, see ``_flat_index``) and ``predict``'s alpha, u and |du/dpixel|.
+
+    The Jacobian is the solver's own linearisation at its last accepted point, so the
+    covariance costs no second pass (and no second compilation) through the model."""
+    solver = optx.LevenbergMarquardt(rtol=1e-4, atol=1e-5)
     sol = optx.least_squares(residuals, solver, params, args=args, max_steps=max_steps, throw=False)
-    return sol.value, sol.result == optx.RESULTS.successful, sol.stats["num_steps"]
+    f_info = sol.state.f_info
+    group, pose, config = args
+    return (sol.value, sol.result == optx.RESULTS.successful, sol.stats["num_steps"],
+            f_info.residual, f_info.jac.as_matrix(), predict(sol.value, group, pose, config))
 
 
-def _covariance(params: dict, args, n_eff: int):
-    flat, unravel = ravel_pytree(params)
-    fn = lambda x: residuals(unravel(x), args)
-    jac = np.asarray(jax.jacfwd(fn)(flat))
-    r = np.asarray(fn(flat))
-    dof = max(n_eff - len(flat), 1)
+def _covariance(r: np.ndarray, jac: np.ndarray, n_eff: int):
+    """Parameter covariance (p, p): (J^T J)^+ scaled by the residual variance s2; also s2."""
+    dof = max(n_eff - jac.shape[1], 1)
     s2 = float(r @ r) / dof
-    jtj = jac.T @ jac
-    cov = np.linalg.pinv(jtj, rcond=1e-12) * s2
-    return cov, unravel, flat, s2
+    return np.linalg.pinv(jac.T @ jac, rcond=1e-12) * s2, s2
+
+
+def _flat_index(params: dict) -> dict[str, int]:
+    """Offset of each parameter in the flattened vector (ravel_pytree sorts a dict's keys)."""
+    names = sorted(params)
+    offsets = np.cumsum([0] + [np.size(params[k]) for k in names])
+    return {k: int(offsets[i]) for i, k in enumerate(names)}
 
 
 def _overlay(model: SoftShadowModel, pose: Pose, view: PhotoView, value: dict, cfg: FitConfig,
              s: PhotoSamples, max_side: int = 480) -> OverlayPlotData:
     """The fitted alpha over a downsampled copy of the photo, for the overlay plot."""
     import cv2
-    from softshadow.params import ShadowParams
+    from softshadow.camera import GroundGrid
     h, w = view.shape
     f = min(1.0, max_side / max(h, w))
     sw, sh = max(int(round(w * f)), 1), max(int(round(h * f)), 1)
     small = cv2.resize(view.gray.astype(np.float32), (sw, sh), interpolation=cv2.INTER_AREA)
     d = np.asarray(value["sun_delta_deg"]) * float(cfg.fit_sun)
     sun = Sun(view.sun_azimuth_deg + d[0], view.sun_elevation_deg + d[1])
-    params = ShadowParams(float(k_from_raw(value["raw_k"])), 0.0)
-    m = model.with_options(profile=cfg.profile)
     if view.grid is not None:
-        from softshadow.camera import GroundGrid
         g = view.grid
         p = g.pixel_m * w / sw
-        grid = GroundGrid(p, (g.origin_m[0] + (p - g.pixel_m) / 2, g.origin_m[1] - (p - g.pixel_m) / 2), sw, sh)
-        alpha = 1.0 - np.asarray(m.ground_map(params, sun, pose, grid))
+        small_view = GroundGrid(p, (g.origin_m[0] + (p - g.pixel_m) / 2,
+                                    g.origin_m[1] - (p - g.pixel_m) / 2), sw, sh)
     else:
-        render = m.camera_image(params, sun, pose, view.camera.with_size(sw, sh))
-        alpha = 1.0 - np.asarray(render.shading)
+        small_view = view.camera.with_size(sw, sh)
+    alpha = fitted_alpha_image(model.with_options(profile=cfg.profile), pose, sun,
+                               _k_np(value["raw_k"]), small_view)
     return OverlayPlotData(view.name, small, alpha, s.uv * f)
 
 
@@ -181,60 +226,66 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
         result.seconds = _time.perf_counter() - start
         return result
     fit_sun = any(v.sun_source == "fitted" for v in used)
+    solve_start = _time.perf_counter()
     arrays = _group_arrays(samples, used)
-    arrays = dataclasses.replace(arrays, grad_t_pixel=angular_pixel_gradient(arrays, pose, 0.01,
-                                                                             options.rule))
     n_eff = sum(len(s.observed) for s in samples)
     base, rho0 = _initial_params(samples, fit_sun)
-
     # Coarse start for k on a log grid (the loss is flat where the band misses the penumbra).
     coarse_cfg = FitConfig.make(options.profiles[0], rule=options.rule)
     grid = np.geomspace(5e-4, options.range_k_max, 9)
-    losses = []
-    for k in grid:
-        p = dict(base, raw_k=jnp.asarray(float(raw_from_k(k))))
-        losses.append(float(_sum_sq(p, (arrays, pose, coarse_cfg))))
-    base["raw_k"] = jnp.asarray(float(raw_from_k(grid[int(np.argmin(losses))])))
+    grad_t_pixel, losses = _prepare(base, jnp.asarray(raw_from_k(grid)), (arrays, pose, coarse_cfg))
+    arrays = dataclasses.replace(arrays, grad_t_pixel=grad_t_pixel)
+    losses = np.asarray(losses)
+    base["raw_k"] = jnp.asarray(raw_from_k(grid[int(np.argmin(losses))]), dtype=jnp.float64)
 
     # A plain least-squares pass sets the noise scale of the robust loss used after it.
-    plain = FitConfig.make(options.profiles[0], False, fit_sun, 0.0, options.rule)
-    start_value, _, _ = _solve(base, (arrays, pose, plain), options.max_steps)
-    r = np.asarray(residuals(start_value, (arrays, pose, plain)))
+    blur_first = True in options.blur
+    plain = FitConfig.make(options.profiles[0], blur_first, fit_sun, 0.0, options.rule)
+    start_value, _, _, r, _, _ = _solve(base, (arrays, pose, plain), options.max_steps)
+    r = np.asarray(r)
     sigma = 1.4826 * np.median(np.abs(r[np.abs(r) > 0])) if np.any(r) else 1e-3
     delta = float(max(3.0 * sigma, 1e-6)) if options.robust else 0.0
-    # Profiles are compared with blur free; then blur is kept only if BIC says so. Each solve
-    # starts from the previous solution, so the later ones take a few steps.
+
     def run(profile, blur, init):
         cfg = FitConfig.make(profile, blur, fit_sun, delta, options.rule)
-        args = (arrays, pose, cfg)
-        value, ok, steps = _solve(init, args, options.max_steps)
-        rss = float(_sum_sq(value, args))
-        bic = n_eff * np.log(max(rss, 1e-300) / n_eff) + _n_free(cfg, len(samples)) * np.log(n_eff)
+        value, ok, steps, r, jac, diag = _solve(init, (arrays, pose, cfg), options.max_steps)
+        r, jac = np.asarray(r), np.asarray(jac)
+        rss = float(r @ r)
+        bic = _bic(rss, n_eff, _n_free(cfg, len(samples)))
         if options.verbose:
             print(f"  {label}: profile {profile} blur {blur}: {int(steps)} steps, ok {bool(ok)}, "
                   f"BIC {bic:.1f}")
-        return bic, value, ok, cfg, rss
+        return Trial(bic, value, bool(ok), cfg, rss, r, jac, diag)
 
-    blur_first = True in options.blur
+    # Profiles are compared with blur free, each solve starting from the previous solution.
     best = None
     for profile in options.profiles:
-        trial = run(profile, blur_first, start_value if best is None else best[1])
-        if best is None or trial[0] < best[0]:
+        trial = run(profile, blur_first, start_value if best is None else best.value)
+        if best is None or trial.bic < best.bic:
             best = trial
+    cov, s2 = _covariance(best.residuals, best.jac, n_eff)
     if blur_first and False in options.blur:
-        trial = run(best[3].profile, False, best[1])
-        if trial[0] < best[0]:
-            best = trial
-    bic, value, ok, cfg, rss = best
-    args = (arrays, pose, cfg)
-    cov, unravel, flat, s2 = _covariance(value, args, n_eff)
+        # BIC without blur, from the fit with it: the nested model's residual sum of squares is
+        # RSS + b^2 / [(J^T J)^-1]_bb to second order (exact for a linear model), so a solve
+        # without blur is needed only when BIC prefers it.
+        i_blur = _flat_index(best.value)["raw_blur"]
+        inv_jtj = cov[i_blur, i_blur] / max(s2, 1e-300)
+        rss_no_blur = best.rss + float(best.value["raw_blur"]) ** 2 / max(inv_jtj, 1e-300)
+        no_blur_cfg = FitConfig.make(best.config.profile, False, fit_sun, delta, options.rule)
+        bic_no_blur = _bic(rss_no_blur, n_eff, _n_free(no_blur_cfg, len(samples)))
+        if bic_no_blur < best.bic:
+            best = run(best.config.profile, False,
+                       dict(best.value, raw_blur=jnp.zeros_like(best.value["raw_blur"])))
+            cov, s2 = _covariance(best.residuals, best.jac, n_eff)
+        elif options.verbose:
+            print(f"  {label}: blur kept (BIC without it, to second order: {bic_no_blur:.1f})")
+    value, ok, cfg, rss = best.value, best.converged, best.config, best.rss
+    result.solve_seconds = _time.perf_counter() - solve_start
     # Standard errors through the reparameterisation.
-    names = list(value.keys())
-    offsets = np.cumsum([0] + [np.size(value[k]) for k in names])
-    idx = {k: offsets[i] for i, k in enumerate(names)}
-    k = float(k_from_raw(value["raw_k"]))
-    rho = float(rho_from_raw(value["raw_rho"]))
-    dk = float(jax.grad(k_from_raw)(value["raw_k"]))
+    idx = _flat_index(value)
+    k = _k_np(value["raw_k"])
+    rho = _rho_np(value["raw_rho"])
+    dk = K_SCALE * _rho_np(value["raw_k"])  # d softplus = sigmoid
     drho = rho * (1 - rho)
     var_k = cov[idx["raw_k"], idx["raw_k"]] * dk**2
     var_rho = cov[idx["raw_rho"], idx["raw_rho"]] * drho**2
@@ -258,7 +309,7 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
     result.sun_azimuth_deg, result.sun_elevation_deg = az0, el0
     result.sun_source = used[0].sun_source
     # Penumbra width in pixels at the solution; identifiability.
-    pred, alpha, u, slope = (np.asarray(x) for x in predict(value, arrays, pose, cfg))
+    pred, alpha, u, slope = (np.asarray(x) for x in best.diagnostics)
     widths = []
     start_i = 0
     for i, s in enumerate(samples):

@@ -1,0 +1,59 @@
+"""The fitted shadow over a (downsampled) photo, for the overlay plot.
+
+One plan for the image's ground points (NumPy) and one compiled evaluation of
+alpha at the points in its penumbra bands (JAX, padded to a bucket size so that
+photos share compilations); no gradients are needed here, so nothing is
+assembled with JAX's eager ops.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from softshadow.camera import GroundGrid, PinholeCamera
+from softshadow.params import Pose, Sun
+from softshadow.plan import PointPlan, bucket_size, plan_alpha_jit
+from softshadow.render import SoftShadowModel, object_mask
+
+__all__ = ["fitted_alpha_image"]
+
+
+def _footprint_m(ground: np.ndarray, use: np.ndarray) -> float:
+    """A fine ground size (m) of the image's pixels where the receiver is seen: the 5th
+    percentile of the distance between horizontally neighbouring ground points."""
+    step = np.linalg.norm(np.diff(ground, axis=1), axis=-1)
+    ok = use[:, 1:] & use[:, :-1] & np.isfinite(step)
+    return float(np.percentile(step[ok], 5)) if ok.any() else 0.01
+
+
+def fitted_alpha_image(model: SoftShadowModel, pose: Pose, sun: Sun, range_k: float,
+                       view: PinholeCamera | GroundGrid) -> np.ndarray:
+    """Alpha (H, W) of the model with ``range_k`` seen by ``view`` (a camera or a top-down
+    grid); NaN where the pixel sees no ground or the object itself."""
+    h, w = view.height, view.width
+    rows, cols = np.mgrid[0:h, 0:w]
+    if isinstance(view, GroundGrid):
+        ground, valid = view.to_world(cols.ravel(), rows.ravel()), np.ones(h * w, bool)
+    else:
+        ground, valid = view.ground_points(cols.ravel(), rows.ravel())
+    use = valid & ~object_mask(model.occluder, pose, view).ravel()
+    alpha = np.full(h * w, np.nan)
+    if not use.any():
+        return alpha.reshape(h, w)
+    points = ground[use]
+    pixel_m = max(_footprint_m(ground.reshape(h, w, 3), use.reshape(h, w)), 1e-4)
+    plan = model.plan_points(sun, pose, points, range_k_max=max(range_k, 1e-4), pixel_m=pixel_m)
+    # Outside the penumbra bands alpha is the hard shadow; only band points go to JAX.
+    values = np.asarray(plan.hard)[:len(points)].astype(np.float64)
+    band = np.flatnonzero(np.asarray(plan.active)[:len(points)])
+    if len(band):
+        size = bucket_size(len(band))
+        take = lambda x, fill: np.concatenate(
+            [np.asarray(x)[band], np.full((size - len(band),) + np.shape(x)[1:], fill, np.asarray(x).dtype)])
+        band_plan = PointPlan(plan.edges, take(plan.edge_id, 0), take(plan.hard, 0.0),
+                              take(plan.active, False), take(plan.near_boundary, 0.0))
+        values[band] = np.asarray(plan_alpha_jit(take(points, 0.0), band_plan, pose, sun,
+                                                 np.float64(range_k), model.rule,
+                                                 model.profile))[:len(band)]
+    alpha[use] = values
+    return alpha.reshape(h, w)
