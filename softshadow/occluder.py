@@ -151,7 +151,8 @@ class Silhouette:
     mesh frame; lit (F,) the lit-face mask used; fill_edges: for each layer of
     faces whose union is the hard shadow (the lit faces; for open meshes also the
     faces turned away), its boundary as (edges (B, 2) in sorted vertex order,
-    winding weights (B,)): the net count of faces running along each edge.
+    winding weights (B,)): the net count of faces running along each edge;
+    normal_local (S, 3): the outward normal sign * normalize(t x L) in the mesh frame.
     """
 
     vertex_ids: np.ndarray
@@ -159,6 +160,7 @@ class Silhouette:
     paper_normal_local: np.ndarray
     lit: np.ndarray
     fill_edges: tuple[tuple[np.ndarray, np.ndarray], ...] = ()
+    normal_local: np.ndarray | None = None
 
 
 def silhouette(occ: Occluder, world_vertices: np.ndarray, rotation: np.ndarray,
@@ -205,9 +207,11 @@ def silhouette(occ: Occluder, world_vertices: np.ndarray, rotation: np.ndarray,
                                                         occ.face_normals[other_face], 0.0)
         paper /= np.maximum(np.sqrt(np.einsum("ij,ij->i", paper, paper)), 1e-12)[:, None]
     n = cvec / c[:, None]
-    inward = occ.edge_inward[idx, inner_slot]  # inner face's centroid minus the edge's midpoint
+    # The inner face's centroid minus the edge's midpoint.
+    inward = occ.edge_inward.reshape(-1, 3)[idx * occ.edge_inward.shape[1] + inner_slot]
     sign = np.where(np.einsum("ij,ij->i", n, inward) > 0, -1.0, 1.0)
     ids = occ.edges[idx]
+    normal = sign[:, None] * n
     pairs = occ.collinear_pairs
     if len(pairs):
         # The mesh's collinear pairs with both edges on the silhouette, at a vertex no other
@@ -219,30 +223,32 @@ def silhouette(occ: Occluder, world_vertices: np.ndarray, rotation: np.ndarray,
         if both.any():
             degree = np.bincount(ids.ravel(), minlength=len(occ.vertices))
             both &= degree[pairs[:, 2]] == 2
-            ids, sign, paper = merge_collinear(ids, world_vertices, light, sign, paper,
-                                               tangent=t, normal=sign[:, None] * n,
-                                               pairs=(e1[both], e2[both]))
+            ids, sign, paper, lead = merge_collinear(ids, world_vertices, light, sign, paper,
+                                                     tangent=t, normal=normal,
+                                                     pairs=(e1[both], e2[both]), return_lead=True)
+            normal = normal[lead]
     layers = [lit] if occ.watertight else [lit, (~lit) & (np.abs(ndotl) > PARALLEL_TOL)]
     fill = []
     for faces in layers:
-        if faces is lit and occ.two_faced:
-            # Only edges with one lit face can have a non-zero net count.
-            cand_ef = ef[candidates]
-            net = (np.where(lit[cand_ef], occ.edge_face_dir[candidates], 0)).sum(1)
-            keep_e = candidates[net != 0]
-            fill.append((occ.edges[keep_e], net[net != 0].astype(np.float64)))
+        if faces is lit and occ.watertight:
+            # Closed and consistently oriented: exactly the edges with one lit face have a
+            # non-zero net count, that face's direction along the edge.
+            direction = occ.edge_face_dir[candidates]
+            net = np.where(lit0[candidates], direction[:, 0], direction[:, 1])
+            fill.append((occ.edges[candidates], net.astype(np.float64)))
             continue
         # Net count of the layer's faces running along each edge (their boundary, oriented).
         on = (ef >= 0) & faces[np.maximum(ef, 0)]
         net = np.where(on, occ.edge_face_dir, 0).sum(1)
         keep_e = np.flatnonzero(net)
         fill.append((occ.edges[keep_e], net[keep_e].astype(np.float64)))
-    return Silhouette(ids, sign, paper, lit, tuple(fill))
+    return Silhouette(ids, sign, paper, lit, tuple(fill), normal)
 
 
 def merge_collinear(ids: np.ndarray, world: np.ndarray, light: np.ndarray, sign: np.ndarray,
                     paper: np.ndarray, tol: float = COLLINEAR_TOL, tangent: np.ndarray | None = None,
-                    normal: np.ndarray | None = None, pairs: tuple[np.ndarray, np.ndarray] | None = None):
+                    normal: np.ndarray | None = None, pairs: tuple[np.ndarray, np.ndarray] | None = None,
+                    return_lead: bool = False):
     """Join chains of collinear silhouette edges (a subdivided box edge) into single edges.
 
     Two edges meeting at a vertex used by no other silhouette edge are joined when they
@@ -250,10 +256,11 @@ def merge_collinear(ids: np.ndarray, world: np.ndarray, light: np.ndarray, sign:
     make a plan hold over larger sun and pose moves, and cost less. ``tangent`` and
     ``normal`` (unit, outward), in any one frame, save recomputing them from ``world``;
     ``pairs`` (two index arrays into ``ids``), the edge pairs meeting at a vertex no other
-    edge uses, if already known.
+    edge uses, if already known. With ``return_lead`` also returns, for each output edge,
+    the input edge whose orientation, sign and normals it keeps.
     """
     if len(ids) < 2:
-        return ids, sign, paper
+        return (ids, sign, paper, np.arange(len(ids))) if return_lead else (ids, sign, paper)
     if tangent is None or normal is None:
         tangent = world[ids[:, 1]] - world[ids[:, 0]]
         tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-300)
@@ -274,7 +281,7 @@ def merge_collinear(ids: np.ndarray, world: np.ndarray, light: np.ndarray, sign:
             & (np.einsum("ij,ij->i", n[e1], n[e2]) > 1.0 - tol)
             & (np.einsum("ij,ij->i", paper[e1], paper[e2]) > 1.0 - 1e-6))
     if not join.any():
-        return ids, sign, paper
+        return (ids, sign, paper, np.arange(len(ids))) if return_lead else (ids, sign, paper)
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
@@ -301,4 +308,6 @@ def merge_collinear(ids: np.ndarray, world: np.ndarray, light: np.ndarray, sign:
     out_ids = np.stack([verts[lo_order[first_of]], verts[lo_order[last_of]]], 1)
     single = np.bincount(chain, minlength=n_out) == 1
     out_ids[single] = ids[lead[single]]
+    if return_lead:
+        return out_ids, sign[lead], paper[lead], lead
     return out_ids, sign[lead], paper[lead]

@@ -97,17 +97,11 @@ def edge_band_widths(world_a: np.ndarray, world_b: np.ndarray, outward: np.ndarr
     return height * np.hypot(r[:, 0], r[:, 1])
 
 
-def _normalise(v):
-    return v / np.linalg.norm(v, axis=-1, keepdims=True)
-
-
 def _edge_data(occ, world, rotation, light, rule):
     sil = silhouette(occ, world, rotation, light)
     ids = sil.vertex_ids
     a, b = world[ids[:, 0]], world[ids[:, 1]]
-    t = _normalise(b - a) if len(ids) else np.zeros((0, 3))
-    n = sil.outward_sign[:, None] * _normalise(np.cross(t, light)) if len(ids) else np.zeros((0, 3))
-    direction = n if rule == "edge" else sil.paper_normal_local @ rotation.T
+    direction = (sil.normal_local if rule == "edge" else sil.paper_normal_local) @ rotation.T
     return sil, a, b, direction
 
 
