@@ -14,7 +14,8 @@ def _options(args):
     from .solve import FitOptions
     profiles = ("linear", "disk") if args.profile == "auto" else (args.profile,)
     return FitOptions(profiles=profiles, rule=args.rule, range_k_max=args.range_k_max,
-                      plots=args.plots, verbose=args.verbose)
+                      plots=args.plots, overlays=getattr(args, "overlays", "first"),
+                      verbose=args.verbose)
 
 
 def _progress(total_label: str):

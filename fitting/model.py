@@ -24,13 +24,13 @@ import numpy as np
 from jaxtyping import Array, Float, Int
 
 from softshadow.params import Pose
-from softshadow.penumbra import PROFILES, edge_coordinate, profile_alpha
+from softshadow.penumbra import PROFILES, profile_alpha
 from softshadow.plan import PointPlan, plan_coordinate_light
 from softshadow.sun import light_direction
 
 __all__ = ["GroupArrays", "FitConfig", "K_SCALE", "k_from_raw", "raw_from_k", "rho_from_raw",
            "raw_from_rho", "predict", "angular_pixel_gradient", "residuals", "pseudo_huber",
-           "sample_light", "chosen_coordinate", "blurred_alpha", "predict_jit", "edge_terms", "shadow_alpha"]
+           "sample_light", "blurred_alpha", "predict_jit", "edge_terms", "shadow_alpha"]
 
 K_SCALE = 0.01
 
@@ -132,37 +132,6 @@ def angular_pixel_gradient(group: GroupArrays, pose: Pose, k, rule: str = "edge"
     return jnp.where(ok, slope / jnp.where(ok, dudt, 1.0), 0.0)
 
 
-def chosen_coordinate(group: GroupArrays, pose: Pose, light, k, rule: str):
-    """Penumbra coordinate u (n,) and du/dT (n,) against each sample's governing edge.
-
-    The choice among the plan's candidate edges (smallest |u|) is made without
-    gradients, then u is evaluated once, for the chosen edge only. Same values and
-    gradients as evaluating every candidate (the choice is piecewise constant), but
-    the Jacobian the solver builds carries one edge per sample instead of all of them.
-    """
-    plan = group.plan
-    ev = pose.apply(plan.edges.vertices_local)
-    paper = pose.apply_direction(plan.edges.paper_normal_local) if rule == "paper" else None
-    n_cand = plan.edge_id.shape[1]
-    frozen = jax.lax.stop_gradient((ev, paper, light, k))
-    no_side = jnp.zeros_like(plan.near_boundary)
-    u_each = jnp.stack([
-        edge_coordinate(group.ground, plan.edge_id[:, c:c + 1], frozen[0], plan.edges.outward_sign,
-                        frozen[2], frozen[3], plan.hard, rule, frozen[1],
-                        near_boundary=plan.near_boundary if c == 0 else no_side)
-        for c in range(n_cand)], axis=1)
-    # Ties (edges meeting at a vertex give the same u beyond it, with different slopes) go to
-    # the earlier candidate, so rounding cannot flip the choice and make the loss jump.
-    score = jnp.abs(u_each) + 1e-9 * (1.0 + jnp.abs(u_each)) * jnp.arange(n_cand)
-    best = jnp.argmin(score, axis=1)
-    edge_id = jnp.take_along_axis(plan.edge_id, best[:, None], axis=1)
-    near = jnp.where(best == 0, plan.near_boundary, 0.0)
-    u, dudt = edge_coordinate(group.ground, edge_id, ev, plan.edges.outward_sign, light, k,
-                              plan.hard, rule, paper, with_slope=True, near_boundary=near)
-    u = jnp.where(plan.active, u, jnp.where(plan.hard > 0.5, -1e6, 1e6))
-    return u, jnp.where(plan.active, dudt, 0.0)
-
-
 _GH_NODES, _GH_WEIGHTS = np.polynomial.hermite_e.hermegauss(12)
 _GH_WEIGHTS = _GH_WEIGHTS / _GH_WEIGHTS.sum()
 
@@ -205,7 +174,8 @@ def edge_terms(shape: Float[Array, "4"], group: GroupArrays, pose: Pose, config:
     """Alpha (n,), penumbra coordinate u (n,) and |du/dpixel| (n,) from the shape vector."""
     k = k_from_raw(shape[0])
     light = sample_light(group, shape[1:3], config.fit_sun)
-    u, dudt = chosen_coordinate(group, pose, light, k, config.rule)
+    u, dudt = plan_coordinate_light(group.ground, group.plan, pose, light, k, config.rule,
+                                    with_slope=True)
     # Blur variance (px^2) added to the pixel's own 1/12, free in sign so that "no blur" is an
     # interior point (a regular minimum, quick to converge) rather than a boundary.
     variance = 1.0 / 12.0 + config.fit_blur * shape[3]

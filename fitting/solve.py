@@ -53,6 +53,7 @@ class FitOptions:
     max_steps: int = 60
     seed: int = 0
     plots: bool = True
+    overlays: str = "first"  # overlay plots for the "first" photo of each group, or "all"
     verbose: bool = False
 
 
@@ -273,10 +274,12 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
         rss_no_blur = best.rss + float(best.value["raw_blur"]) ** 2 / max(inv_jtj, 1e-300)
         no_blur_cfg = FitConfig.make(best.config.profile, False, fit_sun, delta, options.rule)
         bic_no_blur = _bic(rss_no_blur, n_eff, _n_free(no_blur_cfg, len(samples)))
-        if bic_no_blur < best.bic:
-            best = run(best.config.profile, False,
-                       dict(best.value, raw_blur=jnp.zeros_like(best.value["raw_blur"])))
-            cov, s2 = _covariance(best.residuals, best.jac, n_eff)
+        if bic_no_blur < best.bic:  # worth a solve; kept only if its real BIC is lower too
+            trial = run(best.config.profile, False,
+                        dict(best.value, raw_blur=jnp.zeros_like(best.value["raw_blur"])))
+            if trial.bic < best.bic:
+                best = trial
+                cov, s2 = _covariance(best.residuals, best.jac, n_eff)
         elif options.verbose:
             print(f"  {label}: blur kept (BIC without it, to second order: {bic_no_blur:.1f})")
     value, ok, cfg, rss = best.value, best.converged, best.config, best.rss
@@ -323,7 +326,8 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
             dist = np.where(slope[sl] > 0, u[sl] / np.maximum(slope[sl], 1e-12), np.nan)
             result.plot_profiles.append(ProfilePlotData(
                 s.name, dist, s.observed / lvl, pred[sl] / lvl, s.profile_id))
-            result.plot_overlays.append(_overlay(model, pose, used[i], value, cfg, s))
+            if options.overlays == "all" or i == 0:
+                result.plot_overlays.append(_overlay(model, pose, used[i], value, cfg, s))
     if widths:
         w = np.concatenate(widths)
         result.penumbra_px = float(np.median(w))

@@ -82,6 +82,9 @@ def _add_fit(sub):
     p.add_argument("--range-k-max", type=float, default=0.03, help="largest k searched (default 0.03)")
     p.add_argument("--half-size", action="store_true", help="decode RAW at half size (faster)")
     p.add_argument("--no-plots", dest="plots", action="store_false")
+    p.add_argument("--overlays", default="first", choices=("first", "all"),
+                   help="overlay plots of the fitted shadow for the first photo of each group "
+                        "(default) or for every photo")
     p.set_defaults(func=_run_fit)
 
 
