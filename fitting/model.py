@@ -119,14 +119,14 @@ def angular_pixel_gradient(group: GroupArrays, pose: Pose, k, rule: str = "edge"
     light = sample_light(group, jnp.zeros(2), 0.0)
 
     def coord(points):
-        return plan_coordinate_light(points, group.plan, pose, light, k, rule)
+        return plan_coordinate_light(points, group.plan, pose, light, k, rule, with_slope=True)
 
-    ex = jnp.zeros_like(group.ground).at[:, 0].set(1.0)
-    ey = jnp.zeros_like(group.ground).at[:, 1].set(1.0)
-    _, du_dx = jax.jvp(coord, (group.ground,), (ex,))
-    _, du_dy = jax.jvp(coord, (group.ground,), (ey,))
-    grad_pixel = jnp.einsum("nij,ni->nj", group.jac, jnp.stack([du_dx, du_dy], -1))
-    _, dudt = plan_coordinate_light(group.ground, group.plan, pose, light, k, rule, with_slope=True)
+    # Both ground directions in one batched JVP (one trace of the edge geometry, not three).
+    axes = jnp.zeros((2,) + group.ground.shape, group.ground.dtype)
+    axes = axes.at[0, :, 0].set(1.0).at[1, :, 1].set(1.0)
+    (_, dudt), (du, _) = jax.vmap(lambda t: jax.jvp(coord, (group.ground,), (t,)),
+                                  out_axes=((None, None), (0, 0)))(axes)
+    grad_pixel = jnp.einsum("nij,in->nj", group.jac, du)
     slope = jnp.sqrt(jnp.sum(grad_pixel**2, -1))
     ok = dudt > 0
     return jnp.where(ok, slope / jnp.where(ok, dudt, 1.0), 0.0)

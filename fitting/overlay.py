@@ -1,8 +1,8 @@
 """The fitted shadow over a (downsampled) photo, for the overlay plot.
 
 One plan for the image's ground points (NumPy) and one compiled evaluation of
-alpha at the points in its penumbra bands (JAX, padded to a bucket size so that
-photos share compilations); no gradients are needed here, so nothing is
+alpha at the points in its penumbra bands (JAX, in chunks of one fixed size so
+that every photo shares one compilation); no gradients are needed here, so nothing is
 assembled with JAX's eager ops.
 """
 
@@ -12,10 +12,12 @@ import numpy as np
 
 from softshadow.camera import GroundGrid, PinholeCamera
 from softshadow.params import Pose, Sun
-from softshadow.plan import PointPlan, bucket_size, plan_alpha_jit
+from softshadow.plan import PointPlan, plan_alpha_jit
 from softshadow.render import SoftShadowModel, object_mask
 
 __all__ = ["fitted_alpha_image"]
+
+CHUNK = 16384  # band points per compiled evaluation
 
 
 def _footprint_m(ground: np.ndarray, use: np.ndarray) -> float:
@@ -46,14 +48,15 @@ def fitted_alpha_image(model: SoftShadowModel, pose: Pose, sun: Sun, range_k: fl
     # Outside the penumbra bands alpha is the hard shadow; only band points go to JAX.
     values = np.asarray(plan.hard)[:len(points)].astype(np.float64)
     band = np.flatnonzero(np.asarray(plan.active)[:len(points)])
-    if len(band):
-        size = bucket_size(len(band))
+    # Fixed-size chunks: one compiled evaluation serves every photo and band size.
+    for start in range(0, len(band), CHUNK):
+        idx = band[start:start + CHUNK]
         take = lambda x, fill: np.concatenate(
-            [np.asarray(x)[band], np.full((size - len(band),) + np.shape(x)[1:], fill, np.asarray(x).dtype)])
-        band_plan = PointPlan(plan.edges, take(plan.edge_id, 0), take(plan.hard, 0.0),
-                              take(plan.active, False), take(plan.near_boundary, 0.0))
-        values[band] = np.asarray(plan_alpha_jit(take(points, 0.0), band_plan, pose, sun,
-                                                 np.float64(range_k), model.rule,
-                                                 model.profile))[:len(band)]
+            [np.asarray(x)[idx], np.full((CHUNK - len(idx),) + np.shape(x)[1:], fill, np.asarray(x).dtype)])
+        chunk_plan = PointPlan(plan.edges, take(plan.edge_id, 0), take(plan.hard, 0.0),
+                               take(plan.active, False), take(plan.near_boundary, 0.0))
+        values[idx] = np.asarray(plan_alpha_jit(take(points, 0.0), chunk_plan, pose, sun,
+                                                np.float64(range_k), model.rule,
+                                                model.profile))[:len(idx)]
     alpha[use] = values
     return alpha.reshape(h, w)
