@@ -243,11 +243,13 @@ def plan_grid(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, range_k_max
     if len(sil.vertex_ids):
         widths = edge_band_widths(a, b, direction, light, range_k_max)
         pad = int(min(np.ceil(1.5 * widths.max() / grid.pixel_m) + margin_px + 3, 512))
-        # Raster only the shadow's window: the projected mesh's bounding box plus the band's
-        # reach and the candidates' sampling radius, within the grid padded by pad.
+        band_px = (BAND_FRACTION * widths / grid.pixel_m + margin_px).astype(np.float32)  # per edge
+        # Raster only the shadow's window: the projected mesh's bounding box (which holds the
+        # shadow and its outline) plus the band and the candidates' sampling radius, within the
+        # grid padded by pad (edges just off the grid govern pixels on it).
         ground = project_to_ground(world, light)
         px = grid.to_pixel(ground)
-        reach = pad + CANDIDATE_REACH_PX + 1
+        reach = int(np.ceil(band_px.max())) + CANDIDATE_REACH_PX + 2
         c0 = int(max(np.floor(px[:, 0].min()) - reach, -pad))
         c1 = int(min(np.ceil(px[:, 0].max()) + reach, w - 1 + pad))
         r0 = int(max(np.floor(px[:, 1].min()) - reach, -pad))
@@ -259,17 +261,21 @@ def plan_grid(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, range_k_max
             # The part of the grid inside the window, in grid (g) and window (w) pixels.
             gr0, gr1, gc0, gc1 = max(r0, 0), min(r1, h - 1), max(c0, 0), min(c1, w - 1)
             if gr1 >= gr0 and gc1 >= gc0:
-                sub = (slice(gr0 - r0, gr1 - r0 + 1), slice(gc0 - c0, gc1 - c0 + 1))
-                hard[gr0:gr1 + 1, gc0:gc1 + 1] = raster.hard[sub]
-                dist = raster.boundary_dist_px[sub]
-                band_px = BAND_FRACTION * widths / grid.pixel_m + margin_px  # per edge
-                # The widest band first (a cheap test on the distance alone), then each pixel's own edge's.
-                rows_s, cols_s = np.nonzero(dist <= band_px.max())
-                rows_w, cols_w = rows_s + (gr0 - r0), cols_s + (gc0 - c0)
-                lab_b = raster.edge_label[rows_w, cols_w]
-                dist_b = dist[rows_s, cols_s]
-                keep = (lab_b >= 0) & (dist_b <= band_px[np.maximum(lab_b, 0)])
-                rows_w, cols_w, lab_b, dist_b = rows_w[keep], cols_w[keep], lab_b[keep], dist_b[keep]
+                hard[gr0:gr1 + 1, gc0:gc1 + 1] = raster.hard[gr0 - r0:gr1 - r0 + 1, gc0 - c0:gc1 - c0 + 1]
+                # The widest band first (a cheap test on the distance alone, on the window's part
+                # inside the grid), then each pixel's own edge's.
+                dist = raster.boundary_dist_px
+                close = dist <= band_px.max()
+                close[:gr0 - r0] = False
+                close[gr1 - r0 + 1:] = False
+                close[:, :gc0 - c0] = False
+                close[:, gc1 - c0 + 1:] = False
+                index_w = np.flatnonzero(close)
+                lab_b = raster.edge_label.reshape(-1)[index_w]
+                dist_b = dist.reshape(-1)[index_w]
+                keep = dist_b <= band_px[lab_b]
+                index_w, lab_b, dist_b = index_w[keep], lab_b[keep], dist_b[keep]
+                rows_w, cols_w = np.divmod(index_w, window.width)
                 band_idx = (rows_w + r0) * w + (cols_w + c0)
                 near_b = ((dist_b <= 0.25 * widths[lab_b] / grid.pixel_m + 1.5)
                           & _clean_outline(raster, lab_b))

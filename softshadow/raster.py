@@ -272,8 +272,10 @@ def candidate_labels(edge_label: np.ndarray, rows: np.ndarray, cols: np.ndarray,
     first = flat[index]
     columns = [first]
     if neighbours is not None and len(neighbours):
-        nb = neighbours[np.maximum(first, 0)]
-        columns += [np.where(first >= 0, nb[:, 0], -1), np.where(first >= 0, nb[:, 1], -1)]
+        own = np.maximum(first, 0)
+        for j in (0, 1):
+            nb = neighbours[:, j][own]
+            columns.append(nb if first.min(initial=0) >= 0 else np.where(first >= 0, nb, -1))
     if len(rows) and rows.min() >= reach and rows.max() < h - reach and cols.min() >= reach \
             and cols.max() < w - reach:
         columns += [flat[index + (dr * w + dc)] for dr, dc in offsets]
