@@ -114,6 +114,7 @@ class GroupResult:
                     "penumbra_px_iqr": _num(self.penumbra_px_iqr),
                     "penumbra_m": _num(self.penumbra_m),
                     "reprojection_error_px": _num(self.reprojection_error_px),
+                    "solve_seconds": None if self.solve_seconds is None else round(float(self.solve_seconds), 3),
                     "warnings": self.warnings or None, "error": self.error}
         out.update({k: v for k, v in optional.items() if v is not None})
         return out
