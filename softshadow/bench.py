@@ -3,10 +3,12 @@
 Render figures: a top-down ground map of each built-in mesh at 256, 512 and
 1024 pixels, k = 0.01, rho = 0.3, sun azimuth 200 deg, elevation 40 deg.
 ``forward_ms`` is the whole render (the NumPy/OpenCV plan plus the JAX
-evaluation); ``forward_cached_ms`` reuses the plan (as a fit does while the
-discrete choices hold); ``grad_ms`` is value and gradient of a scalar loss of
-the image with respect to k, rho and the sun angles, plan included, and
-``grad_cached_ms`` without the plan. Times are medians after compilation.
+evaluation); ``plan_ms`` the plan alone; ``forward_cached_ms`` reuses the plan
+(as a fit does while the discrete choices hold); ``grad_ms`` is value and
+gradient of a scalar loss of the image with respect to k, rho and the sun
+angles, plan included, and ``grad_cached_ms`` without the plan. Times are
+medians after compilation, in JAX's default float dtype (float32 unless x64 is
+enabled; the result says which).
 """
 
 from __future__ import annotations
@@ -74,13 +76,19 @@ def bench_render(sizes=(256, 512, 1024), meshes=("pillar", "ball", "dragon"), re
             def grad_cached():
                 jax.block_until_ready(grad_fn(params, sun, plan))
 
+            def plan_only():
+                model.plan_grid(sun, pose, grid, 0.01)
+
             out[name][str(size)] = {
                 "forward_ms": round(_median_ms(forward, repeats), 2),
+                "plan_ms": round(_median_ms(plan_only, repeats), 2),
                 "forward_cached_ms": round(_median_ms(forward_cached, repeats), 2),
                 "grad_ms": round(_median_ms(grad, repeats), 2),
                 "grad_cached_ms": round(_median_ms(grad_cached, repeats), 2),
                 "band_pixels": int(plan.n_band),
-                "silhouette_edges": int(np.asarray(plan.plan.edges.outward_sign).shape[0]),
+                "silhouette_edges": int(plan.n_edges),
+                "outline_edges": int(np.count_nonzero(plan.raster.edge_outline_fraction > 0))
+                if plan.raster is not None else 0,
             }
     out["peak_memory_mb"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1)
     return out
@@ -88,8 +96,10 @@ def bench_render(sizes=(256, 512, 1024), meshes=("pillar", "ball", "dragon"), re
 
 def run_bench(args) -> int:
     import jax
-    result = {"jax": jax.__version__, "devices": [str(d) for d in jax.devices()],
-              "settings": "top-down map, k=0.01, rho=0.3, sun az 200 el 40, float32"}
+    import jax.numpy as jnp
+    dtype = str(jnp.result_type(float))
+    result = {"jax": jax.__version__, "devices": [str(d) for d in jax.devices()], "dtype": dtype,
+              "settings": f"top-down map, k=0.01, rho=0.3, sun az 200 el 40, {dtype}"}
     sizes = (256, 512) if args.quick else (256, 512, 1024)
     if args.what in ("render", "all"):
         result["render"] = bench_render(sizes=sizes, repeats=3 if args.quick else 7)

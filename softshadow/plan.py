@@ -221,6 +221,7 @@ class GridPlan:
     plan: PointPlan
     raster: ShadowRaster | None
     n_band: int
+    n_edges: int = 0  # silhouette edges (before padding)
 
     @property
     def band_points(self) -> np.ndarray:
@@ -297,7 +298,7 @@ def plan_grid(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, range_k_max
     # NumPy arrays, not device arrays: a jitted call takes them far more cheaply than
     # jax.device_put or jnp.asarray would.
     plan = PointPlan(EdgeSet(*_pack_edges(occ, sil, ftype)), edge_id, hard_band, active, near)
-    return GridPlan(grid, hard, index, plan, raster, m)
+    return GridPlan(grid, hard, index, plan, raster, m, len(sil.vertex_ids))
 
 
 def _float_dtype():
