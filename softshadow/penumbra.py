@@ -53,12 +53,6 @@ def _safe_div(num, den, eps):
     return num / den_safe
 
 
-def _norm(v, eps=_TINY):
-    sq = jnp.sum(v * v, axis=-1)
-    ok = sq > eps
-    return jnp.where(ok, jnp.sqrt(jnp.where(ok, sq, 1.0)), 0.0)
-
-
 @jax.custom_jvp
 def occluded_disk_fraction(u):
     """Fraction of a uniform disk hidden by a straight edge, u in [-1, 1] (1: none hidden).
@@ -104,7 +98,7 @@ def _norm3(v, eps=_TINY):
 
 
 class _EdgeFrame(NamedTuple):
-    """Per-edge quantities for one light direction (components as 3-tuples of arrays).
+    """An edge's quantities under a light direction (components as 3-tuples of arrays).
 
     a, b the segment's ends; n the outward normal; m the light direction across the edge
     (both over c = |t x L|); along = seg_perp / |seg_perp|^2 (seg_perp: the segment seen
@@ -224,9 +218,9 @@ def edge_coordinate(points, edge_ids: Int[Array, "n K"], edge_vertices_world: Fl
 
     light: (3,), or (n, 3) one per point. Each point takes the candidate nearest in
     penumbra units (smallest |u|): the silhouette that the sun disk sees first. The
-    choice is piecewise constant, so it is made without gradients over all candidates
-    (edge quantities computed once per edge where the light is shared), and u is then
-    evaluated, differentiably, for the chosen edge alone: gradients cost one edge per point.
+    choice is piecewise constant, so it is made without gradients over all candidates,
+    and u is then evaluated, differentiably, for the chosen edge alone: gradients cost
+    one edge per point.
     """
     n_pts, n_cand = edge_ids.shape
     k = _range_k(range_k, points.dtype)
@@ -236,22 +230,13 @@ def edge_coordinate(points, edge_ids: Int[Array, "n K"], edge_vertices_world: Fl
     # -- the choice: all candidates, no gradient --
     flat = edge_ids.reshape(-1)
     rep = lambda v: jnp.repeat(v, n_cand, axis=0)
-    if light.ndim == 1:
-        L_c = _split(sg(light))
-        ev = sg(edge_vertices_world)
-        frames = _edge_frame(_split(ev[:, 0]), _split(ev[:, 1]), sg(outward_sign), L_c, sg(k), rule,
-                             None if paper is None else _split(sg(paper)))
-        columns = [*frames.a, *frames.b, *frames.n, *frames.m, *frames.along,
-                   frames.c, frames.t_out, frames.t_in]
-        table = jnp.stack([jnp.broadcast_to(col, frames.c.shape) for col in columns], axis=1)[flat]
-        col = [table[:, i] for i in range(table.shape[1])]
-        f_c = _EdgeFrame(tuple(col[0:3]), tuple(col[3:6]), tuple(col[6:9]), tuple(col[9:12]),
-                         tuple(col[12:15]), col[15], col[16], col[17])
-    else:
-        L_c = _split(rep(sg(light)))
-        ev = sg(edge_vertices_world)[flat]
-        f_c = _edge_frame(_split(ev[:, 0]), _split(ev[:, 1]), sg(outward_sign)[flat], L_c, sg(k), rule,
-                          None if paper is None else _split(sg(paper)[flat]))
+    L_c = _split(sg(light) if light.ndim == 1 else rep(sg(light)))
+    # Each candidate's edge quantities from its gathered vertices: recomputing them costs less
+    # than gathering a per-edge table of them (gathers dominate on CPU).
+    ev = sg(edge_vertices_world).reshape(-1, 6)[flat]
+    f_c = _edge_frame((ev[:, 0], ev[:, 1], ev[:, 2]), (ev[:, 3], ev[:, 4], ev[:, 5]),
+                      sg(outward_sign)[flat], L_c, sg(k), rule,
+                      None if paper is None else _split(sg(paper)[flat]))
     # Only the nearest boundary edge (the first candidate) may set the side from its plane.
     nb_c = None if near_boundary is None else (
         near_boundary[:, None] * (jnp.arange(n_cand) == 0)[None, :]).reshape(-1)
