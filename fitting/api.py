@@ -20,6 +20,7 @@ from typing import Callable
 import cv2
 import jax
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from softshadow.meshes import MeshError
 from softshadow.params import Pose
@@ -156,6 +157,13 @@ def fit_photos(photos: list[Photo], scene: SceneSpec | None = None, options: Fit
     progress: a callable returning a progress bar (tqdm-like: update, close) for the groups.
     jobs: groups fitted at once (threads).
     """
+    # NumPy's BLAS threads spin after each call and starved XLA's: solves ran 10-20x slower
+    # after a covariance or a matrix product. One BLAS thread for the fit's small products.
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _fit_photos(photos, scene, options, progress, done, on_group, jobs)
+
+
+def _fit_photos(photos, scene, options, progress, done, on_group, jobs) -> FitResults:
     _enable_x64()
     options = options or FitOptions()
     skipped: list[dict] = []

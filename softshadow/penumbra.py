@@ -241,7 +241,11 @@ def edge_coordinate(points, edge_ids: Int[Array, "n K"], edge_vertices_world: Fl
     nb_c = None if near_boundary is None else (
         near_boundary[:, None] * (jnp.arange(n_cand) == 0)[None, :]).reshape(-1)
     u_all, _ = _coordinate(tuple(rep(sg(xi)) for xi in x), f_c, L_c, rep(inside), nb_c)
-    best = jnp.argmin(jnp.abs(u_all.reshape(n_pts, n_cand)), axis=1)
+    # Ties (edges meeting at a vertex give the same u beyond it, with different slopes and
+    # gradients) go to the earlier candidate, so rounding cannot flip the choice: a fit's loss
+    # jumped under 1e-12 steps and its LM solver stalled on rejected steps.
+    abs_u = jnp.abs(u_all.reshape(n_pts, n_cand))
+    best = jnp.argmin(abs_u + 1e-9 * (1.0 + abs_u) * jnp.arange(n_cand), axis=1)
     # -- the value and its gradient: the chosen edge only --
     eid = jnp.take_along_axis(edge_ids, best[:, None], axis=1)[:, 0]
     ev = edge_vertices_world[eid]
