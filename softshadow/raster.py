@@ -97,9 +97,14 @@ def winding_fill(shape: tuple[int, int], start: np.ndarray, end: np.ndarray,
     frac = (rows - y0[seg]) / (y1 - y0)[seg]
     cols = np.clip(np.ceil(x0[seg] + frac * dx[seg]), 0, w).astype(np.int64)
     signed = (np.where(y1 > y0, 1.0, -1.0) * weight)[seg]
-    acc = np.bincount(rows * (w + 1) + cols, weights=signed, minlength=h * (w + 1)).reshape(h, w + 1)
-    # Integer weights: the running sums are exact in float64, so non-zero is exact.
-    return np.cumsum(acc, axis=1, out=acc)[:, :w] != 0
+    # Running sums along rows, as differences of rows of OpenCV's integral image (several
+    # times faster than np.cumsum along rows). Integer weights keep the sums exact: in
+    # float32 while no sum can reach 2^24 (none exceeds the total weight), else in float64.
+    dtype = np.float32 if np.abs(signed).sum() < 2 ** 24 else np.float64
+    acc = np.zeros((h, w + 1), dtype)
+    np.add.at(acc.reshape(-1), rows * (w + 1) + cols, signed.astype(dtype))
+    integral = cv2.integral(acc, sdepth=cv2.CV_32F if dtype == np.float32 else cv2.CV_64F)
+    return np.not_equal(integral[1:, 1:w + 1], integral[:-1, 1:w + 1])
 
 
 def draw_segment_labels(shape: tuple[int, int], start: np.ndarray, end: np.ndarray,
