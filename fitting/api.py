@@ -249,12 +249,14 @@ def _fit_photos(photos, scene, options, progress, done, on_group, jobs) -> FitRe
 
 def fit_folder(path, scene: SceneSpec | str | Path | None = None, options: FitOptions | None = None,
                out_dir=None, force: bool = False, half_size: bool = False,
-               progress: Callable | None = None, jobs: int = 1) -> FitResults:
+               progress: Callable | None = None, jobs: int = 1,
+               on_group: Callable[[GroupResult], None] | None = None) -> FitResults:
     """Fit every time of day in a photo folder.
 
     scene: a SceneSpec, a path to a scene.toml, or None to read ``path/scene.toml`` if any.
     out_dir: when given, finished groups are kept in ``out_dir/groups/*.json`` as they
     finish and reused on the next run (``force`` refits them).
+    on_group: called with each group's result as soon as it is finished (and kept).
     Raises FolderError when nothing in the folder can be read.
     """
     folder = Path(path)
@@ -297,6 +299,8 @@ def fit_folder(path, scene: SceneSpec | str | Path | None = None, options: FitOp
             tmp = target.with_suffix(".json.tmp")
             tmp.write_text(json.dumps(result.to_json(), indent=1))
             tmp.replace(target)
+        if on_group is not None:
+            on_group(result)
 
     results = fit_photos(photos, scene, options, half_size, progress, done, keep, jobs)
     results.skipped = skipped + results.skipped

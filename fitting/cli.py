@@ -29,11 +29,22 @@ def _progress(total_label: str):
 def fit_and_report(photo_dir, out_dir, options, force=False, half_size=False, truth=None,
                    reference=None, jobs=1):
     """Fit a folder and write results.json, table2.md/.csv and plots; returns FitResults."""
+    import concurrent.futures
+
     from .api import fit_folder
-    from .report import write_report
-    results = fit_folder(photo_dir, options=options, out_dir=out_dir, force=force,
-                         half_size=half_size, progress=_progress("fitting"), jobs=jobs)
-    write_report(results, out_dir, reference=reference, truth=truth, plots=options.plots)
+    from .report import plot_group_safely, write_report
+    # Each group's plots are drawn in a background thread while the next group is fitted
+    # (the fit spends its time in XLA and OpenCV, which release the GIL).
+    with concurrent.futures.ThreadPoolExecutor(max_workers=1) as plotter:
+        pending = []
+        on_group = ((lambda g: pending.append(plotter.submit(plot_group_safely, g, out_dir)))
+                    if options.plots else None)
+        results = fit_folder(photo_dir, options=options, out_dir=out_dir, force=force,
+                             half_size=half_size, progress=_progress("fitting"), jobs=jobs,
+                             on_group=on_group)
+        group_plots = [p for f in pending for p in f.result()]
+    write_report(results, out_dir, reference=reference, truth=truth, plots=options.plots,
+                 group_plots=group_plots)
     return results
 
 

@@ -497,10 +497,12 @@ def write_table2(results: FitResults, out_dir, reference=None, truth=None) -> tu
 # --------------------------------------------------------------------------- everything
 
 def write_report(results: FitResults, out_dir, reference=None, truth=None,
-                 plots: bool = True) -> dict[str, Path]:
+                 plots: bool = True, group_plots: list[Path] | None = None) -> dict[str, Path]:
     """Write results.json, table2.md/.csv and (unless ``plots`` is False) the plots
     into OUT_DIR.
 
+    group_plots: the groups' plots when they were already written (``plot_group_safely``
+    while the fit went on); then only the range-against-time plot is drawn here.
     Returns {path relative to OUT_DIR (posix): absolute Path} of every file written.
     results.json and the tables come first; a plot that fails is logged and left out,
     never losing the numbers.
@@ -509,19 +511,28 @@ def write_report(results: FitResults, out_dir, reference=None, truth=None,
     written: list[Path] = [write_results_json(results, out_dir)]
     written += write_table2(results, out_dir, reference, truth)
     if plots:
-        written += _write_plots(results, out_dir, reference, truth)
+        written += _write_plots(results, out_dir, reference, truth, group_plots)
     return {p.relative_to(out_dir).as_posix(): p for p in written}
 
 
-def _write_plots(results: FitResults, out_dir: Path, reference, truth) -> list[Path]:
+def plot_group_safely(group: GroupResult, out_dir) -> list[Path]:
+    """``plots.plot_group``, logging instead of raising: a plot must never cost the results."""
     from . import plots  # matplotlib is only imported when plots are wanted
+    try:
+        return plots.plot_group(group, Path(out_dir))
+    except Exception as exc:
+        logger.warning("plots of group %s skipped: %s: %s", group.label, type(exc).__name__, exc)
+        return []
 
-    written: list[Path] = []
-    for g in results.groups:
-        try:
-            written += plots.plot_group(g, out_dir)
-        except Exception as exc:  # a plot must never cost the results
-            logger.warning("plots of group %s skipped: %s: %s", g.label, type(exc).__name__, exc)
+
+def _write_plots(results: FitResults, out_dir: Path, reference, truth,
+                 group_plots: list[Path] | None = None) -> list[Path]:
+    from . import plots
+
+    if group_plots is None:
+        written = [p for g in results.groups for p in plot_group_safely(g, out_dir)]
+    else:
+        written = list(group_plots)
     try:
         p = plots.plot_range_vs_time(results, out_dir, reference=reference, truth=truth)
         if p is not None:
