@@ -53,7 +53,7 @@ class PhotoSamples:
 
 
 def paper_mask(gray: np.ndarray, exclude: np.ndarray) -> np.ndarray | None:
-    """The white sheet (H, W) bool: the convex hull of large bright, smooth regions, or None.
+    """The white sheet (H, W) bool: the convex hulls of large bright, smooth regions, or None.
 
     Found when the image's brightness is clearly bimodal (paper at least 1.5x the
     ground); the hull closes the parts the shadow hides.
@@ -82,11 +82,34 @@ def paper_mask(gray: np.ndarray, exclude: np.ndarray) -> np.ndarray | None:
     keep = [i for i in range(1, n) if stats[i, cv2.CC_STAT_AREA] >= 0.002 * gray.size]
     if not keep:
         return None
-    pts = np.column_stack(np.nonzero(np.isin(labels, keep))[::-1]).astype(np.int32)
-    hull = cv2.convexHull(pts)
+    hulls = [cv2.convexHull(np.column_stack(np.nonzero(labels == i)[::-1]).astype(np.int32))
+             for i in keep]
     mask = np.zeros(gray.shape, np.uint8)
-    cv2.fillConvexPoly(mask, hull, 1)
+    for hull in _merge_convex_pieces(hulls):
+        cv2.fillConvexPoly(mask, hull, 1)
     return mask.astype(bool)
+
+
+def _merge_convex_pieces(hulls: list[np.ndarray]) -> list[np.ndarray]:
+    """Merge hulls that are pieces of one convex sheet: two pieces join when the hull of both
+    adds no more area than the smaller piece has (a sheet cut by a shadow joins again; a sheet
+    and a calibration board's white margin, with ground between them, do not)."""
+    hulls = list(hulls)
+    merged = True
+    while merged and len(hulls) > 1:
+        merged = False
+        for i in range(len(hulls)):
+            for j in range(i + 1, len(hulls)):
+                both = cv2.convexHull(np.vstack([hulls[i], hulls[j]]))
+                a, b = cv2.contourArea(hulls[i]), cv2.contourArea(hulls[j])
+                if cv2.contourArea(both) - a - b <= min(a, b):
+                    hulls[i] = both
+                    del hulls[j]
+                    merged = True
+                    break
+            if merged:
+                break
+    return hulls
 
 
 def _boundary_ground_points(model: SoftShadowModel, pose: Pose, sun: Sun, spacing_m: float):
