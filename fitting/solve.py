@@ -33,6 +33,9 @@ from .views import PhotoView
 
 __all__ = ["FitOptions", "fit_group"]
 
+#: Levenberg-Marquardt tolerances (relative, absolute) on the parameters and the loss.
+LM_RTOL, LM_ATOL = 1e-4, 1e-5
+
 
 
 @dataclasses.dataclass
@@ -162,7 +165,7 @@ def _solve(params: dict, args, max_steps: int):
 
     The Jacobian is the solver's own linearisation at its last accepted point, so the
     covariance costs no second pass (and no second compilation) through the model."""
-    solver = optx.LevenbergMarquardt(rtol=1e-4, atol=1e-5)
+    solver = optx.LevenbergMarquardt(rtol=LM_RTOL, atol=LM_ATOL)
     sol = optx.least_squares(residuals, solver, params, args=args, max_steps=max_steps, throw=False)
     f_info = sol.state.f_info
     group, pose, config = args
