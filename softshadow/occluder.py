@@ -139,7 +139,14 @@ class Occluder:
 
 def posed_vertices(vertices: np.ndarray, position, rotation: np.ndarray, scale: float) -> np.ndarray:
     """NumPy twin of ``Pose.apply`` for the discrete steps."""
-    return (scale * vertices) @ np.asarray(rotation).T + np.asarray(position)
+    return scale * rotate_rows(vertices, np.asarray(rotation).T) + np.asarray(position)
+
+
+def rotate_rows(v: np.ndarray, matrix: np.ndarray) -> np.ndarray:
+    """v @ matrix for rows v (N, 3), written elementwise: a BLAS product on tall arrays leaves
+    its threads spinning afterwards, and they starve XLA's threads on a small machine."""
+    matrix = np.asarray(matrix, dtype=np.float64)
+    return v[:, 0:1] * matrix[0] + v[:, 1:2] * matrix[1] + v[:, 2:3] * matrix[2]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -173,7 +180,8 @@ def silhouette(occ: Occluder, world_vertices: np.ndarray, rotation: np.ndarray,
     light = np.asarray(light, dtype=np.float64)
     rotation = np.asarray(rotation, dtype=np.float64)
     light_local = rotation.T @ light
-    ndotl = occ.face_normals @ light_local
+    normals = occ.face_normals
+    ndotl = normals[:, 0] * light_local[0] + normals[:, 1] * light_local[1] + normals[:, 2] * light_local[2]
     lit = ndotl < -PARALLEL_TOL
     ef = occ.edge_faces
     if occ.two_faced:

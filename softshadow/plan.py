@@ -20,7 +20,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from .camera import GroundGrid
-from .occluder import Occluder, posed_vertices, silhouette
+from .occluder import Occluder, posed_vertices, rotate_rows, silhouette
 from .params import Pose, Sun, rotation_matrix_xyz_np
 from .penumbra import edge_alpha, edge_coordinate
 from .raster import (ShadowRaster, candidate_labels, project_to_ground, rasterise_shadow,
@@ -101,7 +101,7 @@ def _edge_data(occ, world, rotation, light, rule):
     sil = silhouette(occ, world, rotation, light)
     ids = sil.vertex_ids
     a, b = world[ids[:, 0]], world[ids[:, 1]]
-    direction = (sil.normal_local if rule == "edge" else sil.paper_normal_local) @ rotation.T
+    direction = rotate_rows(sil.normal_local if rule == "edge" else sil.paper_normal_local, rotation.T)
     return sil, a, b, direction
 
 
