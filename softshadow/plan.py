@@ -210,9 +210,9 @@ class GridPlan:
 
     hard (H, W) uint8 0/1; band_index (m,) int32 flat pixel indices padded with H*W;
     plan: the PointPlan of the band pixels (``band_points``), with NumPy arrays for
-    the jitted evaluation to take; raster: the ShadowRaster
-    of the shadow's window (the grid padded by the band's reach, cropped to the shadow),
-    for debugging.
+    the jitted evaluation to take; raster: the ShadowRaster of the shadow's window
+    (the projected mesh's bounding box plus the band's reach, within the padded
+    grid), for debugging; n_edges: silhouette edges before padding.
     """
 
     grid: GroundGrid
@@ -221,7 +221,7 @@ class GridPlan:
     plan: PointPlan
     raster: ShadowRaster | None
     n_band: int
-    n_edges: int = 0  # silhouette edges (before padding)
+    n_edges: int = 0
 
     @property
     def band_points(self) -> np.ndarray:

@@ -70,17 +70,13 @@ class ShadowRaster:
         dist = np.where(inside, self.boundary_dist_px[r, c] * self.grid.pixel_m, np.inf)
         return hard, label, dist
 
-    def label_at(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-        """Governing edge label at pixels (rows, cols) inside the raster."""
-        return self.edge_label[rows, cols]
-
 
 def winding_fill(shape: tuple[int, int], start: np.ndarray, end: np.ndarray,
                  weight: np.ndarray) -> np.ndarray:
     """Pixels (H, W) bool with non-zero winding number of weighted directed segments.
 
     start, end (B, 2) in pixel coordinates (col, row), pixel centres at integers;
-    weight (B,) how many times each segment is traversed start -> end. A pixel
+    weight (B,) how many times (an integer) each segment is traversed start -> end. A pixel
     centre is inside when the weighted count of crossings to its left is non-zero.
     """
     h, w = shape
