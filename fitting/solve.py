@@ -144,33 +144,40 @@ def _rho_np(raw) -> float:
     return float(1.0 / (1.0 + np.exp(-float(raw))))
 
 
-@eqx.filter_jit
-def _prepare(params: dict, raw_ks, args):
-    """The samples' |dT/dpixel| (n,) and, with it, the sum of squares (m,) for each raw_k of a
-    grid, the other parameters fixed (one compiled program for both)."""
-    group, pose, config = args
+def _prepare(params: dict, raw_ks, group: GroupArrays, pose: Pose, config: FitConfig):
+    """The samples' |dT/dpixel| (n,) and the raw_k (of the grid raw_ks) with the least plain
+    sum of squares, blur and sun switched off and the other parameters fixed: the start."""
     grad_t_pixel = angular_pixel_gradient(group, pose, 0.01, config.rule)
-    args = (dataclasses.replace(group, grad_t_pixel=grad_t_pixel), pose, config)
-    losses = jax.vmap(lambda rk: jnp.sum(residuals(dict(params, raw_k=rk), args) ** 2))(raw_ks)
-    return grad_t_pixel, losses
-
-
+    zero = jnp.zeros_like(config.fit_blur)
+    coarse = (dataclasses.replace(group, grad_t_pixel=grad_t_pixel), pose,
+              dataclasses.replace(config, fit_blur=zero, fit_sun=zero, huber_delta=zero))
+    losses = jax.vmap(lambda rk: jnp.sum(residuals(dict(params, raw_k=rk), coarse) ** 2))(raw_ks)
+    return grad_t_pixel, raw_ks[jnp.argmin(losses)]
 
 
 @eqx.filter_jit
-def _solve(params: dict, args, max_steps: int):
+def _solve(params: dict, args, max_steps: int, start_raw_ks, prepare):
     """Levenberg-Marquardt from ``params``. Returns the solution, whether it converged, the
     number of steps, and at the solution the residuals (n,), their Jacobian (n, p) (flattened
-    parameters, see ``_flat_index``) and ``predict``'s alpha, u and |du/dpixel|.
+    parameters, see ``_flat_index``), ``predict``'s outputs, and the samples' |dT/dpixel|.
 
-    The Jacobian is the solver's own linearisation at its last accepted point, so the
-    covariance costs no second pass (and no second compilation) through the model."""
+    With ``prepare`` true (a traced switch, so one compiled program serves every call), the
+    group's first solve: |dT/dpixel| is computed and raw_k starts at the best value of the
+    grid ``start_raw_ks`` (m,) (``_prepare``). The Jacobian is the solver's own
+    linearisation at its last accepted point, so the covariance costs no second pass."""
+    group, pose, config = args
+    grad_t_pixel, raw_k = jax.lax.cond(
+        prepare, lambda: _prepare(params, start_raw_ks, group, pose, config),
+        lambda: (group.grad_t_pixel, params["raw_k"]))
+    group = dataclasses.replace(group, grad_t_pixel=grad_t_pixel)
+    params = dict(params, raw_k=raw_k)
+    args = (group, pose, config)
     solver = optx.LevenbergMarquardt(rtol=LM_RTOL, atol=LM_ATOL)
     sol = optx.least_squares(residuals, solver, params, args=args, max_steps=max_steps, throw=False)
     f_info = sol.state.f_info
-    group, pose, config = args
     return (sol.value, sol.result == optx.RESULTS.successful, sol.stats["num_steps"],
-            f_info.residual, f_info.jac.as_matrix(), predict(sol.value, group, pose, config))
+            f_info.residual, f_info.jac.as_matrix(), predict(sol.value, group, pose, config),
+            group.grad_t_pixel)
 
 
 def _covariance(r: np.ndarray, jac: np.ndarray, n_eff: int):
@@ -234,25 +241,22 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
     arrays = _group_arrays(samples, used)
     n_eff = sum(len(s.observed) for s in samples)
     base, rho0 = _initial_params(samples, fit_sun)
-    # Coarse start for k on a log grid (the loss is flat where the band misses the penumbra).
-    coarse_cfg = FitConfig.make(options.profiles[0], rule=options.rule)
-    grid = np.geomspace(5e-4, options.range_k_max, 9)
-    grad_t_pixel, losses = _prepare(base, jnp.asarray(raw_from_k(grid)), (arrays, pose, coarse_cfg))
-    arrays = dataclasses.replace(arrays, grad_t_pixel=grad_t_pixel)
-    losses = np.asarray(losses)
-    base["raw_k"] = jnp.asarray(raw_from_k(grid[int(np.argmin(losses))]), dtype=jnp.float64)
-
-    # A plain least-squares pass sets the noise scale of the robust loss used after it.
+    # A plain least-squares pass, from the best k of a coarse log grid (the loss is flat where
+    # the band misses the penumbra), sets the noise scale of the robust loss used after it.
     blur_first = True in options.blur
     plain = FitConfig.make(options.profiles[0], blur_first, fit_sun, 0.0, options.rule)
-    start_value, _, _, r, _, _ = _solve(base, (arrays, pose, plain), options.max_steps)
+    grid = jnp.asarray(raw_from_k(np.geomspace(5e-4, options.range_k_max, 9)))
+    start_value, _, _, r, _, _, grad_t_pixel = _solve(base, (arrays, pose, plain), options.max_steps,
+                                                      grid, jnp.asarray(True))
+    arrays = dataclasses.replace(arrays, grad_t_pixel=grad_t_pixel)
     r = np.asarray(r)
     sigma = 1.4826 * np.median(np.abs(r[np.abs(r) > 0])) if np.any(r) else 1e-3
     delta = float(max(3.0 * sigma, 1e-6)) if options.robust else 0.0
 
     def run(profile, blur, init):
         cfg = FitConfig.make(profile, blur, fit_sun, delta, options.rule)
-        value, ok, steps, r, jac, diag = _solve(init, (arrays, pose, cfg), options.max_steps)
+        value, ok, steps, r, jac, diag, _ = _solve(init, (arrays, pose, cfg), options.max_steps,
+                                                   grid, jnp.asarray(False))
         r, jac = np.asarray(r), np.asarray(jac)
         rss = float(r @ r)
         bic = _bic(rss, n_eff, _n_free(cfg, len(samples)))
