@@ -15,7 +15,7 @@ import dataclasses
 import cv2
 import numpy as np
 
-from softshadow.params import Pose, Sun
+from softshadow.params import Pose, Sun, rotation_matrix_xyz_np
 from softshadow.plan import PointPlan, edge_band_widths
 from softshadow.raster import project_to_ground
 from softshadow.occluder import posed_vertices, silhouette
@@ -115,7 +115,7 @@ def _merge_convex_pieces(hulls: list[np.ndarray]) -> list[np.ndarray]:
 def _boundary_ground_points(model: SoftShadowModel, pose: Pose, sun: Sun, spacing_m: float):
     """Points along the projected silhouette (M, 3) and their edge's ground width per unit k."""
     occ = model.occluder
-    rotation = np.asarray(pose.rotation, np.float64)
+    rotation = rotation_matrix_xyz_np(pose.rotation_deg)  # NumPy: no eager JAX ops
     world = posed_vertices(occ.vertices, np.asarray(pose.position, np.float64), rotation,
                            float(pose.scale))
     light = np.asarray(sun.light, np.float64)

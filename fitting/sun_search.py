@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 
 from softshadow.occluder import posed_vertices, silhouette
-from softshadow.params import Pose
+from softshadow.params import Pose, rotation_matrix_xyz_np
 from softshadow.raster import project_to_ground, winding_at_points
 from softshadow.render import SoftShadowModel, object_mask
 from softshadow.sun import light_direction
@@ -39,7 +39,7 @@ def search_sun(model: SoftShadowModel, pose: Pose, view: PhotoView, width: int =
     darkness -= darkness.mean()
     pts = ground[use, :2]
     occ = model.occluder
-    rotation = np.asarray(pose.rotation, np.float64)
+    rotation = rotation_matrix_xyz_np(pose.rotation_deg)  # NumPy: no eager JAX ops
     world = posed_vertices(occ.vertices, np.asarray(pose.position, np.float64), rotation,
                            float(pose.scale))
     best = (0.0, 45.0, -np.inf)

@@ -21,7 +21,7 @@ import trimesh
 from .camera import GroundGrid, PinholeCamera
 from .meshes import load_mesh
 from .occluder import Occluder, posed_vertices
-from .params import Pose, ShadowParams, Sun
+from .params import Pose, ShadowParams, Sun, rotation_matrix_xyz_np
 from .penumbra import PROFILES, RULES, shade
 from .plan import GridPlan, PointPlan, plan_alpha, plan_grid, plan_points
 
@@ -78,7 +78,7 @@ def object_mask(occ: Occluder, pose: Pose, camera: PinholeCamera | GroundGrid) -
     For a top-down ground map, the mesh seen straight down (its footprint from above).
     """
     world = posed_vertices(occ.vertices, np.asarray(pose.position, np.float64),
-                           np.asarray(pose.rotation, np.float64), float(pose.scale))
+                           rotation_matrix_xyz_np(pose.rotation_deg), float(pose.scale))
     if isinstance(camera, GroundGrid):
         uv, front = camera.to_pixel(world), np.ones(len(world), bool)
     else:
