@@ -33,8 +33,9 @@ from .views import PhotoView
 
 __all__ = ["FitOptions", "fit_group"]
 
-#: Levenberg-Marquardt tolerances (relative, absolute) on the parameters and the loss.
-LM_RTOL, LM_ATOL = 1e-4, 1e-5
+#: Levenberg-Marquardt tolerances (relative, absolute) on the parameters and on each residual
+#: (residuals are relative to the lit level, whose noise is ~1e-2: 1e-4 is 1 % of it).
+LM_RTOL, LM_ATOL = 1e-4, 1e-4
 
 
 
