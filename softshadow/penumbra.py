@@ -245,7 +245,8 @@ def edge_coordinate(points, edge_ids: Int[Array, "n K"], edge_vertices_world: Fl
     # gradients) go to the earlier candidate, so rounding cannot flip the choice: a fit's loss
     # jumped under 1e-12 steps and its LM solver stalled on rejected steps.
     abs_u = jnp.abs(u_all.reshape(n_pts, n_cand))
-    best = jnp.argmin(abs_u + 1e-9 * (1.0 + abs_u) * jnp.arange(n_cand), axis=1)
+    tie = 8 * jnp.finfo(abs_u.dtype).eps  # a few ulps, in float32 and float64 alike
+    best = jnp.argmin(abs_u + tie * (1.0 + abs_u) * jnp.arange(n_cand), axis=1)
     # -- the value and its gradient: the chosen edge only --
     eid = jnp.take_along_axis(edge_ids, best[:, None], axis=1)[:, 0]
     ev = edge_vertices_world[eid]
