@@ -282,14 +282,17 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
         rss_no_blur = best.rss + float(best.value["raw_blur"]) ** 2 / max(inv_jtj, 1e-300)
         no_blur_cfg = FitConfig.make(best.config.profile, False, fit_sun, delta, options.rule)
         bic_no_blur = _bic(rss_no_blur, n_eff, _n_free(no_blur_cfg, len(samples)))
-        if bic_no_blur < best.bic:  # worth a solve; kept only if its real BIC is lower too
+        if options.verbose:
+            print(f"  {label}: BIC without blur, to second order: {bic_no_blur:.1f}")
+        # Worth a solve only when the estimate wins by more than 2 (a BIC difference under 2
+        # is not evidence either way; the blur fit contains no blur as blur ~ 0); the solve is
+        # kept only if its real BIC is lower too.
+        if bic_no_blur < best.bic - 2.0:
             trial = run(best.config.profile, False,
                         dict(best.value, raw_blur=jnp.zeros_like(best.value["raw_blur"])))
             if trial.bic < best.bic:
                 best = trial
                 cov, s2 = _covariance(best.residuals, best.jac, n_eff)
-        elif options.verbose:
-            print(f"  {label}: blur kept (BIC without it, to second order: {bic_no_blur:.1f})")
     value, ok, cfg, rss = best.value, best.converged, best.config, best.rss
     result.solve_seconds = _time.perf_counter() - solve_start
     # Standard errors through the reparameterisation.

@@ -48,28 +48,28 @@ class Sun(eqx.Module):
         return light_direction(self.azimuth_deg, self.elevation_deg)
 
 
+def _rotation_xyz(rotation_deg, xp):
+    """Rz @ Ry @ Rx for XYZ Euler angles in degrees, in the array module ``xp``."""
+    rx, ry, rz = xp.deg2rad(xp.asarray(rotation_deg))
+    cx, sx, cy, sy, cz, sz = xp.cos(rx), xp.sin(rx), xp.cos(ry), xp.sin(ry), xp.cos(rz), xp.sin(rz)
+    one, zero = xp.ones_like(cx), xp.zeros_like(cx)
+    Rx = xp.stack([xp.stack([one, zero, zero]), xp.stack([zero, cx, -sx]), xp.stack([zero, sx, cx])])
+    Ry = xp.stack([xp.stack([cy, zero, sy]), xp.stack([zero, one, zero]), xp.stack([-sy, zero, cy])])
+    Rz = xp.stack([xp.stack([cz, -sz, zero]), xp.stack([sz, cz, zero]), xp.stack([zero, zero, one])])
+    return Rz @ Ry @ Rx
+
+
 def rotation_matrix_xyz(rotation_deg) -> Float[Array, "3 3"]:
     """Rotation for XYZ Euler angles in degrees: about x, then y, then z (fixed axes).
 
     Equal to scipy's ``Rotation.from_euler("xyz", angles, degrees=True)``.
     """
-    rx, ry, rz = jnp.deg2rad(jnp.asarray(rotation_deg))
-    cx, sx, cy, sy, cz, sz = jnp.cos(rx), jnp.sin(rx), jnp.cos(ry), jnp.sin(ry), jnp.cos(rz), jnp.sin(rz)
-    one, zero = jnp.ones_like(cx), jnp.zeros_like(cx)
-    Rx = jnp.stack([jnp.stack([one, zero, zero]), jnp.stack([zero, cx, -sx]), jnp.stack([zero, sx, cx])])
-    Ry = jnp.stack([jnp.stack([cy, zero, sy]), jnp.stack([zero, one, zero]), jnp.stack([-sy, zero, cy])])
-    Rz = jnp.stack([jnp.stack([cz, -sz, zero]), jnp.stack([sz, cz, zero]), jnp.stack([zero, zero, one])])
-    return Rz @ Ry @ Rx
+    return _rotation_xyz(rotation_deg, jnp)
 
 
 def rotation_matrix_xyz_np(rotation_deg) -> np.ndarray:
-    """NumPy twin of ``rotation_matrix_xyz`` (float64) for the discrete steps."""
-    rx, ry, rz = np.radians(np.asarray(rotation_deg, dtype=np.float64))
-    cx, sx, cy, sy, cz, sz = np.cos(rx), np.sin(rx), np.cos(ry), np.sin(ry), np.cos(rz), np.sin(rz)
-    Rx = np.array([[1.0, 0.0, 0.0], [0.0, cx, -sx], [0.0, sx, cx]])
-    Ry = np.array([[cy, 0.0, sy], [0.0, 1.0, 0.0], [-sy, 0.0, cy]])
-    Rz = np.array([[cz, -sz, 0.0], [sz, cz, 0.0], [0.0, 0.0, 1.0]])
-    return Rz @ Ry @ Rx
+    """``rotation_matrix_xyz`` in NumPy float64, for the discrete steps (no eager JAX ops)."""
+    return _rotation_xyz(np.asarray(rotation_deg, dtype=np.float64), np)
 
 
 class Pose(eqx.Module):
