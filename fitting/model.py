@@ -15,8 +15,6 @@ pixel's 1/12).
 
 from __future__ import annotations
 
-import functools
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -24,13 +22,13 @@ import numpy as np
 from jaxtyping import Array, Float, Int
 
 from softshadow.params import Pose
-from softshadow.penumbra import PROFILES, profile_alpha
+from softshadow.penumbra import PROFILES, blurred_profile_alpha
 from softshadow.plan import PointPlan, plan_coordinate_light
 from softshadow.sun import light_direction
 
 __all__ = ["GroupArrays", "FitConfig", "K_SCALE", "k_from_raw", "raw_from_k", "rho_from_raw",
            "raw_from_rho", "predict", "angular_pixel_gradient", "residuals", "pseudo_huber",
-           "sample_light", "blurred_alpha", "predict_jit", "edge_terms", "shadow_alpha"]
+           "sample_light", "edge_terms", "shadow_alpha"]
 
 K_SCALE = 0.01
 
@@ -132,37 +130,6 @@ def angular_pixel_gradient(group: GroupArrays, pose: Pose, k, rule: str = "edge"
     return jnp.where(ok, slope / jnp.where(ok, dudt, 1.0), 0.0)
 
 
-_GH_NODES, _GH_WEIGHTS = np.polynomial.hermite_e.hermegauss(12)
-_GH_WEIGHTS = _GH_WEIGHTS / _GH_WEIGHTS.sum()
-
-
-def _profile_slope(u, profile: str):
-    """d alpha / d u of ``profile_alpha`` (0 outside the ramp)."""
-    if profile == "linear":
-        return jnp.where(jnp.abs(u) < 1.0, -0.5, 0.0)
-    uc = jnp.clip(u, -1.0, 1.0)
-    return -2.0 * jnp.sqrt(jnp.maximum(1.0 - uc * uc, 0.0)) / jnp.pi
-
-
-@functools.partial(jax.custom_jvp, nondiff_argnums=(2,))
-def blurred_alpha(u, tau, profile: str):
-    """Alpha (n,) of ``profile`` seen through a Gaussian blur of tau (n,) in u units
-    (12-node Gauss-Hermite). Its JVP is two n-vectors (d/du, d/dtau) made in the primal
-    pass, so each Jacobian column costs O(n), not O(12 n)."""
-    x = u[:, None] + tau[:, None] * _GH_NODES
-    return profile_alpha(x, profile) @ _GH_WEIGHTS
-
-
-@blurred_alpha.defjvp
-def _blurred_alpha_jvp(profile, primals, tangents):
-    (u, tau), (du, dtau) = primals, tangents
-    x = u[:, None] + tau[:, None] * _GH_NODES
-    slope = _profile_slope(x, profile)
-    d_u = slope @ _GH_WEIGHTS
-    d_tau = slope @ (_GH_WEIGHTS * _GH_NODES)
-    return profile_alpha(x, profile) @ _GH_WEIGHTS, d_u * du + d_tau * dtau
-
-
 def _shape_vector(params: dict) -> Float[Array, "4"]:
     """The parameters the shadow's shape depends on: raw_k, sun azimuth and elevation
     corrections (degrees) and raw_blur. The rest (levels, gradients, rho) enter linearly."""
@@ -181,7 +148,7 @@ def edge_terms(shape: Float[Array, "4"], group: GroupArrays, pose: Pose, config:
     variance = 1.0 / 12.0 + config.fit_blur * shape[3]
     slope = dudt * group.grad_t_pixel
     tau = jnp.sqrt(jnp.maximum(variance, 1e-3)) * slope
-    return blurred_alpha(u, tau, config.profile), u, slope
+    return blurred_profile_alpha(u, tau, config.profile), u, slope
 
 
 @jax.custom_jvp
@@ -217,8 +184,6 @@ def predict(params: dict, group: GroupArrays, pose: Pose, config: FitConfig):
     alpha, u, slope = edge_terms(_shape_vector(params), group, pose, config)
     return _shaded(params, group, alpha), alpha, u, slope
 
-
-predict_jit = eqx.filter_jit(predict)
 
 
 def residuals(params: dict, args):

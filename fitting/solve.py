@@ -13,20 +13,19 @@ import dataclasses
 import time as _time
 from typing import NamedTuple
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-import equinox as eqx
-
 from softshadow.params import Pose, Sun
 from softshadow.plan import bucket_size, concatenate_plans
 from softshadow.render import SoftShadowModel
 
-from .overlay import fitted_alpha_image
 from .model import (K_SCALE, FitConfig, GroupArrays, angular_pixel_gradient, predict, raw_from_k,
                     raw_from_rho, residuals)
+from .overlay import fitted_alpha_image
 from .results import GroupResult, OverlayPlotData, ProfilePlotData
 from .samples import NoShadowInView, PhotoSamples, select_samples
 from .views import PhotoView
