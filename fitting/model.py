@@ -2,12 +2,14 @@
 
 Per sample pixel of photo p with albedo class c:
 
-    observed ~ level[p, c] * (1 + g_p . uv) * (1 - alpha * (1 - rho)),
+    observed ~ level[p, c] * (1 + g_p . uv) * (1 - alpha * (1 - rho) - rho * h),
     alpha = profile(u) blurred by a Gaussian of tau = sqrt(blur^2 + 1/12) |du/dpixel|,
 
 where u is softshadow's penumbra coordinate at the pixel's ground point (a
 function of k, the sun and the pose), the 1/12 is the pixel's own area (a
-box of one pixel), and blur is the camera's optical blur in pixels. Bounds
+box of one pixel), blur is the camera's optical blur in pixels, and h the
+sky fraction the object hides from the pixel's ground point (``fitting.sky``;
+0 on open ground, where rho and level are defined). Bounds
 are kept by reparameterisation: k = K_SCALE softplus(raw_k),
 rho = sigmoid(raw_rho), blur variance = raw_blur (pixels^2, added to the
 pixel's 1/12).
@@ -57,7 +59,8 @@ class GroupArrays(eqx.Module):
     ground (n, 3); jac (n, 2, 2); observed (n,); weight (n,); photo (n,) photo index;
     albedo_class (n,); uv_norm (n, 2); plan: one plan for all photos (their edges
     stacked); sun_azimuth_deg, sun_elevation_deg, scale (P,) per photo;
-    grad_t_pixel (n,) |dT/dpixel| at the start.
+    grad_t_pixel (n,) |dT/dpixel| at the start; sky_hidden (n,) the sky fraction the object
+    hides from each sample (``fitting.sky``).
     """
 
     ground: Float[Array, "n 3"]
@@ -72,6 +75,7 @@ class GroupArrays(eqx.Module):
     sun_elevation_deg: Float[Array, " P"]
     scale: Float[Array, " P"]
     grad_t_pixel: Float[Array, " n"]
+    sky_hidden: Float[Array, " n"]
 
 
 class FitConfig(eqx.Module):
@@ -172,11 +176,12 @@ def _shadow_alpha_jvp(primals, tangents):
 
 
 def _shaded(params: dict, group: GroupArrays, alpha):
-    """Linear values (n,): each photo's lit level and gradient times the shadow factor."""
+    """Linear values (n,): each photo's open-ground lit level and gradient times the shadow
+    factor, less the sky the object hides (rho is the sky's share on open ground)."""
     rho = rho_from_raw(params["raw_rho"])
     level = jnp.exp(params["log_level"][group.photo, group.albedo_class])
     level = level * (1.0 + jnp.sum(group.uv_norm * params["gradient"][group.photo], -1))
-    return level * (1.0 - alpha * (1.0 - rho))
+    return level * (1.0 - alpha * (1.0 - rho) - rho * group.sky_hidden)
 
 
 def predict(params: dict, group: GroupArrays, pose: Pose, config: FitConfig):

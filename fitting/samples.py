@@ -14,6 +14,7 @@ import dataclasses
 
 import cv2
 import numpy as np
+import trimesh
 
 from softshadow.params import Pose, Sun, rotation_matrix_xyz_np
 from softshadow.plan import PointPlan, edge_band_widths
@@ -21,6 +22,7 @@ from softshadow.raster import project_to_ground
 from softshadow.occluder import posed_vertices, silhouette
 from softshadow.render import SoftShadowModel, object_mask
 
+from .sky import hidden_sky_fraction
 from .views import PhotoView
 
 __all__ = ["PhotoSamples", "select_samples", "NoShadowInView", "paper_mask"]
@@ -50,6 +52,7 @@ class PhotoSamples:
     plan: PointPlan
     n_profiles: int
     band_px: int
+    sky_hidden: np.ndarray | None = None  # (n,) sky fraction the object hides (``fitting.sky``)
 
 
 def paper_mask(gray: np.ndarray, exclude: np.ndarray) -> np.ndarray | None:
@@ -139,8 +142,11 @@ def _boundary_ground_points(model: SoftShadowModel, pose: Pose, sun: Sun, spacin
 
 def select_samples(model: SoftShadowModel, pose: Pose, view: PhotoView, range_k_max: float = 0.03,
                    sun_margin_deg: float = 0.3, max_samples: int = 12000, seed: int = 0,
-                   min_band_px: int = 5, max_band_px: int = 80) -> PhotoSamples:
+                   min_band_px: int = 5, max_band_px: int = 80,
+                   sky_occlusion: bool = True) -> PhotoSamples:
     """Pixels in a band around the predicted shadow boundary of one photo.
+
+    sky_occlusion: also find, per sample, the sky fraction the object hides (else 0).
 
     Raises NoShadowInView when no usable boundary pixel is in the frame.
     """
@@ -209,4 +215,6 @@ def select_samples(model: SoftShadowModel, pose: Pose, view: PhotoView, range_k_
         observed=view.gray[rows, cols].astype(np.float64),
         albedo_class=(np.zeros(len(rows), int) if paper is None else (~paper[rows, cols]).astype(int)),
         uv_norm=np.column_stack([cols / w - 0.5, rows / h - 0.5]),
-        profile_id=profile_id, plan=plan, n_profiles=int(len(np.unique(profile_id))), band_px=band_px)
+        profile_id=profile_id, plan=plan, n_profiles=int(len(np.unique(profile_id))), band_px=band_px,
+        sky_hidden=(hidden_sky_fraction(trimesh.Trimesh(world, model.occluder.faces, process=False),
+                                        ground) if sky_occlusion else np.zeros(len(ground))))

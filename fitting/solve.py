@@ -55,6 +55,7 @@ class FitOptions:
     robust: bool = True
     max_steps: int = 60
     seed: int = 0
+    sky_occlusion: bool = True  # model the sky the object hides from each sample (fitting.sky)
     plots: bool = True
     overlays: str = "first"  # overlay plots for the "first" photo of each group, or "all"
     verbose: bool = False
@@ -85,7 +86,9 @@ def _group_arrays(samples: list[PhotoSamples], views: list[PhotoView]) -> GroupA
         uv_norm=jnp.asarray(pad(cat([s.uv_norm for s in samples]))), plan=plan,
         sun_azimuth_deg=jnp.asarray([float(v.sun_azimuth_deg) for v in views]),
         sun_elevation_deg=jnp.asarray([float(v.sun_elevation_deg) for v in views]),
-        scale=jnp.asarray(scales), grad_t_pixel=jnp.zeros(size))
+        scale=jnp.asarray(scales), grad_t_pixel=jnp.zeros(size),
+        sky_hidden=jnp.asarray(pad(cat([s.sky_hidden if s.sky_hidden is not None
+                                        else np.zeros(len(s.observed)) for s in samples]))))
 
 
 def _initial_params(samples: list[PhotoSamples], fit_sun: bool) -> tuple[dict, float]:
@@ -228,7 +231,8 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
     for i, view in enumerate(views):
         try:
             samples.append(select_samples(model, pose, view, options.range_k_max,
-                                          max_samples=options.max_samples_per_photo, seed=options.seed + i))
+                                          max_samples=options.max_samples_per_photo, seed=options.seed + i,
+                                          sky_occlusion=options.sky_occlusion))
             used.append(view)
         except NoShadowInView as exc:
             result.warnings.append(f"{view.name}: {exc}")
@@ -323,6 +327,7 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
     result.sun_source = used[0].sun_source
     # Penumbra width in pixels at the solution; identifiability.
     pred, alpha, u, slope = (np.asarray(x) for x in best.diagnostics)
+    sky_hidden = np.asarray(arrays.sky_hidden)
     widths = []
     start_i = 0
     for i, s in enumerate(samples):
@@ -332,7 +337,7 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
         if in_pen.any():
             widths.append(2.0 / np.maximum(slope[sl][in_pen], 1e-12))
         if options.plots:
-            lvl = pred[sl] / np.maximum(1 - alpha[sl] * (1 - rho), 1e-9)
+            lvl = pred[sl] / np.maximum(1 - alpha[sl] * (1 - rho) - rho * sky_hidden[sl], 1e-9)
             dist = np.where(slope[sl] > 0, u[sl] / np.maximum(slope[sl], 1e-12), np.nan)
             result.plot_profiles.append(ProfilePlotData(
                 s.name, dist, s.observed / lvl, pred[sl] / lvl, s.profile_id))

@@ -32,3 +32,17 @@ def test_paper_mask_none_without_a_bright_sheet():
     rng = np.random.default_rng(1)
     flat = (0.3 + 0.01 * rng.standard_normal((200, 200))).astype(np.float32)
     assert paper_mask(flat, np.zeros((200, 200), bool)) is None
+
+
+def test_hidden_sky_fraction_of_a_disk_overhead_matches_its_solid_angle():
+    """A disk of radius R at height d hides sin^2(atan(R/d)) = R^2 / (R^2 + d^2) of the
+    cosine-weighted sky from the point below its centre, and nothing from far away."""
+    import trimesh
+
+    from fitting.sky import hidden_sky_fraction
+    R, d = 1.0, 1.5
+    disk = trimesh.creation.cylinder(radius=R, height=0.01, sections=128)
+    disk.apply_translation([0.0, 0.0, d])
+    h = hidden_sky_fraction(disk, np.array([[0.0, 0.0, 0.0], [500.0, 0.0, 0.0]]), n_directions=4096)
+    assert abs(h[0] - R**2 / (R**2 + d**2)) < 0.005
+    assert h[1] == 0.0
