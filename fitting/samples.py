@@ -121,7 +121,7 @@ def _boundary_ground_points(model: SoftShadowModel, pose: Pose, sun: Sun, spacin
     rotation = rotation_matrix_xyz_np(pose.rotation_deg)  # NumPy: no eager JAX ops
     world = posed_vertices(occ.vertices, np.asarray(pose.position, np.float64), rotation,
                            float(pose.scale))
-    light = np.asarray(sun.light, np.float64)
+    light = sun.light_np
     sil = silhouette(occ, world, rotation, light)
     if not len(sil.vertex_ids):
         return np.zeros((0, 3)), np.zeros(0), world, light, sil

@@ -47,7 +47,7 @@ def bench_render(sizes=(256, 512, 1024), meshes=("pillar", "ball", "dragon"), re
     for name in meshes:
         model = SoftShadowModel.from_mesh(name)
         world = np.asarray(model.occluder.vertices)
-        g = project_to_ground(world, np.asarray(sun.light))
+        g = project_to_ground(world, sun.light_np)
         pts = np.vstack([g, world[:, :2]])
         centre = (pts.min(0) + pts.max(0)) / 2
         extent = float((pts.max(0) - pts.min(0)).max()) * 1.1

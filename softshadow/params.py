@@ -47,6 +47,11 @@ class Sun(eqx.Module):
         """Direction the light travels, L = -s, shape (3,)."""
         return light_direction(self.azimuth_deg, self.elevation_deg)
 
+    @property
+    def light_np(self) -> np.ndarray:
+        """``light`` in NumPy float64, for the discrete steps (no eager JAX ops)."""
+        return light_direction(float(self.azimuth_deg), float(self.elevation_deg), np)
+
 
 def _rotation_xyz(rotation_deg, xp):
     """Rz @ Ry @ Rx for XYZ Euler angles in degrees, in the array module ``xp``."""

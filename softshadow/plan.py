@@ -80,9 +80,7 @@ def _concrete_geometry(occ: Occluder, pose: Pose, sun: Sun):
     rotation = rotation_matrix_xyz_np(np.asarray(pose.rotation_deg, np.float64))
     world = posed_vertices(occ.vertices, np.asarray(pose.position, np.float64), rotation,
                            float(pose.scale))
-    az, el = np.radians(float(sun.azimuth_deg)), np.radians(el)
-    light = -np.array([np.sin(az) * np.cos(el), np.cos(az) * np.cos(el), np.sin(el)])
-    return world, rotation, light
+    return world, rotation, sun.light_np
 
 
 def edge_band_widths(world_a: np.ndarray, world_b: np.ndarray, outward: np.ndarray,

@@ -93,7 +93,7 @@ def _default_grid(model, pose, sun, w, h, pixel_m):
     """A north-up map framing the object and its whole shadow."""
     from .raster import project_to_ground
     world = np.asarray(pose.apply(model.occluder.vertices))
-    g = project_to_ground(world, np.asarray(sun.light))
+    g = project_to_ground(world, sun.light_np)
     pts = np.vstack([g, world[:, :2]])
     lo, hi = pts.min(0), pts.max(0)
     centre = (lo + hi) / 2

@@ -20,16 +20,19 @@ class SunBelowHorizonError(ValueError):
     """The sun is at or below the horizon: there is no direct-sun shadow."""
 
 
-def sun_direction(azimuth_deg, elevation_deg) -> Float[Array, "3"]:
-    """Unit vector towards the sun, shape (3,), from angles in degrees."""
-    a = jnp.deg2rad(azimuth_deg)
-    e = jnp.deg2rad(elevation_deg)
-    return jnp.stack([jnp.sin(a) * jnp.cos(e), jnp.cos(a) * jnp.cos(e), jnp.sin(e)])
+def sun_direction(azimuth_deg, elevation_deg, xp=jnp) -> Float[Array, "3"]:
+    """Unit vector towards the sun, shape (3,), from angles in degrees.
+
+    xp: the array module, ``jax.numpy`` (differentiable) or ``numpy`` (for the discrete
+    steps, which must not dispatch eager JAX ops)."""
+    a = xp.deg2rad(azimuth_deg)
+    e = xp.deg2rad(elevation_deg)
+    return xp.stack([xp.sin(a) * xp.cos(e), xp.cos(a) * xp.cos(e), xp.sin(e)])
 
 
-def light_direction(azimuth_deg, elevation_deg) -> Float[Array, "3"]:
-    """Unit direction the sunlight travels, L = -s, shape (3,)."""
-    return -sun_direction(azimuth_deg, elevation_deg)
+def light_direction(azimuth_deg, elevation_deg, xp=jnp) -> Float[Array, "3"]:
+    """Unit direction the sunlight travels, L = -s, shape (3,) (xp as in ``sun_direction``)."""
+    return -sun_direction(azimuth_deg, elevation_deg, xp)
 
 
 def solar_position(time: _dt.datetime, latitude: float, longitude: float,
