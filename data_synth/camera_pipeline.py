@@ -20,7 +20,7 @@ import math
 import cv2
 import numpy as np
 
-from softshadow.camera import GroundGrid, PinholeCamera, look_at_camera
+from softshadow import GroundGrid, PinholeCamera, look_at_camera
 
 __all__ = ["SensorSettings", "handheld_camera", "fit_handheld_camera", "topdown_grid", "expose",
            "apply_optics", "apply_sensor_noise", "srgb_encode", "srgb_decode", "camera_pipeline"]

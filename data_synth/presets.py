@@ -28,7 +28,7 @@ from zoneinfo import ZoneInfo
 
 import numpy as np
 
-from softshadow.sun import solar_position
+from scene import solar_position
 
 from .camera_pipeline import SensorSettings
 from .lighting import SunSky

@@ -210,13 +210,13 @@ class ModelRenderer:
         if scene.receiver.mesh is not None:
             raise ValueError("the model renderer draws shadows on the plane z = 0 only; "
                              "use renderer='physical' for a non-plane receiver")
-        from softshadow.render import SoftShadowModel
+        from softshadow import SoftShadowModel
         self.scene = scene
         self.model = SoftShadowModel.from_mesh(scene.object_mesh, rule=rule, profile=profile)
 
     def render(self, rays: ViewRays, sun: SunSky, ground: GroundAppearance,
                rng: np.random.Generator) -> ViewRender:
-        from softshadow.params import Pose, ShadowParams, Sun
+        from softshadow import Pose, ShadowParams, Sun
         t0 = time.perf_counter()
         hits = trace(rays, self.scene.object_mesh, self.scene.receiver)
         recv = np.flatnonzero(hits.kind == KIND_RECEIVER)

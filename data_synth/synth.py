@@ -19,10 +19,8 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from softshadow.camera import GroundGrid, PinholeCamera
-from softshadow.meshes import builtin_mesh
-from softshadow.params import brightness_to_paper, rotation_matrix_xyz
-from softshadow.scene_io import CameraSpec, ObjectSpec, PhotoSpec, SceneSpec, SiteSpec, dump_scene
+from scene import CameraSpec, ObjectSpec, PhotoSpec, SceneSpec, SiteSpec, dump_scene
+from softshadow import GroundGrid, PinholeCamera, brightness_to_paper, builtin_mesh, pose_matrix
 
 from .camera_pipeline import camera_pipeline, fit_handheld_camera, topdown_grid
 from .image_io import EXTENSIONS, FORMATS, PhotoMetadata, write_corrupt_jpeg, write_photo
@@ -40,10 +38,10 @@ class OutputExistsError(FileExistsError):
 
 
 def posed_mesh(name: str, position, rotation_deg, scale: float) -> trimesh.Trimesh:
-    """A built-in mesh placed in the world as softshadow.params.Pose does:
+    """A built-in mesh placed in the world as softshadow.Pose does:
     x_world = R(rotation_deg) (scale x_mesh) + position."""
     mesh = builtin_mesh(name)
-    R = np.asarray(rotation_matrix_xyz(np.asarray(rotation_deg, dtype=np.float64)), dtype=np.float64)
+    R = pose_matrix(rotation_deg)
     v = (float(scale) * np.asarray(mesh.vertices)) @ R.T + np.asarray(position, dtype=np.float64)
     return trimesh.Trimesh(v, np.asarray(mesh.faces), process=False)
 

@@ -11,7 +11,7 @@ import dataclasses
 import numpy as np
 import trimesh
 
-from softshadow.camera import GroundGrid, PinholeCamera
+from softshadow import GroundGrid, PinholeCamera
 
 __all__ = ["ViewRays", "SurfaceHits", "pinhole_rays", "topdown_rays", "trace", "pixel_axes",
            "KIND_NONE", "KIND_RECEIVER", "KIND_OBJECT"]

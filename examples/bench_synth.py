@@ -23,10 +23,10 @@ import numpy as np
 import trimesh
 
 from data_synth import RenderQuality, SunSky, synthesize
-from data_synth.cli import parse_size
+from softshadow_cli.synth_command import parse_size
 from data_synth.physical import sky_visibility, sky_visibility_map, sun_visibility
 from data_synth.receivers import PlaneReceiver
-from softshadow.meshes import builtin_mesh
+from softshadow import builtin_mesh
 
 
 def penumbra_noise(n_samples: int, seed: int = 0) -> float:

@@ -4,11 +4,11 @@ Photos are read linearly (``photos``), timed and grouped (``exif``, ``grouping``
 registered (scene cameras or a ChArUco board, ``markers``), sampled near the
 predicted shadow boundary (``samples``) and fitted with the differentiable
 renderer and optimistix (``model``, ``solve``); ``api`` runs whole folders and
-``report``/``plots`` write the Table-2 report. Fits run in float64: importing
-``fitting.api`` turns on JAX's 64-bit mode when a fit starts.
+``report``/``plots`` write the Table-2 report. Fits run in float64, scoped to
+the fitting call (``jax.enable_x64``), so the caller's own precision is kept.
 """
 
-from .api import FolderError, fit_folder, fit_photos
+from .api import FolderError, fit_and_report, fit_folder, fit_photos
 from .edge_measure import EdgeMeasurement, measure_shadow_edges
 from .exif import intrinsics_from_exif, photo_time_from_exif, read_exif
 from .grouping import NO_TIME_REASON, PhotoGroup, group_photos, photo_time
@@ -23,7 +23,7 @@ from .solve import FitOptions, fit_group
 from .views import PhotoView
 
 __all__ = [
-    "EdgeMeasurement", "FitOptions", "FitResults", "FolderError", "GroupResult", "IMAGE_EXTENSIONS",
+    "EdgeMeasurement", "FitOptions", "fit_and_report", "FitResults", "FolderError", "GroupResult", "IMAGE_EXTENSIONS",
     "NO_TIME_REASON", "NoShadowInView", "PAPER_TABLE2", "Photo", "PhotoError", "PhotoGroup",
     "PhotoView", "RAW_EXTENSIONS", "Registration", "RegistrationError", "board_from_spec",
     "board_outline_world", "board_world_points", "fit_folder", "fit_group", "fit_photos",

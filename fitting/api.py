@@ -22,11 +22,8 @@ import jax
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from softshadow.meshes import MeshError
-from softshadow.params import Pose
-from softshadow.render import SoftShadowModel
-from softshadow.scene_io import CameraSpec, SceneError, SceneSpec, load_scene
-from softshadow.sun import SunBelowHorizonError, check_sun_above_horizon, solar_position
+from scene import CameraSpec, SceneError, SceneSpec, load_scene, photo_sun
+from softshadow import MeshError, Pose, SoftShadowModel, SunBelowHorizonError, check_sun_above_horizon
 
 from .exif import intrinsics_from_exif
 from .grouping import PhotoGroup, group_photos, photo_time
@@ -35,15 +32,11 @@ from .results import FitResults, GroupResult
 from .solve import FitOptions, fit_group
 from .views import PhotoView
 
-__all__ = ["fit_folder", "fit_photos", "FolderError"]
+__all__ = ["fit_folder", "fit_photos", "fit_and_report", "FolderError"]
 
 
 class FolderError(ValueError):
     """The folder as a whole cannot be fitted (no images, unreadable scene.toml)."""
-
-
-def _enable_x64():
-    jax.config.update("jax_enable_x64", True)
 
 
 def _safe_label(label: str) -> str:
@@ -87,17 +80,11 @@ def _camera_view(photo: Photo, spec: CameraSpec | None, view: PhotoView) -> None
 
 
 def _sun_view(name: str, when: _dt.datetime | None, scene: SceneSpec, view: PhotoView) -> None:
-    spec = scene.photo(name)
-    if spec.sun_azimuth_deg is not None and spec.sun_elevation_deg is not None:
-        view.sun_azimuth_deg, view.sun_elevation_deg = spec.sun_azimuth_deg, spec.sun_elevation_deg
-        view.sun_source = "given"
-    elif when is not None and scene.site is not None and when.tzinfo is not None:
-        view.sun_azimuth_deg, view.sun_elevation_deg = solar_position(
-            when, scene.site.latitude, scene.site.longitude, scene.site.altitude_m)
-        view.sun_source = "time+site"
-    else:
+    sun = photo_sun(scene, name, when)
+    if sun is None:
         view.sun_source = "fitted"
         return
+    view.sun_azimuth_deg, view.sun_elevation_deg, view.sun_source = sun.azimuth_deg, sun.elevation_deg, sun.source
     check_sun_above_horizon(view.sun_elevation_deg)
 
 
@@ -157,14 +144,19 @@ def fit_photos(photos: list[Photo], scene: SceneSpec | None = None, options: Fit
     progress: a callable returning a progress bar (tqdm-like: update, close) for the groups.
     jobs: groups fitted at once (threads).
     """
-    # NumPy's BLAS threads spin after each call and starved XLA's: solves ran 10-20x slower
-    # after a covariance or a matrix product. One BLAS thread for the fit's small products.
-    with threadpool_limits(limits=1, user_api="blas"):
+    # Fits run in float64 (LM in float32 stalls short of its tolerances), scoped to this call so
+    # that a caller's own JAX code keeps its precision; one BLAS thread, see softshadow_cli.main.
+    with jax.enable_x64(True), threadpool_limits(limits=1, user_api="blas"):
         return _fit_photos(photos, scene, options, progress, done, on_group, jobs)
 
 
+def _in_float64(fn, *args):
+    """fn(*args) in float64 and one BLAS thread: JAX's precision switch is per thread."""
+    with jax.enable_x64(True), threadpool_limits(limits=1, user_api="blas"):
+        return fn(*args)
+
+
 def _fit_photos(photos, scene, options, progress, done, on_group, jobs) -> FitResults:
-    _enable_x64()
     options = options or FitOptions()
     skipped: list[dict] = []
     by_name = {p.name: p for p in photos}
@@ -223,7 +215,7 @@ def _fit_photos(photos, scene, options, progress, done, on_group, jobs) -> FitRe
     if jobs > 1 and len(groups) > 1:
         # Threads: XLA releases the GIL, and the compiled solver is shared between them.
         with concurrent.futures.ThreadPoolExecutor(max_workers=jobs) as pool:
-            futures = {pool.submit(fit_one, g): i for i, g in enumerate(groups)}
+            futures = {pool.submit(_in_float64, fit_one, g): i for i, g in enumerate(groups)}
             for future in concurrent.futures.as_completed(futures):
                 result, more = future.result()
                 ordered[futures[future]] = result
@@ -304,4 +296,30 @@ def fit_folder(path, scene: SceneSpec | str | Path | None = None, options: FitOp
 
     results = fit_photos(photos, scene, options, half_size, progress, done, keep, jobs)
     results.skipped = skipped + results.skipped
+    return results
+
+
+def fit_and_report(photo_dir, out_dir, options: FitOptions | None = None, force: bool = False,
+                   half_size: bool = False, truth=None, reference=None, jobs: int = 1,
+                   progress: Callable | None = None) -> FitResults:
+    """Fit a folder and write everything into ``out_dir``: results.json, table2.md/.csv and
+    plots/ (``fit_folder`` then ``report.write_report``); returns the FitResults.
+
+    truth, reference: a truth.json document and the paper's table, shown beside the fit.
+    """
+    from .report import plot_group_safely, write_report
+
+    options = options or FitOptions()
+    # Each group's plots are drawn in a background thread while the next group is fitted
+    # (the fit spends its time in XLA and OpenCV, which release the GIL).
+    with concurrent.futures.ThreadPoolExecutor(max_workers=1) as plotter:
+        pending = []
+        on_group = ((lambda g: pending.append(plotter.submit(plot_group_safely, g, out_dir)))
+                    if options.plots else None)
+        results = fit_folder(photo_dir, options=options, out_dir=out_dir, force=force,
+                             half_size=half_size, progress=progress, jobs=jobs,
+                             on_group=on_group)
+        group_plots = [p for f in pending for p in f.result()]
+    write_report(results, out_dir, reference=reference, truth=truth, plots=options.plots,
+                 group_plots=group_plots)
     return results

@@ -15,7 +15,7 @@ import datetime as _dt
 import math
 from typing import Mapping
 
-from softshadow.scene_io import SceneSpec, parse_time
+from scene import SceneSpec, parse_time
 
 from .exif import photo_time_from_exif
 
@@ -30,7 +30,7 @@ def photo_time(name: str, exif: Mapping, scene: SceneSpec | None) -> _dt.datetim
     EXIF first, else scene.toml ``[photos."name"].time``. With a site time zone in
     the scene, naive times are taken as the site's local time and aware times are
     converted to it, so ``.hour``/``.minute`` are the site's local civil time.
-    Raises softshadow.scene_io.SceneError for a scene time that is not ISO 8601.
+    Raises scene.SceneError for a scene time that is not ISO 8601.
     """
     tz_name = scene.site.timezone if scene is not None and scene.site is not None else None
     when = photo_time_from_exif(dict(exif or {}))

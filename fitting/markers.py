@@ -23,8 +23,8 @@ import dataclasses
 import cv2
 import numpy as np
 
-from softshadow.camera import PinholeCamera
-from softshadow.scene_io import CameraSpec
+from scene import CameraSpec
+from softshadow import PinholeCamera
 
 from .exif import intrinsics_from_exif
 from .photos import REC709_WEIGHTS, linear_to_srgb

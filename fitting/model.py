@@ -23,10 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
-from softshadow.params import Pose
-from softshadow.penumbra import PROFILES, blurred_profile_alpha
-from softshadow.plan import PointPlan, plan_coordinate_light
-from softshadow.sun import light_direction
+from softshadow import PROFILES, PointPlan, Pose, blurred_profile_alpha, light_direction, plan_coordinate_light
 
 __all__ = ["GroupArrays", "FitConfig", "K_SCALE", "k_from_raw", "raw_from_k", "rho_from_raw",
            "raw_from_rho", "predict", "angular_pixel_gradient", "residuals", "pseudo_huber",

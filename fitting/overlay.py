@@ -10,10 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from softshadow.camera import GroundGrid, PinholeCamera
-from softshadow.params import Pose, Sun
-from softshadow.plan import PointPlan, plan_alpha_jit
-from softshadow.render import SoftShadowModel, object_mask
+from softshadow import GroundGrid, PinholeCamera, PointPlan, Pose, SoftShadowModel, Sun, object_mask, plan_alpha_jit
 
 __all__ = ["fitted_alpha_image"]
 

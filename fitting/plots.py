@@ -23,9 +23,9 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import MultipleLocator
 from matplotlib.transforms import offset_copy
 
-from .report import (_minutes, _time_order, brightness_stderr, range_stderr_paper,
-                     reference_for_group, truth_for_group)
-from softshadow.params import brightness_to_paper, range_to_paper
+from .comparison import (brightness_stderr, groups_in_time_order, minutes_of_day, range_stderr_paper,
+                         reference_for_group, truth_for_group)
+from softshadow import brightness_to_paper, range_to_paper
 from .results import FitResults, GroupResult, OverlayPlotData, ProfilePlotData
 
 __all__ = ["safe_name", "plot_group", "plot_profiles", "plot_overlay", "plot_range_vs_time",
@@ -268,10 +268,10 @@ def plot_range_vs_time(results: FitResults, out_dir, reference: Mapping | None =
     """OUT_DIR/plots/range_vs_time.png: range (100 k) and brightness (255 rho^(1/2.2))
     against time of day, one-sigma error bars, upper bounds as down-arrows; reference
     and truth values as open markers when given. None when no fitted group has a time."""
-    groups = [g for g in _time_order(results.groups) if g.fitted and _minutes(g.time) is not None]
+    groups = [g for g in groups_in_time_order(results.groups) if g.fitted and minutes_of_day(g.time) is not None]
     if not groups:
         return None
-    t = np.array([_minutes(g.time) for g in groups])
+    t = np.array([minutes_of_day(g.time) for g in groups])
     fig = Figure(figsize=(6.5, 5.5), layout="constrained")
     ax_r, ax_b = fig.subplots(2, 1, sharex=True)
 

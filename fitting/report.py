@@ -21,16 +21,18 @@ import json
 import logging
 import math
 import os
-import re
 import tempfile
 from importlib import metadata
 from pathlib import Path
-from typing import Iterator, Mapping, Sequence
+from typing import Iterator, Sequence
 
 import numpy as np
 
-from softshadow.params import brightness_to_paper, range_to_paper
+from softshadow import brightness_to_paper, range_to_paper
 
+from .comparison import (PAPER_TABLE2, PAPER_TIME_TOLERANCE_MIN, brightness_stderr, finite_or_none,
+                         groups_in_time_order,
+                         nearest_paper_time, range_stderr_paper, reference_for_group, truth_for_group)
 from .results import FitResults, GroupResult
 
 __all__ = [
@@ -40,14 +42,6 @@ __all__ = [
 ]
 
 logger = logging.getLogger(__name__)
-
-#: The paper's hand-set Table 2 (seed 002, section 4.1): time -> (range, brightness),
-#: in paper units (range = 100 k, brightness = 255 rho^(1/2.2)).
-PAPER_TABLE2: dict[str, tuple[float, float]] = {
-    "09:20": (6.0, 110.0), "13:21": (5.0, 120.0), "16:21": (8.0, 180.0)}
-
-#: A group's time matches a reference time at most this far away (minutes).
-PAPER_TIME_TOLERANCE_MIN = 30.0
 
 UPPER_BOUND = "≤"
 MISSING = "—"
@@ -75,89 +69,6 @@ def software_versions() -> dict[str, str | None]:
     opencv = next((v for v in map(version, _OPENCV_DISTRIBUTIONS) if v is not None), None)
     return {"softshadow": version("softshadow"), "jax": version("jax"),
             "optimistix": version("optimistix"), "numpy": version("numpy"), "opencv": opencv}
-
-
-# --------------------------------------------------------------------------- matching
-
-_HHMM = re.compile(r"^\s*(\d{1,2}):(\d{2})(?::\d{2}(?:\.\d*)?)?\s*$")
-
-
-def _minutes(time_of_day: str | None) -> float | None:
-    """'HH:MM' (or 'H:MM', 'HH:MM:SS') -> minutes since midnight; None if not a time."""
-    if time_of_day is None:
-        return None
-    m = _HHMM.match(str(time_of_day))
-    if m is None:
-        return None
-    hours, minutes = int(m.group(1)), int(m.group(2))
-    if hours > 23 or minutes > 59:
-        return None
-    return hours * 60.0 + minutes
-
-
-def nearest_paper_time(time_of_day: str | None, paper_times: Sequence[str] = tuple(PAPER_TABLE2),
-                       tolerance_min: float = PAPER_TIME_TOLERANCE_MIN) -> str | None:
-    """The entry of ``paper_times`` nearest to ``time_of_day`` ('HH:MM'), if within
-    ``tolerance_min`` minutes; else None (also for a missing or unparsable time)."""
-    here = _minutes(time_of_day)
-    if here is None:
-        return None
-    candidates = [(abs(_minutes(t) - here), t) for t in paper_times if _minutes(t) is not None]
-    if not candidates:
-        return None
-    gap, best = min(candidates)
-    return best if gap <= tolerance_min else None
-
-
-def reference_for_group(group: GroupResult, reference: Mapping[str, tuple[float, float]] | None
-                        ) -> tuple[float, float] | None:
-    """The (range, brightness) reference for a group: by its label, else by the
-    reference time nearest its time of day (within 30 minutes)."""
-    if not reference:
-        return None
-    if group.label in reference:
-        return reference[group.label]
-    key = nearest_paper_time(group.time, tuple(reference))
-    return None if key is None else reference[key]
-
-
-def truth_for_group(group: GroupResult, truth: Mapping | None) -> dict | None:
-    """The truth.json group for a result group: the one sharing most photos, else the
-    one with the same label, else None."""
-    if not truth:
-        return None
-    entries = [t for t in truth.get("groups", []) if isinstance(t, Mapping)]
-    photos = set(group.photos)
-    overlap = [(len(photos & set(t.get("photos") or [])), i) for i, t in enumerate(entries)]
-    overlap = [o for o in overlap if o[0] > 0]
-    if overlap:
-        return dict(entries[max(overlap)[1]])
-    same = [t for t in entries if t.get("label") == group.label]
-    return dict(same[0]) if same else None
-
-
-# --------------------------------------------------------------------------- uncertainty
-
-def _finite(x) -> float | None:
-    if x is None:
-        return None
-    x = float(x)
-    return x if math.isfinite(x) else None
-
-
-def range_stderr_paper(group: GroupResult) -> float | None:
-    """One-sigma of ``range`` = 100 k in paper units."""
-    s = _finite(group.range_stderr)
-    return None if s is None else float(range_to_paper(s))
-
-
-def brightness_stderr(rho: float | None, rho_stderr: float | None) -> float | None:
-    """One-sigma of brightness = 255 rho^(1/2.2), to first order:
-    255/2.2 rho^(1/2.2 - 1) * stderr(rho). None where undefined (rho <= 0)."""
-    rho, s = _finite(rho), _finite(rho_stderr)
-    if rho is None or s is None or rho <= 0.0:
-        return None
-    return 255.0 / 2.2 * rho ** (1.0 / 2.2 - 1.0) * s
 
 
 # --------------------------------------------------------------------------- atomic files
@@ -238,13 +149,6 @@ class TableCell:
     notes: list[str] = dataclasses.field(default_factory=list)
 
 
-def _time_order(groups: Sequence[GroupResult]) -> list[GroupResult]:
-    """Groups by time of day; groups without a parsable time keep their order, last."""
-    keyed = [(0, _minutes(g.time), i) if _minutes(g.time) is not None else (1, 0.0, i)
-             for i, g in enumerate(groups)]
-    return [groups[i] for *_, i in sorted(keyed)]
-
-
 _UPPER_NOTE = ("upper bound (identifiable: false): the data do not constrain the range "
                "(e.g. a penumbra narrower than a pixel); the true range is at most this value")
 
@@ -261,12 +165,12 @@ def _group_notes(g: GroupResult) -> list[str]:
 
 def _no_range_note(g: GroupResult) -> str:
     text = f"{g.label}: no scene geometry, so no range; "
-    if _finite(g.penumbra_px) is None:
+    if finite_or_none(g.penumbra_px) is None:
         return text + "no penumbra width measured"
     text += f"penumbra width {_fmt(g.penumbra_px, 3)} px"
-    if _finite(g.penumbra_px_iqr) is not None:
+    if finite_or_none(g.penumbra_px_iqr) is not None:
         text += f" (IQR {_fmt(g.penumbra_px_iqr, 3)} px)"
-    if _finite(g.penumbra_m) is not None:
+    if finite_or_none(g.penumbra_m) is not None:
         text += f", {_fmt(g.penumbra_m, 3)} m"
     return text + " along the shadow edges"
 
@@ -290,17 +194,17 @@ def _table_rows(groups: Sequence[GroupResult], reference, truth
         if g.range_k is None:
             return TableCell(None)
         bound = not g.identifiable
-        return TableCell(g.range_k, _finite(g.range_stderr), bound, [_UPPER_NOTE] if bound else [])
+        return TableCell(g.range_k, finite_or_none(g.range_stderr), bound, [_UPPER_NOTE] if bound else [])
 
     rows.append((RANGE_NAME + " (100 k)", "range", cells(range_cell)))
     rows.append((BRIGHTNESS_NAME + " (255 ρ^(1/2.2))", "brightness",
                  cells(lambda g: TableCell(g.brightness, brightness_stderr(g.rho, g.rho_stderr)))))
     rows.append(("k (physical range)", "range_k", cells(k_cell)))
     rows.append(("ρ (physical brightness)", "rho",
-                 cells(lambda g: TableCell(_finite(g.rho), _finite(g.rho_stderr)))))
-    if any(_finite(g.penumbra_px) is not None for g in groups):
+                 cells(lambda g: TableCell(finite_or_none(g.rho), finite_or_none(g.rho_stderr)))))
+    if any(finite_or_none(g.penumbra_px) is not None for g in groups):
         rows.append(("Penumbra width (px, median; ± is the IQR)", "penumbra_px",
-                     cells(lambda g: TableCell(_finite(g.penumbra_px), _finite(g.penumbra_px_iqr)))))
+                     cells(lambda g: TableCell(finite_or_none(g.penumbra_px), finite_or_none(g.penumbra_px_iqr)))))
 
     if reference:
         refs = [reference_for_group(g, reference) for g in groups]
@@ -313,7 +217,7 @@ def _table_rows(groups: Sequence[GroupResult], reference, truth
         truths = [truth_for_group(g, truth) for g in groups]
         if any(t is not None for t in truths):
             def truth_value(t, key):
-                return None if t is None else _finite(t.get(key))
+                return None if t is None else finite_or_none(t.get(key))
 
             ks = [truth_value(t, "range_k") for t in truths]
             rhos = [truth_value(t, "rho") for t in truths]
@@ -349,7 +253,7 @@ def _fmt(x: float, significant: int) -> str:
 def _format_value(value: float, stderr: float | None, key: str) -> str:
     """Value ± stderr with the uncertainty to two significant digits and the value to
     the same decimal place; without an uncertainty, the row's default precision."""
-    s = _finite(stderr)
+    s = finite_or_none(stderr)
     if s is not None and s > 0.0:
         decimals = min(12, max(0, 1 - math.floor(math.log10(s))))
         return f"{value:.{decimals}f} ± {s:.{decimals}f}"
@@ -387,7 +291,7 @@ def _cell_text(cell: TableCell, key: str, notes: _Footnotes, extra_notes: Sequen
 
 def _rendered(results: FitResults, reference, truth):
     """Header, text rows and footnotes shared by the Markdown and terminal tables."""
-    groups = _time_order(results.groups)
+    groups = groups_in_time_order(results.groups)
     rows, column_notes = _table_rows(groups, reference, truth)
     notes = _Footnotes()
     header = ["Time of day"] + [g.label for g in groups]
@@ -453,14 +357,14 @@ def table2_csv(results: FitResults, reference=None, truth=None) -> str:
     column (the label) and a ``<label> stderr`` column. Numbers at full precision
     (``repr``), empty cells for missing values; extra rows: time, upper-bound flags,
     converged, error."""
-    groups = _time_order(results.groups)
+    groups = groups_in_time_order(results.groups)
     rows, _ = _table_rows(groups, reference, truth)
     header = ["quantity"]
     for g in groups:
         header += [g.label, f"{g.label} stderr"]
 
     def num(x) -> str:
-        x = _finite(x) if not isinstance(x, str) else x
+        x = finite_or_none(x) if not isinstance(x, str) else x
         return "" if x is None else (x if isinstance(x, str) else repr(float(x)))
 
     out = [header, ["time"] + sum(([g.time or "", ""] for g in groups), [])]

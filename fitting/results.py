@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from softshadow.params import brightness_to_paper, range_to_paper
+from softshadow import brightness_to_paper, range_to_paper
 
 __all__ = ["ProfilePlotData", "OverlayPlotData", "GroupResult", "FitResults"]
 

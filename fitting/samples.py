@@ -16,11 +16,8 @@ import cv2
 import numpy as np
 import trimesh
 
-from softshadow.params import Pose, Sun, rotation_matrix_xyz_np
-from softshadow.plan import PointPlan, edge_band_widths
-from softshadow.raster import project_to_ground
-from softshadow.occluder import posed_vertices, silhouette
-from softshadow.render import SoftShadowModel, object_mask
+from softshadow import (PointPlan, Pose, PosedOccluder, SoftShadowModel, Sun, edge_band_widths, object_mask,
+                        project_to_ground)
 
 from .sky import hidden_sky_fraction
 from .views import PhotoView
@@ -117,27 +114,19 @@ def _merge_convex_pieces(hulls: list[np.ndarray]) -> list[np.ndarray]:
 
 def _boundary_ground_points(model: SoftShadowModel, pose: Pose, sun: Sun, spacing_m: float):
     """Points along the projected silhouette (M, 3) and their edge's ground width per unit k."""
-    occ = model.occluder
-    rotation = rotation_matrix_xyz_np(pose.rotation_deg)  # NumPy: no eager JAX ops
-    world = posed_vertices(occ.vertices, np.asarray(pose.position, np.float64), rotation,
-                           float(pose.scale))
-    light = sun.light_np
-    sil = silhouette(occ, world, rotation, light)
-    if not len(sil.vertex_ids):
-        return np.zeros((0, 3)), np.zeros(0), world, light, sil
-    a, b = world[sil.vertex_ids[:, 0]], world[sil.vertex_ids[:, 1]]
+    posed = PosedOccluder.make(model.occluder, pose, sun)
+    world, light = posed.world, posed.light
+    if not posed.n_edges:
+        return np.zeros((0, 3)), np.zeros(0), world, light, posed.silhouette
+    a, b, outward = posed.edge_geometry("edge")
     ga, gb = project_to_ground(a, light), project_to_ground(b, light)
     n = np.maximum(np.ceil(np.linalg.norm(gb - ga, axis=1) / spacing_m).astype(int), 1) + 1
     seg = np.repeat(np.arange(len(a)), n)
     frac = (np.arange(len(seg)) - np.repeat(np.cumsum(n) - n, n)) / np.repeat(n - 1, n)
     pts2 = ga[seg] + frac[:, None] * (gb[seg] - ga[seg])
-    t = b - a
-    t /= np.linalg.norm(t, axis=1, keepdims=True)
-    outward = np.cross(t, light)
-    outward /= np.maximum(np.linalg.norm(outward, axis=1, keepdims=True), 1e-12)
     width_per_k = edge_band_widths(a, b, outward, light, 1e-3) / 1e-3
     pts = np.column_stack([pts2, np.zeros(len(pts2))])
-    return pts, width_per_k[seg], world, light, sil
+    return pts, width_per_k[seg], world, light, posed.silhouette
 
 
 def select_samples(model: SoftShadowModel, pose: Pose, view: PhotoView, range_k_max: float = 0.03,

@@ -19,9 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from softshadow.params import Pose, Sun
-from softshadow.plan import bucket_size, concatenate_plans
-from softshadow.render import SoftShadowModel
+from softshadow import GroundGrid, Pose, SoftShadowModel, Sun, bucket_size, concatenate_plans
 
 from .model import (K_SCALE, FitConfig, GroupArrays, angular_pixel_gradient, predict, raw_from_k,
                     raw_from_rho, residuals)
@@ -201,7 +199,6 @@ def _overlay(model: SoftShadowModel, pose: Pose, view: PhotoView, value: dict, c
              s: PhotoSamples, max_side: int = 480) -> OverlayPlotData:
     """The fitted alpha over a downsampled copy of the photo, for the overlay plot."""
     import cv2
-    from softshadow.camera import GroundGrid
     h, w = view.shape
     f = min(1.0, max_side / max(h, w))
     sw, sh = max(int(round(w * f)), 1), max(int(round(h * f)), 1)

@@ -10,11 +10,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from softshadow.occluder import posed_vertices, silhouette
-from softshadow.params import Pose, rotation_matrix_xyz_np
-from softshadow.raster import project_to_ground, winding_at_points
-from softshadow.render import SoftShadowModel, object_mask
-from softshadow.sun import light_direction
+from softshadow import Pose, PosedOccluder, SoftShadowModel, Sun, object_mask
 
 from .views import PhotoView
 
@@ -38,19 +34,11 @@ def search_sun(model: SoftShadowModel, pose: Pose, view: PhotoView, width: int =
     darkness = 1.0 - np.clip(small.ravel()[use] / max(lit, 1e-9), 0, 1)
     darkness -= darkness.mean()
     pts = ground[use, :2]
-    occ = model.occluder
-    rotation = rotation_matrix_xyz_np(pose.rotation_deg)  # NumPy: no eager JAX ops
-    world = posed_vertices(occ.vertices, np.asarray(pose.position, np.float64), rotation,
-                           float(pose.scale))
+    posed = PosedOccluder.make(model.occluder, pose, Sun(0.0, 45.0))  # posed once, lit per candidate
     best = (0.0, 45.0, -np.inf)
     for el in elevations:
         for az in np.arange(0.0, 360.0, azimuth_step):
-            light = np.asarray(light_direction(az, el), np.float64)
-            sil = silhouette(occ, world, rotation, light)
-            g = project_to_ground(world, light)
-            inside = np.zeros(len(pts), bool)
-            for edges, weights in sil.fill_edges:
-                inside |= winding_at_points(pts, g[edges[:, 0]], g[edges[:, 1]], weights)
+            inside = posed.with_sun(az, el).hard_shadow_at(pts)
             if not inside.any():
                 continue
             hard = inside - inside.mean()

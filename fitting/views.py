@@ -11,7 +11,7 @@ import datetime as _dt
 
 import numpy as np
 
-from softshadow.camera import GroundGrid, PinholeCamera
+from softshadow import GroundGrid, PinholeCamera
 
 __all__ = ["PhotoView"]
 

@@ -6,25 +6,30 @@ contracted at its silhouette by moving the light direction to L +- k N, with
 alpha ramping between the two silhouettes, and the umbra at brightness rho.
 """
 
-from .camera import GroundGrid, PinholeCamera, look_at_camera, project_points
+from ._version import __version__
+from .camera import GroundGrid, PinholeCamera, look_at_camera
+from .evaluate import plan_alpha, plan_alpha_jit, plan_coordinate, plan_coordinate_light
 from .meshes import BUILTIN_MESHES, MeshError, builtin_mesh, load_mesh
-from .occluder import Occluder
+from .occluder import Occluder, Silhouette
 from .params import (Pose, ShadowParams, Sun, brightness_to_paper, paper_to_range_k, paper_to_rho,
                      range_to_paper, rotation_matrix_xyz)
-from .penumbra import PROFILES, RULES, occluded_disk_fraction, penumbra_coordinate, profile_alpha, shade
-from .plan import GridPlan, PointPlan, plan_alpha, plan_grid, plan_points
+from .penumbra import (PROFILES, RULES, blurred_profile_alpha, occluded_disk_fraction, penumbra_coordinate,
+                       profile_alpha, shade)
+from .plan import (GridPlan, PointPlan, bucket_size, concatenate_plans, edge_band_widths, plan_grid,
+                   plan_points)
+from .posed import PosedOccluder, pose_matrix, posed_vertices
+from .raster import project_to_ground
 from .render import CameraRender, SoftShadowModel, object_mask
-from .scene_io import SceneError, SceneSpec, dump_scene, load_scene
-from .sun import SunBelowHorizonError, light_direction, solar_position, sun_direction
-
-__version__ = "0.1.0"
+from .sun import SunBelowHorizonError, check_sun_above_horizon, light_direction, sun_direction
 
 __all__ = [
     "BUILTIN_MESHES", "CameraRender", "GridPlan", "GroundGrid", "MeshError", "Occluder", "PROFILES",
-    "PinholeCamera", "PointPlan", "Pose", "RULES", "SceneError", "SceneSpec", "ShadowParams",
-    "SoftShadowModel", "Sun", "SunBelowHorizonError", "brightness_to_paper", "builtin_mesh",
-    "dump_scene", "light_direction", "load_mesh", "load_scene", "look_at_camera", "object_mask",
-    "occluded_disk_fraction", "paper_to_range_k", "paper_to_rho", "penumbra_coordinate", "plan_alpha",
-    "plan_grid", "plan_points", "profile_alpha", "project_points", "range_to_paper",
-    "rotation_matrix_xyz", "shade", "solar_position", "sun_direction", "__version__",
+    "PinholeCamera", "PointPlan", "Pose", "PosedOccluder", "RULES", "ShadowParams", "Silhouette",
+    "SoftShadowModel", "Sun", "SunBelowHorizonError", "blurred_profile_alpha", "brightness_to_paper",
+    "bucket_size", "builtin_mesh", "check_sun_above_horizon", "concatenate_plans", "edge_band_widths",
+    "light_direction", "load_mesh", "look_at_camera", "object_mask", "occluded_disk_fraction",
+    "paper_to_range_k", "paper_to_rho", "penumbra_coordinate", "plan_alpha", "plan_alpha_jit",
+    "plan_coordinate", "plan_coordinate_light", "plan_grid", "plan_points", "pose_matrix",
+    "posed_vertices", "profile_alpha", "project_to_ground", "range_to_paper",
+    "rotation_matrix_xyz", "shade", "sun_direction", "__version__",
 ]

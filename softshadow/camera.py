@@ -5,19 +5,17 @@ Pinhole convention (CONVENTIONS): x_cam = R x_world + t, pixel (u, v) with
 north up, pixel (col, row) centred at (origin_x + col * pixel_m,
 origin_y - row * pixel_m).
 
-The ray/ground geometry here is NumPy (it picks which ground points each
-pixel sees, a discrete step); ``project_points`` is also written for JAX so
-the fitter can differentiate through a camera pose.
+The ray/ground geometry here is NumPy: it picks which ground points each
+pixel sees, a discrete step.
 """
 
 from __future__ import annotations
 
 import dataclasses
 
-import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["PinholeCamera", "GroundGrid", "look_at_camera", "project_points"]
+__all__ = ["PinholeCamera", "GroundGrid", "look_at_camera"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -94,13 +92,6 @@ class PinholeCamera:
         uv, _ = cv2.projectPoints(pts, rvec, self.t, self.K,
                                   self.dist if self.dist is not None else np.zeros(5))
         return uv.reshape(-1, 2), depth > 1e-9
-
-
-def project_points(K, R, t, points):
-    """Differentiable pinhole projection (no distortion): (N, 3) world -> (N, 2) pixels."""
-    cam = points @ jnp.asarray(R).T + jnp.asarray(t)
-    uvw = cam @ jnp.asarray(K).T
-    return uvw[:, :2] / uvw[:, 2:3]
 
 
 def look_at_camera(position, target, width: int, height: int, fov_x_deg: float,

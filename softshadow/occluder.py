@@ -24,7 +24,7 @@ import trimesh
 
 from .meshes import clean_mesh
 
-__all__ = ["Occluder", "Silhouette", "silhouette", "posed_vertices"]
+__all__ = ["Occluder", "Silhouette", "silhouette", "merge_collinear"]
 
 PARALLEL_TOL = 1e-7   # |n . L| below this: a face seen exactly edge-on from the sun
 PARALLEL_EDGE_TOL = 1e-6  # |t x L| below this: an edge along the light projects to a point
@@ -135,18 +135,6 @@ class Occluder:
         slot = np.arange(len(order)) - np.repeat(starts, np.diff(np.r_[starts, len(order)]))
         out[edge, slot] = self.face_edge_dir.ravel()[order]
         return out
-
-
-def posed_vertices(vertices: np.ndarray, position, rotation: np.ndarray, scale: float) -> np.ndarray:
-    """NumPy twin of ``Pose.apply`` for the discrete steps."""
-    return scale * rotate_rows(vertices, np.asarray(rotation).T) + np.asarray(position)
-
-
-def rotate_rows(v: np.ndarray, matrix: np.ndarray) -> np.ndarray:
-    """v @ matrix for rows v (N, 3), written elementwise: a BLAS product on tall arrays leaves
-    its threads spinning afterwards, and they starve XLA's threads on a small machine."""
-    matrix = np.asarray(matrix, dtype=np.float64)
-    return v[:, 0:1] * matrix[0] + v[:, 1:2] * matrix[1] + v[:, 2:3] * matrix[2]
 
 
 @dataclasses.dataclass(frozen=True)

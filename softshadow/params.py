@@ -1,20 +1,33 @@
 """Parameter pytrees: the shadow's two parameters, the sun, and the object's pose.
 
 Each is an ``equinox.Module`` so it can be differentiated, vmapped and passed
-through ``jax.jit``; fields are JAX scalars or arrays in the units named.
+through ``jax.jit``; fields are scalars or arrays in the units named. Built from
+plain numbers they hold NumPy arrays in JAX's current float type, so building
+one dispatches no JAX operation (the discrete steps read them as they are);
+built from JAX arrays or tracers (inside ``jax.grad``) they keep those.
 """
 
 from __future__ import annotations
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.scipy.spatial.transform import Rotation
 from jaxtyping import Array, Float
 
 from .sun import light_direction
 
-__all__ = ["ShadowParams", "Sun", "Pose", "rotation_matrix_xyz", "rotation_matrix_xyz_np",
+__all__ = ["ShadowParams", "Sun", "Pose", "rotation_matrix_xyz",
            "range_to_paper", "brightness_to_paper", "paper_to_range_k", "paper_to_rho"]
+
+
+def _leaf(value, shape=()):
+    """A parameter leaf: JAX arrays and tracers kept as JAX, anything else as NumPy."""
+    dtype = jnp.result_type(float)  # a dtype lookup, not an operation
+    if isinstance(value, jax.Array):
+        return jnp.asarray(value, dtype=dtype).reshape(shape)
+    return np.asarray(value, dtype=dtype).reshape(shape)
 
 
 class ShadowParams(eqx.Module):
@@ -28,8 +41,8 @@ class ShadowParams(eqx.Module):
     rho: Float[Array, ""]
 
     def __init__(self, range_k=0.01, rho=0.3):
-        self.range_k = jnp.asarray(range_k, dtype=jnp.result_type(float))
-        self.rho = jnp.asarray(rho, dtype=jnp.result_type(float))
+        self.range_k = _leaf(range_k)
+        self.rho = _leaf(rho)
 
 
 class Sun(eqx.Module):
@@ -39,8 +52,8 @@ class Sun(eqx.Module):
     elevation_deg: Float[Array, ""]
 
     def __init__(self, azimuth_deg=180.0, elevation_deg=45.0):
-        self.azimuth_deg = jnp.asarray(azimuth_deg, dtype=jnp.result_type(float))
-        self.elevation_deg = jnp.asarray(elevation_deg, dtype=jnp.result_type(float))
+        self.azimuth_deg = _leaf(azimuth_deg)
+        self.elevation_deg = _leaf(elevation_deg)
 
     @property
     def light(self) -> Float[Array, "3"]:
@@ -53,28 +66,11 @@ class Sun(eqx.Module):
         return light_direction(float(self.azimuth_deg), float(self.elevation_deg), np)
 
 
-def _rotation_xyz(rotation_deg, xp):
-    """Rz @ Ry @ Rx for XYZ Euler angles in degrees, in the array module ``xp``."""
-    rx, ry, rz = xp.deg2rad(xp.asarray(rotation_deg))
-    cx, sx, cy, sy, cz, sz = xp.cos(rx), xp.sin(rx), xp.cos(ry), xp.sin(ry), xp.cos(rz), xp.sin(rz)
-    one, zero = xp.ones_like(cx), xp.zeros_like(cx)
-    Rx = xp.stack([xp.stack([one, zero, zero]), xp.stack([zero, cx, -sx]), xp.stack([zero, sx, cx])])
-    Ry = xp.stack([xp.stack([cy, zero, sy]), xp.stack([zero, one, zero]), xp.stack([-sy, zero, cy])])
-    Rz = xp.stack([xp.stack([cz, -sz, zero]), xp.stack([sz, cz, zero]), xp.stack([zero, zero, one])])
-    return Rz @ Ry @ Rx
-
-
 def rotation_matrix_xyz(rotation_deg) -> Float[Array, "3 3"]:
-    """Rotation for XYZ Euler angles in degrees: about x, then y, then z (fixed axes).
-
-    Equal to scipy's ``Rotation.from_euler("xyz", angles, degrees=True)``.
-    """
-    return _rotation_xyz(rotation_deg, jnp)
-
-
-def rotation_matrix_xyz_np(rotation_deg) -> np.ndarray:
-    """``rotation_matrix_xyz`` in NumPy float64, for the discrete steps (no eager JAX ops)."""
-    return _rotation_xyz(np.asarray(rotation_deg, dtype=np.float64), np)
+    """Rotation for XYZ Euler angles in degrees: about x, then y, then z (fixed axes), i.e.
+    Rz @ Ry @ Rx, as scipy's ``Rotation.from_euler("xyz", angles, degrees=True)`` (JAX,
+    differentiable; ``softshadow.posed.pose_matrix`` is the NumPy twin for discrete steps)."""
+    return Rotation.from_euler("xyz", jnp.asarray(rotation_deg), degrees=True).as_matrix()
 
 
 class Pose(eqx.Module):
@@ -85,10 +81,9 @@ class Pose(eqx.Module):
     scale: Float[Array, ""]
 
     def __init__(self, position=(0.0, 0.0, 0.0), rotation_deg=(0.0, 0.0, 0.0), scale=1.0):
-        dtype = jnp.result_type(float)
-        self.position = jnp.asarray(position, dtype=dtype).reshape(3)
-        self.rotation_deg = jnp.asarray(rotation_deg, dtype=dtype).reshape(3)
-        self.scale = jnp.asarray(scale, dtype=dtype)
+        self.position = _leaf(position, (3,))
+        self.rotation_deg = _leaf(rotation_deg, (3,))
+        self.scale = _leaf(scale)
 
     @property
     def rotation(self) -> Float[Array, "3 3"]:

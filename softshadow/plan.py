@@ -1,12 +1,13 @@
-"""Plans: the discrete choices for a set of receiver points, made once in NumPy.
+"""Plans: the discrete choices for a set of receiver points, made once (NumPy/OpenCV only).
 
 A plan fixes, for a concrete pose and sun, which silhouette edges exist,
 which edge governs each receiver point, whether the point is in the hard
 shadow, and whether it lies in a penumbra band (where the differentiable
-formula is evaluated). ``plan_alpha`` then evaluates alpha in JAX, and is
-differentiable in k, the sun angles and the pose as long as those discrete
-choices hold (they are piecewise constant, so gradients there are exact).
-Re-plan when the sun or pose moves by more than a penumbra width.
+formula is evaluated). Its leaves are NumPy arrays; ``softshadow.evaluate``
+then evaluates alpha in JAX, differentiable in k, the sun angles and the pose
+as long as those discrete choices hold (they are piecewise constant, so
+gradients there are exact). Re-plan when the sun or pose moves by more than a
+penumbra width.
 """
 
 from __future__ import annotations
@@ -14,23 +15,17 @@ from __future__ import annotations
 import dataclasses
 
 import equinox as eqx
-import jax
-import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Bool, Float, Int
+from jaxtyping import Bool, Float, Int
 
 from .camera import GroundGrid
-from .occluder import Occluder, posed_vertices, rotate_rows, silhouette
-from .params import Pose, Sun, rotation_matrix_xyz_np
-from .penumbra import edge_alpha, edge_coordinate
-from .raster import (ShadowRaster, candidate_labels, project_to_ground, rasterise_shadow,
-                     winding_at_points)
-from .sun import check_sun_above_horizon
+from .occluder import Occluder
+from .params import Pose, Sun
+from .posed import PosedOccluder
+from .raster import ShadowRaster, candidate_labels, rasterise_shadow
 
-__all__ = ["EdgeSet", "PointPlan", "plan_points", "plan_grid", "plan_alpha", "plan_coordinate",
-           "plan_coordinate_light", "concatenate_plans",
-           "edge_band_widths",
-           "bucket_size", "grid_bucket_size"]
+__all__ = ["EdgeSet", "PointPlan", "GridPlan", "plan_points", "plan_grid", "concatenate_plans",
+           "edge_band_widths", "bucket_size", "grid_bucket_size"]
 
 MAX_RASTER_SIDE = 2048
 # The wedge reaches half its width on each side of the outline; the band adds a fifth for the
@@ -47,18 +42,18 @@ def bucket_size(n: int, minimum: int = 64) -> int:
 
 
 class EdgeSet(eqx.Module):
-    """Silhouette edges in the mesh frame, padded to a bucket size.
+    """Silhouette edges in the mesh frame, padded to a bucket size (NumPy leaves).
 
     vertices_local (s, 2, 3) metres; outward_sign (s,); paper_normal_local (s, 3).
     """
 
-    vertices_local: Float[Array, "s 2 3"]
-    outward_sign: Float[Array, " s"]
-    paper_normal_local: Float[Array, "s 3"]
+    vertices_local: Float[np.ndarray, "s 2 3"]
+    outward_sign: Float[np.ndarray, " s"]
+    paper_normal_local: Float[np.ndarray, "s 3"]
 
 
 class PointPlan(eqx.Module):
-    """Per-point discrete choices.
+    """Per-point discrete choices (NumPy leaves; a jitted evaluation takes them as they are).
 
     edge_id (n, K) candidate governing edges; hard (n,) 0/1 in the hard shadow;
     active (n,) in a penumbra band (elsewhere alpha is ``hard``); near_boundary (n,)
@@ -67,20 +62,10 @@ class PointPlan(eqx.Module):
     """
 
     edges: EdgeSet
-    edge_id: Int[Array, "n K"]
-    hard: Float[Array, " n"]
-    active: Bool[Array, " n"]
-    near_boundary: Float[Array, " n"]
-
-
-def _concrete_geometry(occ: Occluder, pose: Pose, sun: Sun):
-    """Posed vertices (V, 3), rotation (3, 3) and light (3,) as NumPy float64 (no eager JAX ops)."""
-    el = float(sun.elevation_deg)
-    check_sun_above_horizon(el)
-    rotation = rotation_matrix_xyz_np(np.asarray(pose.rotation_deg, np.float64))
-    world = posed_vertices(occ.vertices, np.asarray(pose.position, np.float64), rotation,
-                           float(pose.scale))
-    return world, rotation, sun.light_np
+    edge_id: Int[np.ndarray, "n K"]
+    hard: Float[np.ndarray, " n"]
+    active: Bool[np.ndarray, " n"]
+    near_boundary: Float[np.ndarray, " n"]
 
 
 def edge_band_widths(world_a: np.ndarray, world_b: np.ndarray, outward: np.ndarray,
@@ -93,14 +78,6 @@ def edge_band_widths(world_a: np.ndarray, world_b: np.ndarray, outward: np.ndarr
     r = d_out[:, :2] / d_out[:, 2:] - d_in[:, :2] / d_in[:, 2:]
     height = np.maximum(np.abs(world_a[:, 2]), np.abs(world_b[:, 2]))
     return height * np.hypot(r[:, 0], r[:, 1])
-
-
-def _edge_data(occ, world, rotation, light, rule):
-    sil = silhouette(occ, world, rotation, light)
-    ids = sil.vertex_ids
-    a, b = world[ids[:, 0]], world[ids[:, 1]]
-    direction = rotate_rows(sil.normal_local if rule == "edge" else sil.paper_normal_local, rotation.T)
-    return sil, a, b, direction
 
 
 def _pack_edges(occ: Occluder, sil, dtype=np.float64):
@@ -128,18 +105,10 @@ def _clean_outline(raster: ShadowRaster, label: np.ndarray) -> np.ndarray:
     return (label >= 0) & (frac[np.maximum(label, 0)] >= 0.99)
 
 
-def _exact_hard(world, light, sil, points) -> np.ndarray:
-    """Hard shadow (N,) 0/1 at points by winding number against the projected fill edges."""
-    ground = project_to_ground(world, light)
-    inside = np.zeros(len(points), bool)
-    for edges, weights in sil.fill_edges:
-        inside |= winding_at_points(points[:, :2], ground[edges[:, 0]], ground[edges[:, 1]], weights)
-    return inside.astype(np.float64)
-
-
-def _raster_for(world, light, sil, region_lo, region_hi, pixel_m, pad_m):
+def _raster_for(posed: PosedOccluder, region_lo, region_hi, pixel_m, pad_m):
     """Raster over [lo, hi] (world xy) padded by pad_m, at pixel_m, intersected with the shadow's reach."""
-    ground = project_to_ground(world, light)
+    world = posed.world
+    ground = posed.ground_vertices()
     reach_lo = np.minimum(ground.min(0), world[:, :2].min(0)) - pad_m
     reach_hi = np.maximum(ground.max(0), world[:, :2].max(0)) + pad_m
     lo = np.maximum(region_lo - pad_m, reach_lo)
@@ -151,7 +120,7 @@ def _raster_for(world, light, sil, region_lo, region_hi, pixel_m, pad_m):
     width = int(np.ceil(size[0] / pixel_m)) + 1
     height = int(np.ceil(size[1] / pixel_m)) + 1
     grid = GroundGrid(pixel_m, (float(lo[0]), float(hi[1])), width, height)
-    return rasterise_shadow(grid, world, light, sil)
+    return rasterise_shadow(grid, world, posed.light, posed.silhouette, ground)
 
 
 def plan_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k_max: float,
@@ -164,8 +133,9 @@ def plan_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k
     pad_to: pad the point arrays to this length (default: a power-of-two bucket).
     """
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    world, rotation, light = _concrete_geometry(occ, pose, sun)
-    sil, a, b, direction = _edge_data(occ, world, rotation, light, rule)
+    posed = PosedOccluder.make(occ, pose, sun)
+    sil, light = posed.silhouette, posed.light
+    a, b, direction = posed.edge_geometry(rule)
     n = len(points)
     size = pad_to or bucket_size(n)
     edge_id = np.zeros((size, N_CANDIDATES), np.int32)
@@ -178,7 +148,7 @@ def plan_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k
         if pixel_m is None:
             pixel_m = max(float((hi - lo).max()) / 1024, 1e-4)
         pad_m = 1.5 * float(widths.max()) + (margin_px + 2) * pixel_m
-        raster = _raster_for(world, light, sil, lo, hi, pixel_m, pad_m)
+        raster = _raster_for(posed, lo, hi, pixel_m, pad_m)
         if raster is not None:
             h, label, dist = raster.lookup(points)
             ok = label >= 0
@@ -193,13 +163,11 @@ def plan_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k
             # Near the boundary a raster pixel is too coarse for the side: test exactly.
             near = np.nonzero(dist <= 2.0 * raster.grid.pixel_m)[0]
             if len(near):
-                hard[near] = _exact_hard(world, light, sil, points[near])
+                hard[near] = posed.hard_shadow_at(points[near, :2])
             active[:n] = ok & (dist <= band)
             near_boundary[:n] = ok & (dist <= 0.25 * widths[np.maximum(label, 0)]
                                       + 1.5 * raster.grid.pixel_m) & _clean_outline(raster, label)
-    verts, sign, paper = jax.device_put(_pack_edges(occ, sil))
-    return PointPlan(EdgeSet(verts, sign, paper), jnp.asarray(edge_id), jnp.asarray(hard),
-                     jnp.asarray(active), jnp.asarray(near_boundary))
+    return PointPlan(EdgeSet(*_pack_edges(occ, sil)), edge_id, hard, active, near_boundary)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -229,10 +197,15 @@ class GridPlan:
 
 
 def plan_grid(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, range_k_max: float,
-              rule: str = "edge", margin_px: float = 2.5) -> GridPlan:
-    """Discrete choices for every pixel of a ground map; only band pixels go to JAX."""
-    world, rotation, light = _concrete_geometry(occ, pose, sun)
-    sil, a, b, direction = _edge_data(occ, world, rotation, light, rule)
+              rule: str = "edge", margin_px: float = 2.5, dtype=np.float64) -> GridPlan:
+    """Discrete choices for every pixel of a ground map; only band pixels go to JAX.
+
+    dtype: the float type of the plan's arrays (the evaluation's, so a jitted call takes
+    them without a conversion).
+    """
+    posed = PosedOccluder.make(occ, pose, sun)
+    sil, light, world = posed.silhouette, posed.light, posed.world
+    a, b, direction = posed.edge_geometry(rule)
     h, w = grid.height, grid.width
     hard = np.zeros((h, w), np.uint8)
     band_idx = np.zeros(0, np.int64)
@@ -246,7 +219,7 @@ def plan_grid(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, range_k_max
         # Raster only the shadow's window: the projected mesh's bounding box (which holds the
         # shadow and its outline) plus the band and the candidates' sampling radius, within the
         # grid padded by pad (edges just off the grid govern pixels on it).
-        ground = project_to_ground(world, light)
+        ground = posed.ground_vertices()
         px = grid.to_pixel(ground)
         reach = int(np.ceil(band_px.max())) + CANDIDATE_REACH_PX + 2
         c0 = int(max(np.floor(px[:, 0].min()) - reach, -pad))
@@ -282,7 +255,7 @@ def plan_grid(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, range_k_max
                                               max_candidates=N_CANDIDATES, neighbours=raster.edge_neighbours)
     m = len(band_idx)
     size = grid_bucket_size(m)
-    ftype = _float_dtype()
+    ftype = np.dtype(dtype)
     index = np.full(size, h * w, np.int32)
     index[:m] = band_idx
     edge_id = np.zeros((size, N_CANDIDATES), np.int32)
@@ -299,54 +272,12 @@ def plan_grid(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, range_k_max
     return GridPlan(grid, hard, index, plan, raster, m, len(sil.vertex_ids))
 
 
-def _float_dtype():
-    return np.dtype(np.float64 if jax.config.jax_enable_x64 else np.float32)
-
-
 def grid_bucket_size(n: int, minimum: int = 256) -> int:
     """Round a count up to one of four sizes per octave (waste <= 25 %, few distinct shapes)."""
     if n <= minimum:
         return minimum
     step = 1 << (int(np.floor(np.log2(n))) - 2)
     return -(-n // step) * step
-
-
-def plan_alpha(points: Float[Array, "n 3"], plan: PointPlan, pose: Pose, sun: Sun, range_k,
-               rule: str = "edge", profile: str = "linear") -> Float[Array, " n"]:
-    """Alpha (n,) at the plan's points: the penumbra formula in bands, the hard shadow elsewhere."""
-    edges = plan.edges
-    ev = pose.apply(edges.vertices_local)
-    paper = pose.apply_direction(edges.paper_normal_local) if rule == "paper" else None
-    alpha = edge_alpha(points, plan.edge_id, ev, edges.outward_sign, sun.light, range_k,
-                       plan.hard, rule, profile, paper, near_boundary=plan.near_boundary)
-    return jnp.where(plan.active, alpha, plan.hard)
-
-
-def plan_coordinate(points: Float[Array, "n 3"], plan: PointPlan, pose: Pose, sun: Sun, range_k,
-                    rule: str = "edge", with_slope: bool = False):
-    """Normalised penumbra coordinate u (n,) at the plan's points (+1 outer, -1 inner silhouette).
-
-    Outside the penumbra bands u is +-1e6 from the hard shadow, so any profile
-    gives alpha 0 or 1 there. Use with ``profile_alpha`` (possibly blurred).
-    With ``with_slope`` also returns du/dT (see ``penumbra_coordinate``), 0 outside bands.
-    """
-    return plan_coordinate_light(points, plan, pose, sun.light, range_k, rule, with_slope)
-
-
-def plan_coordinate_light(points: Float[Array, "n 3"], plan: PointPlan, pose: Pose,
-                          light: Float[Array, "*n 3"], range_k, rule: str = "edge",
-                          with_slope: bool = False):
-    """``plan_coordinate`` with the light direction given directly, (3,) or one per point (n, 3)."""
-    edges = plan.edges
-    ev = pose.apply(edges.vertices_local)
-    paper = pose.apply_direction(edges.paper_normal_local) if rule == "paper" else None
-    u, slope = edge_coordinate(points, plan.edge_id, ev, edges.outward_sign, light, range_k,
-                               plan.hard, rule, paper, with_slope=True,
-                               near_boundary=plan.near_boundary)
-    u = jnp.where(plan.active, u, jnp.where(plan.hard > 0.5, -1e6, 1e6))
-    if with_slope:
-        return u, jnp.where(plan.active, slope, 0.0)
-    return u
 
 
 def concatenate_plans(plans: list[PointPlan], counts: list[int], pad_to: int | None = None,
@@ -376,12 +307,6 @@ def concatenate_plans(plans: list[PointPlan], counts: list[int], pad_to: int | N
     v[offset:, 1, 0] = 1.0
     paper = pad(np.concatenate(papers), e_size, 0.0)
     paper[offset:, 2] = 1.0
-    edges = EdgeSet(jnp.asarray(v), jnp.asarray(pad(np.concatenate(signs), e_size, 1.0)),
-                    jnp.asarray(paper))
-    return PointPlan(edges, jnp.asarray(pad(np.concatenate(ids), size, 0)),
-                     jnp.asarray(pad(np.concatenate(hards), size, 0.0)),
-                     jnp.asarray(pad(np.concatenate(actives), size, False)),
-                     jnp.asarray(pad(np.concatenate(nears), size, 0.0)))
-
-
-plan_alpha_jit = jax.jit(plan_alpha, static_argnames=("rule", "profile"))
+    edges = EdgeSet(v, pad(np.concatenate(signs), e_size, 1.0), paper)
+    return PointPlan(edges, pad(np.concatenate(ids), size, 0), pad(np.concatenate(hards), size, 0.0),
+                     pad(np.concatenate(actives), size, False), pad(np.concatenate(nears), size, 0.0))

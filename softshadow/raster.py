@@ -27,7 +27,8 @@ import numpy as np
 
 from .camera import GroundGrid
 
-__all__ = ["ShadowRaster", "project_to_ground", "rasterise_shadow", "winding_fill", "draw_segment_labels"]
+__all__ = ["ShadowRaster", "project_to_ground", "rasterise_shadow", "winding_fill", "winding_at_points",
+           "draw_segment_labels", "candidate_labels"]
 
 
 def project_to_ground(points: np.ndarray, light: np.ndarray, plane_z: float = 0.0) -> np.ndarray:

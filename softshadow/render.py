@@ -20,10 +20,12 @@ import trimesh
 
 from .camera import GroundGrid, PinholeCamera
 from .meshes import load_mesh
-from .occluder import Occluder, posed_vertices
-from .params import Pose, ShadowParams, Sun, rotation_matrix_xyz_np
+from .evaluate import plan_alpha
+from .occluder import Occluder
+from .params import Pose, ShadowParams, Sun
 from .penumbra import PROFILES, RULES, shade
-from .plan import GridPlan, PointPlan, plan_alpha, plan_grid, plan_points
+from .plan import GridPlan, PointPlan, plan_grid, plan_points
+from .posed import posed_vertices
 
 __all__ = ["SoftShadowModel", "CameraRender", "object_mask"]
 
@@ -77,8 +79,7 @@ def object_mask(occ: Occluder, pose: Pose, camera: PinholeCamera | GroundGrid) -
 
     For a top-down ground map, the mesh seen straight down (its footprint from above).
     """
-    world = posed_vertices(occ.vertices, np.asarray(pose.position, np.float64),
-                           rotation_matrix_xyz_np(pose.rotation_deg), float(pose.scale))
+    world, _ = posed_vertices(occ, pose)
     if isinstance(camera, GroundGrid):
         uv, front = camera.to_pixel(world), np.ones(len(world), bool)
     else:
@@ -124,7 +125,8 @@ class SoftShadowModel:
 
     # -- discrete plans (NumPy) -------------------------------------------------------------
     def plan_grid(self, sun: Sun, pose: Pose, grid: GroundGrid, range_k_max: float) -> GridPlan:
-        return plan_grid(self.occluder, pose, sun, grid, range_k_max, self.rule)
+        return plan_grid(self.occluder, pose, sun, grid, range_k_max, self.rule,
+                         dtype=jnp.result_type(float))
 
     def plan_points(self, sun: Sun, pose: Pose, points, range_k_max: float, **kwargs) -> PointPlan:
         return plan_points(self.occluder, pose, sun, points, range_k_max, self.rule, **kwargs)

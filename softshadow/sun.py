@@ -1,4 +1,4 @@
-"""Sun direction (differentiable) and solar position from time and site (NumPy/pvlib).
+"""Sun direction: the light the renderer casts shadows with (JAX, or NumPy for the discrete steps).
 
 Frames follow CONVENTIONS: world x east, y north, z up; azimuth A clockwise
 from north towards east, elevation E above the horizon, direction *to* the
@@ -7,13 +7,11 @@ sun s = (sin A cos E, cos A cos E, sin E); light travels along L = -s.
 
 from __future__ import annotations
 
-import datetime as _dt
-
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-__all__ = ["sun_direction", "light_direction", "solar_position", "SunBelowHorizonError"]
+__all__ = ["sun_direction", "light_direction", "check_sun_above_horizon", "SunBelowHorizonError"]
 
 
 class SunBelowHorizonError(ValueError):
@@ -33,25 +31,6 @@ def sun_direction(azimuth_deg, elevation_deg, xp=jnp) -> Float[Array, "3"]:
 def light_direction(azimuth_deg, elevation_deg, xp=jnp) -> Float[Array, "3"]:
     """Unit direction the sunlight travels, L = -s, shape (3,) (xp as in ``sun_direction``)."""
     return -sun_direction(azimuth_deg, elevation_deg, xp)
-
-
-def solar_position(time: _dt.datetime, latitude: float, longitude: float,
-                   altitude_m: float = 0.0) -> tuple[float, float]:
-    """Apparent sun (azimuth_deg, elevation_deg) for an aware datetime and site.
-
-    Uses pvlib's NREL SPA (``method="nrel_numpy"``) with atmospheric refraction
-    (apparent elevation), which is where shadows point. Raises ValueError for a
-    naive datetime: local civil time without an offset is ambiguous.
-    """
-    import pandas as pd
-    import pvlib
-
-    if time.tzinfo is None:
-        raise ValueError(f"time {time.isoformat()} has no UTC offset or time zone")
-    index = pd.DatetimeIndex([pd.Timestamp(time)])
-    pos = pvlib.solarposition.get_solarposition(
-        index, latitude, longitude, altitude=altitude_m, method="nrel_numpy")
-    return float(pos["azimuth"].iloc[0]), float(pos["apparent_elevation"].iloc[0])
 
 
 def check_sun_above_horizon(elevation_deg: float, minimum_deg: float = 0.5) -> None:

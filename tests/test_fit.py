@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from softshadow import GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun
-from softshadow.scene_io import CameraSpec, ObjectSpec, PhotoSpec, SceneSpec, dump_scene
+from scene import CameraSpec, ObjectSpec, PhotoSpec, SceneSpec, dump_scene
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
 MITSUBA = SHARED / "data" / "mitsuba"
@@ -68,7 +68,7 @@ def test_same_model_fit_recovers_truth_with_honest_errors(same_model_folder):
 
 def test_cli_writes_the_conventions_files_and_refuses_to_overwrite(same_model_folder, tmp_path):
     out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "softshadow.cli", "fit", str(same_model_folder), "--out", str(out),
+    cmd = [sys.executable, "-m", "softshadow_cli", "fit", str(same_model_folder), "--out", str(out),
            "--no-plots"]
     first = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     assert first.returncode == 0, first.stderr

@@ -8,7 +8,7 @@ import numpy as np
 
 from softshadow import Pose, ShadowParams, SoftShadowModel, Sun
 from softshadow.camera import look_at_camera
-from softshadow.plan import plan_coordinate
+from softshadow import plan_coordinate
 
 K = 0.01
 

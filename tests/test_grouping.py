@@ -8,7 +8,7 @@ from zoneinfo import ZoneInfo
 import pytest
 
 from fitting.grouping import NO_TIME_REASON, PhotoGroup, group_photos, photo_time
-from softshadow.scene_io import SceneError, scene_from_dict
+from scene import SceneError, scene_from_dict
 
 JST = dt.timezone(dt.timedelta(hours=9))
 

@@ -16,7 +16,7 @@ from fitting.markers import (Registration, RegistrationError, board_from_spec, b
                              board_world_points, marker_world_points, register_board)
 from fitting.photos import srgb_to_linear
 from softshadow.camera import look_at_camera
-from softshadow.scene_io import CameraSpec
+from scene import CameraSpec
 
 PPM = 1000  # board image pixels per metre: 0.1 m squares are 100 px
 SPEC = CameraSpec(kind="markers", origin_m=(-0.35, 0.25))  # default 7x5 DICT_4X4_50 board, centred on 0

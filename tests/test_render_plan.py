@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from softshadow.meshes import builtin_mesh
-from softshadow.occluder import Occluder, merge_collinear, posed_vertices, silhouette
-from softshadow.params import rotation_matrix_xyz_np
+from softshadow.occluder import Occluder, merge_collinear, silhouette
+from softshadow.posed import pose_matrix
 from softshadow.raster import candidate_labels, winding_at_points, winding_fill
 
 
@@ -54,8 +54,8 @@ def _general_path(occ: Occluder) -> Occluder:
 @pytest.mark.parametrize("azimuth,elevation,rot", [(200.0, 40.0, 0.0), (33.0, 71.0, 25.0), (290.0, 12.0, -60.0)])
 def test_closed_mesh_silhouette_equals_the_general_path(mesh, azimuth, elevation, rot):
     occ = Occluder.from_trimesh(builtin_mesh(mesh))
-    rotation = rotation_matrix_xyz_np([0.0, 0.0, rot])
-    world = posed_vertices(occ.vertices, np.zeros(3), rotation, 1.0)
+    rotation = pose_matrix([0.0, 0.0, rot])
+    world = occ.vertices @ rotation.T
     light = light_from(azimuth, elevation)
     fast = silhouette(occ, world, rotation, light)
     slow = silhouette(_general_path(occ), world, rotation, light)

@@ -13,15 +13,15 @@ import pytest
 
 import data_synth
 from data_synth import PRESETS, SunSky, synthesize
-from data_synth.cli import add_arguments, run
+from softshadow_cli.synth_command import add_arguments, run
 from data_synth.receivers import PlaneReceiver
 from data_synth.renderers import ModelRenderer, PhysicalRenderer, RenderQuality, SynthScene
 from data_synth.textures import GroundAppearance
 from data_synth.tracing import topdown_rays
 from softshadow.camera import GroundGrid
 from softshadow.meshes import builtin_mesh
-from softshadow.scene_io import load_scene, parse_time
-from softshadow.sun import solar_position
+from scene import load_scene, parse_time
+from scene import solar_position
 
 SMALL = (160, 120)
 FAST = RenderQuality(sun_samples=16, sky_samples=256, sky_fine_nodes=48, object_sky_samples=16)

@@ -4,16 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from .camera import GroundGrid
-from .meshes import load_mesh
-from .params import Pose, ShadowParams, Sun, paper_to_range_k, paper_to_rho
-from .render import SoftShadowModel
-from .scene_io import load_scene, parse_time
-from .sun import solar_position
+from scene import load_scene, parse_time, photo_sun
+from softshadow import (GroundGrid, PinholeCamera, Pose, PosedOccluder, ShadowParams, SoftShadowModel, Sun,
+                        load_mesh, paper_to_range_k, paper_to_rho)
 
 __all__ = ["render_scene_file", "shading_to_srgb8", "draw_outlines"]
 
 PAPER_ALBEDO = 0.85  # white paper, for display
+DEFAULT_SIZE = "512x512"  # a top-down map's size when --size is not given
 
 
 def shading_to_srgb8(shading: np.ndarray, albedo: float = PAPER_ALBEDO) -> np.ndarray:
@@ -48,14 +46,12 @@ def render_scene_file(args):
     photo = scene.photo(name) if name else None
     az, el = args.sun_azimuth, args.sun_elevation
     if (az is None or el is None) and photo is not None:
-        if photo.sun_azimuth_deg is not None:
-            az = photo.sun_azimuth_deg if az is None else az
-            el = photo.sun_elevation_deg if el is None else el
-        elif photo.time and scene.site:
-            a, e = solar_position(parse_time(photo.time, scene.site.timezone), scene.site.latitude,
-                                  scene.site.longitude)
-            az = a if az is None else az
-            el = e if el is None else el
+        # The same sun as ``softshadow fit`` finds for this photo (time zone and altitude included).
+        when = parse_time(photo.time, scene.site.timezone if scene.site else None) if photo.time else None
+        sun = photo_sun(scene, name, when)
+        if sun is not None:
+            az = sun.azimuth_deg if az is None else az
+            el = sun.elevation_deg if el is None else el
     if az is None or el is None:
         raise ValueError("no sun: give --sun-azimuth/--sun-elevation, or a sun or time + site in the scene")
     k = args.k if args.k is not None else (paper_to_range_k(args.range_paper)
@@ -65,12 +61,11 @@ def render_scene_file(args):
     params = ShadowParams(k, rho)
     sun = Sun(az, el)
     cam = scene.camera_for(name) if name else scene.camera
-    w, h = (int(v) for v in args.size.lower().split("x"))
+    w, h = (int(v) for v in (args.size or DEFAULT_SIZE).lower().split("x"))
     if cam is not None and cam.kind == "explicit":
-        from .camera import PinholeCamera
         K = np.asarray(cam.K)  # without --size, the image the principal point is the centre of
-        width = int(round(2 * (K[0, 2] + 0.5))) if args.size == "512x512" else w
-        height = int(round(2 * (K[1, 2] + 0.5))) if args.size == "512x512" else h
+        width = int(round(2 * (K[0, 2] + 0.5))) if args.size is None else w
+        height = int(round(2 * (K[1, 2] + 0.5))) if args.size is None else h
         camera = PinholeCamera(K, cam.R, cam.t, width, height, cam.dist)
         rendered = model.camera_image(params, sun, pose, camera)
         shading = np.asarray(rendered.shading)
@@ -91,10 +86,8 @@ def render_scene_file(args):
 
 def _default_grid(model, pose, sun, w, h, pixel_m):
     """A north-up map framing the object and its whole shadow."""
-    from .raster import project_to_ground
-    world = np.asarray(pose.apply(model.occluder.vertices))
-    g = project_to_ground(world, sun.light_np)
-    pts = np.vstack([g, world[:, :2]])
+    posed = PosedOccluder.make(model.occluder, pose, sun)
+    pts = np.vstack([posed.ground_vertices(), posed.world[:, :2]])
     lo, hi = pts.min(0), pts.max(0)
     centre = (lo + hi) / 2
     if pixel_m is None:

@@ -8,17 +8,16 @@ round trip.
 from __future__ import annotations
 
 import dataclasses
-import datetime as _dt
 import tomllib
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .camera import GroundGrid, PinholeCamera
+from softshadow import GroundGrid, PinholeCamera
 
 __all__ = ["SceneError", "SiteSpec", "ObjectSpec", "CameraSpec", "PhotoSpec", "SceneSpec",
-           "load_scene", "dump_scene", "parse_time"]
+           "load_scene", "dump_scene", "scene_from_dict", "scene_to_dict"]
 
 CAMERA_KINDS = ("explicit", "topdown", "markers")
 
@@ -165,18 +164,6 @@ def _camera(table: dict, where: str) -> CameraSpec:
             if key in table:
                 setattr(cam, key, np.asarray(table[key], dtype=float).tolist())
     return cam
-
-
-def parse_time(text: str, timezone: str | None = None) -> _dt.datetime:
-    """ISO 8601 time; a naive time takes the site's time zone when one is given."""
-    try:
-        when = _dt.datetime.fromisoformat(str(text))
-    except ValueError as exc:
-        raise SceneError(f"cannot read time {text!r} (use ISO 8601, e.g. 2026-04-20T09:20:00+09:00)") from exc
-    if when.tzinfo is None and timezone:
-        from zoneinfo import ZoneInfo
-        when = when.replace(tzinfo=ZoneInfo(timezone))
-    return when
 
 
 def load_scene(path: str | Path) -> SceneSpec:

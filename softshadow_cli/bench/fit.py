@@ -26,8 +26,8 @@ __all__ = ["bench_same_model", "bench_table2", "bench_fit"]
 def _model_folder(folder: Path, k: float, rho: float, noise: float, seed: int, size: int = 192):
     import cv2
 
+    from scene import CameraSpec, ObjectSpec, PhotoSpec, SceneSpec, dump_scene
     from softshadow import GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun
-    from softshadow.scene_io import CameraSpec, ObjectSpec, PhotoSpec, SceneSpec, dump_scene
     folder.mkdir(parents=True, exist_ok=True)
     model = SoftShadowModel.from_mesh("pillar", profile="disk")
     grid = GroundGrid.around((-0.9, 1.6), 2.6, size)
@@ -44,8 +44,7 @@ def _model_folder(folder: Path, k: float, rho: float, noise: float, seed: int, s
 
 
 def bench_same_model(seeds: int = 20, k: float = 0.012, rho: float = 0.25, noise: float = 0.01) -> dict:
-    from .api import fit_folder
-    from .solve import FitOptions
+    from fitting import FitOptions, fit_folder
     options = FitOptions(profiles=("disk",), blur=(False,), robust=False, sky_occlusion=False,
                          plots=False)  # the data were rendered without the sky term
     ks, rhos, k_se, rho_se, secs, solve_secs = [], [], [], [], [], []
@@ -80,7 +79,7 @@ def _fit_cli_seconds(folder: Path, out: Path, cache: Path) -> float:
     """Wall time of ``softshadow fit`` in a fresh process (imports and compilation included)."""
     env = dict(os.environ, SOFTSHADOW_JAX_CACHE=str(cache))
     t = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "softshadow.cli", "fit", str(folder), "--out", str(out), "--force"],
+    subprocess.run([sys.executable, "-m", "softshadow_cli", "fit", str(folder), "--out", str(out), "--force"],
                    check=True, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     return time.perf_counter() - t
 
@@ -124,6 +123,3 @@ def bench_fit(quick: bool = False) -> dict:
     return {"same_model": bench_same_model(seeds=6 if quick else 40),
             "table2": bench_table2(size=(800, 600) if quick else (1600, 1200))}
 
-
-if __name__ == "__main__":
-    print(json.dumps(bench_fit(), indent=1))

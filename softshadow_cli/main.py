@@ -1,4 +1,4 @@
-"""The ``softshadow`` command: render, fit, synth, demo, bench."""
+"""The ``softshadow`` command: render, fit, synth, demo, bench (the layer above all packages)."""
 
 from __future__ import annotations
 
@@ -42,7 +42,8 @@ def _add_render(sub):
     p.add_argument("--sun-elevation", type=float, help="degrees above the horizon")
     p.add_argument("--rule", default="edge", choices=("edge", "paper"))
     p.add_argument("--profile", default="linear", choices=("linear", "disk"))
-    p.add_argument("--size", default="512x512", help="image size WxH for a default top-down map")
+    p.add_argument("--size", help="image size WxH (default: 512x512 for a top-down map, the principal "
+                                   "point's image for an explicit camera)")
     p.add_argument("--pixel-m", type=float, help="metres per pixel for a default top-down map")
     p.add_argument("--npy", help="also write the linear shading (H, W) as .npy")
     p.add_argument("--silhouettes", action="store_true",
@@ -53,7 +54,7 @@ def _add_render(sub):
 def _run_render(args) -> int:
     import numpy as np
 
-    from .render_cli import render_scene_file
+    from .render_command import render_scene_file
     try:
         image, shading = render_scene_file(args)
     except (ValueError, OSError) as exc:
@@ -89,7 +90,7 @@ def _add_fit(sub):
 
 
 def _run_fit(args) -> int:
-    from fitting.cli import run_fit
+    from .fit_command import run_fit
     return run_fit(args)
 
 
@@ -97,9 +98,9 @@ def _run_fit(args) -> int:
 def _add_synth(sub):
     p = sub.add_parser("synth", help="write a synthetic photo folder with known truth",
                        description="Synthesise a photo folder (images, scene.toml, truth.json).")
-    from data_synth.cli import add_arguments
+    from .synth_command import add_arguments, run
     add_arguments(p)
-    p.set_defaults(func=lambda a: __import__("data_synth.cli", fromlist=["run"]).run(a))
+    p.set_defaults(func=run)
 
 
 def _add_demo(sub):
@@ -113,7 +114,7 @@ def _add_demo(sub):
 
 
 def _run_demo(args) -> int:
-    from fitting.cli import run_demo
+    from .demo_command import run_demo
     return run_demo(args)
 
 
@@ -133,7 +134,8 @@ def _run_bench(args) -> int:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="softshadow", description=__doc__)
-    parser.add_argument("--version", action="version", version="softshadow 0.1.0")
+    from softshadow import __version__
+    parser.add_argument("--version", action="version", version=f"softshadow {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     _add_render(sub)
     _add_fit(sub)

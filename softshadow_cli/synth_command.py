@@ -1,4 +1,4 @@
-"""Command-line glue for ``softshadow synth OUT_DIR --preset NAME --seed N`` (called by softshadow.cli)."""
+"""``softshadow synth OUT_DIR --preset NAME --seed N``: a synthetic photo folder with its truth."""
 
 from __future__ import annotations
 
@@ -21,9 +21,7 @@ def parse_size(text: str) -> tuple[int, int]:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the synth options to an argparse (sub)parser."""
-    from .image_io import FORMATS
-    from .presets import PRESETS
-    from .renderers import RENDERERS
+    from data_synth import FORMATS, PRESETS, RENDERERS
 
     parser.add_argument("out_dir", metavar="OUT_DIR", help="folder to write (images, scene.toml, truth.json)")
     parser.add_argument("--preset", default="table2", choices=PRESETS, help="scene preset (default table2)")
@@ -45,7 +43,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run a synthesis from parsed arguments; 0 on success, 1 with a one-line reason on stderr."""
-    from .synth import OutputExistsError, synthesize
+    from data_synth import OutputExistsError, synthesize
 
     try:
         out = synthesize(args.out_dir, preset=args.preset, seed=args.seed, renderer=args.renderer, size=args.size,
@@ -61,13 +59,3 @@ def run(args: argparse.Namespace) -> int:
     print(out)
     return 0
 
-
-def main(argv=None) -> int:
-    """Stand-alone entry point: python -m data_synth.cli OUT_DIR ..."""
-    parser = argparse.ArgumentParser(prog="softshadow synth", description="Write a synthetic photo folder.")
-    add_arguments(parser)
-    return run(parser.parse_args(argv))
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

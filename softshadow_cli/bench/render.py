@@ -13,12 +13,11 @@ enabled; the result says which).
 
 from __future__ import annotations
 
-import json
 import resource
 import statistics
 import time
 
-__all__ = ["bench_render", "run_bench"]
+__all__ = ["bench_render"]
 
 
 def _median_ms(fn, repeats: int) -> float:
@@ -36,10 +35,7 @@ def bench_render(sizes=(256, 512, 1024), meshes=("pillar", "ball", "dragon"), re
     import jax.numpy as jnp
     import numpy as np
 
-    from .camera import GroundGrid
-    from .params import Pose, ShadowParams, Sun
-    from .render import SoftShadowModel
-    from .raster import project_to_ground
+    from softshadow import GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun, project_to_ground
 
     out = {}
     sun, pose = Sun(200.0, 40.0), Pose()
@@ -92,23 +88,3 @@ def bench_render(sizes=(256, 512, 1024), meshes=("pillar", "ball", "dragon"), re
             }
     out["peak_memory_mb"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1)
     return out
-
-
-def run_bench(args) -> int:
-    import jax
-    import jax.numpy as jnp
-    dtype = str(jnp.result_type(float))
-    result = {"jax": jax.__version__, "devices": [str(d) for d in jax.devices()], "dtype": dtype,
-              "settings": f"top-down map, k=0.01, rho=0.3, sun az 200 el 40, {dtype}"}
-    sizes = (256, 512) if args.quick else (256, 512, 1024)
-    if args.what in ("render", "all"):
-        result["render"] = bench_render(sizes=sizes, repeats=3 if args.quick else 7)
-    if args.what in ("fit", "all"):
-        from fitting.bench import bench_fit
-        result["fit"] = bench_fit(quick=args.quick)
-    text = json.dumps(result, indent=1)
-    print(text)
-    if args.json_path:
-        with open(args.json_path, "w") as f:
-            f.write(text + "\n")
-    return 0

@@ -1,0 +1,68 @@
+"""Evaluating a plan: alpha and the penumbra coordinate at the plan's points (JAX).
+
+The plan (``softshadow.plan``, NumPy) fixed the discrete choices; here the
+chosen edges are posed and lit by the (possibly traced) pose and sun, and the
+penumbra formula of ``softshadow.penumbra`` runs on them. Differentiable in
+k, the sun angles and the pose while the plan's choices hold.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+from .params import Pose, Sun
+from .penumbra import edge_alpha, edge_coordinate
+from .plan import PointPlan
+
+__all__ = ["plan_alpha", "plan_alpha_jit", "plan_coordinate", "plan_coordinate_light"]
+
+
+def _as_jax(plan: PointPlan) -> PointPlan:
+    """The plan's NumPy leaves as JAX arrays (a no-op under jit, where they are already traced),
+    so that traced indices can gather from them."""
+    return jax.tree_util.tree_map(jnp.asarray, plan)
+
+
+def plan_alpha(points: Float[Array, "n 3"], plan: PointPlan, pose: Pose, sun: Sun, range_k,
+               rule: str = "edge", profile: str = "linear") -> Float[Array, " n"]:
+    """Alpha (n,) at the plan's points: the penumbra formula in bands, the hard shadow elsewhere."""
+    plan = _as_jax(plan)
+    edges = plan.edges
+    ev = pose.apply(edges.vertices_local)
+    paper = pose.apply_direction(edges.paper_normal_local) if rule == "paper" else None
+    alpha = edge_alpha(points, plan.edge_id, ev, edges.outward_sign, sun.light, range_k,
+                       plan.hard, rule, profile, paper, near_boundary=plan.near_boundary)
+    return jnp.where(plan.active, alpha, plan.hard)
+
+
+def plan_coordinate(points: Float[Array, "n 3"], plan: PointPlan, pose: Pose, sun: Sun, range_k,
+                    rule: str = "edge", with_slope: bool = False):
+    """Normalised penumbra coordinate u (n,) at the plan's points (+1 outer, -1 inner silhouette).
+
+    Outside the penumbra bands u is +-1e6 from the hard shadow, so any profile
+    gives alpha 0 or 1 there. Use with ``profile_alpha`` (possibly blurred).
+    With ``with_slope`` also returns du/dT (see ``penumbra_coordinate``), 0 outside bands.
+    """
+    return plan_coordinate_light(points, plan, pose, sun.light, range_k, rule, with_slope)
+
+
+def plan_coordinate_light(points: Float[Array, "n 3"], plan: PointPlan, pose: Pose,
+                          light: Float[Array, "*n 3"], range_k, rule: str = "edge",
+                          with_slope: bool = False):
+    """``plan_coordinate`` with the light direction given directly, (3,) or one per point (n, 3)."""
+    plan = _as_jax(plan)
+    edges = plan.edges
+    ev = pose.apply(edges.vertices_local)
+    paper = pose.apply_direction(edges.paper_normal_local) if rule == "paper" else None
+    u, slope = edge_coordinate(points, plan.edge_id, ev, edges.outward_sign, light, range_k,
+                               plan.hard, rule, paper, with_slope=True,
+                               near_boundary=plan.near_boundary)
+    u = jnp.where(plan.active, u, jnp.where(plan.hard > 0.5, -1e6, 1e6))
+    if with_slope:
+        return u, jnp.where(plan.active, slope, 0.0)
+    return u
+
+
+plan_alpha_jit = jax.jit(plan_alpha, static_argnames=("rule", "profile"))
