@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from scene import CameraSpec, ObjectSpec, PhotoSpec, SceneSpec, SiteSpec, dump_scene
+from scene import CameraSpec, ObjectSpec, PhotoSpec, ReceiverSpec, SceneSpec, SiteSpec, dump_scene
 from softshadow import GroundGrid, PinholeCamera, brightness_to_paper, builtin_mesh, pose_matrix
 
 from .camera_pipeline import camera_pipeline, fit_handheld_camera, topdown_grid
@@ -162,8 +162,7 @@ def synthesize(out_dir, preset: str = "table2", seed: int = 0, renderer: str = "
     if plan.site is not None:
         spec.site = SiteSpec(plan.site["latitude"], plan.site["longitude"], plan.site.get("timezone"))
     if plan.receiver == "bank":
-        spec.receiver = {"kind": "depth", "depth_quantity": "z-depth along the camera's optical axis (m), "
-                         "float32 TIFF, NaN where no receiver; file named in each photo's 'depth'"}
+        spec.receiver = ReceiverSpec(kind="depth")
     if plan.board is not None:
         b = plan.board
         spec.camera = CameraSpec(kind="markers", dictionary=b.dictionary, squares=tuple(b.squares),
@@ -221,7 +220,7 @@ def synthesize(out_dir, preset: str = "table2", seed: int = 0, renderer: str = "
             import tifffile
             depth_name = photo.name + ".depth.tiff"
             tifffile.imwrite(out / depth_name, _depth_image(camera, render))
-            entry.extra["depth"] = depth_name
+            entry.depth = depth_name
             files.append(depth_name)
         spec.photos[name] = entry
         groups[photo.group]["photos"].append(name)

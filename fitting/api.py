@@ -176,6 +176,10 @@ def _fit_photos(photos, scene, options, progress, done, on_group, jobs) -> FitRe
             if on_group:
                 on_group(result)
         return FitResults(groups_out, skipped, _software())
+    if scene.receiver.kind != "plane":
+        # Never fitted silently as flat ground: the fitter models the plane z = 0 only (so far).
+        raise FolderError(f"[receiver] kind {scene.receiver.kind!r} cannot be fitted yet: the fitter "
+                          "models the ground plane z = 0 only")
     try:
         model = SoftShadowModel.from_mesh(scene.object.mesh, rule=options.rule, base_dir=scene.base_dir)
     except MeshError as exc:

@@ -52,7 +52,9 @@ class GroupResult:
     range_k and rho are physical values; ``range`` and ``brightness`` are the paper's units
     (100 k and 255 rho^(1/2.2)); *_stderr are one-sigma in physical units. When
     ``identifiable`` is False, range_k is an upper bound. ``error`` holds a one-line reason
-    when the group could not be fitted (then the numeric fields are None).
+    when the group could not be fitted (then the numeric fields are None). ``warnings`` are
+    one-line notes; ``reliable`` is False when the measurement failed a consistency check
+    (the values are still given, but do not trust their error bars).
     """
 
     label: str
@@ -79,6 +81,7 @@ class GroupResult:
     penumbra_m: float | None = None
     reprojection_error_px: float | None = None
     warnings: list[str] = dataclasses.field(default_factory=list)
+    reliable: bool = True
     error: str | None = None
     plot_profiles: list[ProfilePlotData] = dataclasses.field(default_factory=list, repr=False)
     plot_overlays: list[OverlayPlotData] = dataclasses.field(default_factory=list, repr=False)
@@ -107,6 +110,7 @@ class GroupResult:
             "rmse": _num(self.rmse), "n_profiles": int(self.n_profiles),
             "converged": bool(self.converged), "identifiable": bool(self.identifiable),
             "seconds": round(float(self.seconds), 3),
+            "warnings": list(self.warnings), "reliable": bool(self.reliable),
         }
         optional = {"sun_source": self.sun_source, "profile": self.profile,
                     "blur_px": _num(self.blur_px), "n_samples": self.n_samples or None,
@@ -115,7 +119,7 @@ class GroupResult:
                     "penumbra_m": _num(self.penumbra_m),
                     "reprojection_error_px": _num(self.reprojection_error_px),
                     "solve_seconds": None if self.solve_seconds is None else round(float(self.solve_seconds), 3),
-                    "warnings": self.warnings or None, "error": self.error}
+                    "error": self.error}
         out.update({k: v for k, v in optional.items() if v is not None})
         return out
 

@@ -16,10 +16,11 @@ import numpy as np
 
 from softshadow import GroundGrid, PinholeCamera
 
-__all__ = ["SceneError", "SiteSpec", "ObjectSpec", "CameraSpec", "PhotoSpec", "SceneSpec",
+__all__ = ["SceneError", "SiteSpec", "ObjectSpec", "ReceiverSpec", "CameraSpec", "PhotoSpec", "SceneSpec",
            "load_scene", "dump_scene", "scene_from_dict", "scene_to_dict"]
 
 CAMERA_KINDS = ("explicit", "topdown", "markers")
+RECEIVER_KINDS = ("plane", "depth", "mesh")
 
 
 class SceneError(ValueError):
@@ -40,6 +41,35 @@ class ObjectSpec:
     position: tuple[float, float, float] = (0.0, 0.0, 0.0)
     rotation_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
     scale: float = 1.0
+
+
+@dataclasses.dataclass
+class ReceiverSpec:
+    """What the shadow falls on (besides the object itself, always a receiver too).
+
+    kind "plane": the ground z = 0. kind "depth": a range image seen by each photo's own
+    camera; ``depth`` names the file for every photo (a photo's own ``depth`` overrides
+    it), relative to the folder: ``.npy`` float32 metres (NaN: no data) or 16-bit ``.png``
+    millimetres (0: no data), each value the distance along the camera's optical axis
+    (z_cam). kind "mesh": ``mesh`` is any mesh trimesh reads (or a built-in name), in world
+    metres, placed with position / rotation_deg / scale as the object is.
+    """
+
+    kind: str = "plane"
+    depth: str | None = None
+    mesh: str | None = None
+    position: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rotation_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    scale: float = 1.0
+
+    def to_toml(self) -> dict:
+        out: dict[str, Any] = {"kind": self.kind}
+        if self.kind == "depth" and self.depth is not None:
+            out["depth"] = self.depth
+        if self.kind == "mesh":
+            out.update(mesh=self.mesh, position=list(self.position), rotation_deg=list(self.rotation_deg),
+                       scale=self.scale)
+        return out
 
 
 @dataclasses.dataclass
@@ -94,6 +124,8 @@ class PhotoSpec:
     sun_azimuth_deg: float | None = None
     sun_elevation_deg: float | None = None
     camera: CameraSpec | None = None
+    depth: str | None = None   # this photo's range image (receiver kind "depth"), relative to the folder
+    ignore: str | None = None  # this photo's ignore mask (non-zero pixels are left out), relative to the folder
     extra: dict = dataclasses.field(default_factory=dict)
 
 
@@ -101,7 +133,7 @@ class PhotoSpec:
 class SceneSpec:
     object: ObjectSpec | None = None
     site: SiteSpec | None = None
-    receiver: dict = dataclasses.field(default_factory=lambda: {"kind": "plane"})
+    receiver: ReceiverSpec = dataclasses.field(default_factory=ReceiverSpec)
     camera: CameraSpec | None = None
     photos: dict[str, PhotoSpec] = dataclasses.field(default_factory=dict)
     extra: dict = dataclasses.field(default_factory=dict)
@@ -166,6 +198,25 @@ def _camera(table: dict, where: str) -> CameraSpec:
     return cam
 
 
+def _receiver(table: dict, where: str) -> ReceiverSpec:
+    kind = table.pop("kind", "plane")
+    if kind not in RECEIVER_KINDS:
+        raise SceneError(f"{where}.kind must be one of {RECEIVER_KINDS}, got {kind!r}")
+    spec = ReceiverSpec(kind=kind)
+    if kind == "depth" and "depth" in table:
+        spec.depth = str(table.pop("depth"))
+    if kind == "mesh":
+        if "mesh" not in table:
+            raise SceneError(f"{where}: a mesh receiver needs mesh (a file trimesh reads, or a built-in name)")
+        spec.mesh = str(table.pop("mesh"))
+        spec.position = _floats(table.pop("position", (0, 0, 0)), 3, f"{where}.position")
+        spec.rotation_deg = _floats(table.pop("rotation_deg", (0, 0, 0)), 3, f"{where}.rotation_deg")
+        spec.scale = float(table.pop("scale", 1.0))
+        if not spec.scale > 0:
+            raise SceneError(f"{where}.scale must be positive")
+    return spec
+
+
 def load_scene(path: str | Path) -> SceneSpec:
     """Read and validate a scene.toml."""
     path = Path(path)
@@ -201,9 +252,7 @@ def scene_from_dict(data: dict, base_dir=None, source="scene.toml") -> SceneSpec
         if not spec.object.scale > 0:
             raise SceneError(f"{source} [object].scale must be positive")
     if "receiver" in data:
-        spec.receiver = dict(data.pop("receiver"))
-        if spec.receiver.get("kind", "plane") not in ("plane", "depth"):
-            raise SceneError(f"{source} [receiver].kind must be 'plane' or 'depth'")
+        spec.receiver = _receiver(dict(data.pop("receiver")), f"{source} [receiver]")
     if "camera" in data:
         spec.camera = _camera(data.pop("camera"), f"{source} [camera]")
     for name, p in (data.pop("photos", {}) or {}).items():
@@ -222,6 +271,12 @@ def scene_from_dict(data: dict, base_dir=None, source="scene.toml") -> SceneSpec
                 setattr(photo, key, value)
         if "camera" in p:
             photo.camera = _camera(p.pop("camera"), f"{where}.camera")
+        for key in ("depth", "ignore"):
+            if key in p:
+                value = p.pop(key)
+                if not isinstance(value, str) or not value:
+                    raise SceneError(f"{where}.{key} must be a file name, got {value!r}")
+                setattr(photo, key, value)
         photo.extra = p
         spec.photos[name] = photo
     spec.extra = data
@@ -236,7 +291,7 @@ def scene_to_dict(spec: SceneSpec) -> dict:
         o = spec.object
         out["object"] = {"mesh": o.mesh, "position": list(o.position),
                          "rotation_deg": list(o.rotation_deg), "scale": o.scale}
-    out["receiver"] = dict(spec.receiver)
+    out["receiver"] = spec.receiver.to_toml()
     if spec.camera is not None:
         out["camera"] = spec.camera.to_toml()
     out.update(spec.extra)
@@ -244,7 +299,7 @@ def scene_to_dict(spec: SceneSpec) -> dict:
         photos = {}
         for name, p in spec.photos.items():
             entry: dict[str, Any] = {}
-            for key in ("time", "group", "sun_azimuth_deg", "sun_elevation_deg"):
+            for key in ("time", "group", "sun_azimuth_deg", "sun_elevation_deg", "depth", "ignore"):
                 if getattr(p, key) is not None:
                     entry[key] = getattr(p, key)
             if p.camera is not None:

@@ -160,9 +160,9 @@ def test_depth_background_writes_range_images(tmp_path):
     import tifffile
     out = synthesize(tmp_path / "d", "depth-background", size=SMALL, progress=False, render_quality=FAST)
     scene = load_scene(out / "scene.toml")
-    assert scene.receiver["kind"] == "depth"
+    assert scene.receiver.kind == "depth"
     for name, spec in scene.photos.items():
-        depth = tifffile.imread(out / spec.extra["depth"])
+        depth = tifffile.imread(out / spec.depth)
         assert depth.shape == SMALL[::-1] and depth.dtype == np.float32
         finite = np.isfinite(depth)
         assert finite.mean() > 0.5 and np.all(depth[finite] > 0)
