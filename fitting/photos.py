@@ -39,6 +39,8 @@ ALL_PHOTO_EXTENSIONS = IMAGE_EXTENSIONS | RAW_EXTENSIONS
 IGNORED_NAMES = frozenset({"scene.toml", "truth.json"})
 IGNORED_EXTENSIONS = frozenset({".json", ".md", ".npy", ".obj", ".mtl", ".ply", ".stl", ".glb",
                                 ".gltf", ".off", ".dae", ".3mf"})
+# Range images and ignore masks beside the photos (scene.toml): images, but never photos.
+IGNORED_SUFFIXES = (".depth.png", ".depth.npy", ".ignore.png")
 
 # Linear-light luminance of Rec. 709 / sRGB primaries.
 REC709_WEIGHTS = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
@@ -351,9 +353,9 @@ def read_photo(path, half_size: bool = False, assume_16bit: str = "linear") -> P
 def list_photos(folder) -> tuple[list[Path], list[tuple[str, str]]]:
     """Photo files of a folder, sorted by name, and the other files skipped as (name, reason).
 
-    Hidden files, sub-folders, scene.toml, truth.json, *.json, *.md, *.npy and mesh
-    files (.obj .mtl .ply .stl .glb .gltf .off .dae .3mf) belong in a photo folder and
-    are ignored silently; any other file is skipped as "not an image (extension .xyz)".
+    Hidden files, sub-folders, scene.toml, truth.json, *.json, *.md, *.npy, range images
+    and ignore masks (*.depth.png, *.depth.npy, *.ignore.png) and mesh files (.obj .mtl
+    .ply .stl .glb .gltf .off .dae .3mf) belong in a photo folder and are ignored silently; any other file is skipped as "not an image (extension .xyz)".
     Raises PhotoError when the folder does not exist.
     """
     folder = Path(folder)
@@ -366,7 +368,7 @@ def list_photos(folder) -> tuple[list[Path], list[tuple[str, str]]]:
         if name.startswith(".") or not entry.is_file():
             continue
         ext = entry.suffix.lower()
-        if name.lower() in IGNORED_NAMES or ext in IGNORED_EXTENSIONS:
+        if name.lower() in IGNORED_NAMES or ext in IGNORED_EXTENSIONS or name.lower().endswith(IGNORED_SUFFIXES):
             continue
         if ext in ALL_PHOTO_EXTENSIONS:
             photos.append(entry)
