@@ -25,7 +25,6 @@ from threadpoolctl import threadpool_limits
 from scene import CameraSpec, SceneError, SceneSpec, load_scene, photo_sun
 from softshadow import MeshError, Pose, SoftShadowModel, SunBelowHorizonError, check_sun_above_horizon
 
-from .exif import intrinsics_from_exif
 from .grouping import PhotoGroup, group_photos, photo_time
 from .photos import Photo, PhotoError, list_photos, read_photo
 from .results import FitResults, GroupResult
@@ -66,8 +65,8 @@ def _camera_view(photo: Photo, spec: CameraSpec | None, view: PhotoView) -> None
         view.camera = cam
     else:
         from .markers import board_outline_world, register_board
-        K = np.asarray(spec.K) if spec.K is not None else intrinsics_from_exif(photo.exif, w, h)
-        reg = register_board(photo.gray, spec, K=K, exif=photo.exif)
+        # Intrinsics: scene.toml's K with its distortion, else EXIF, else fitted (register_board).
+        reg = register_board(photo.gray, spec, exif=photo.exif)
         view.camera = reg.camera
         view.reprojection_error_px = reg.reprojection_error_px
         outline = board_outline_world(spec)
