@@ -24,28 +24,9 @@ import numpy as np
 __all__ = ["bench_same_model", "bench_table2", "bench_fit"]
 
 
-def _model_folder(folder: Path, k: float, rho: float, noise: float, seed: int, size: int = 192):
-    import cv2
-
-    from scene import CameraSpec, ObjectSpec, PhotoSpec, SceneSpec, dump_scene
-    from softshadow import GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun
-    folder.mkdir(parents=True, exist_ok=True)
-    model = SoftShadowModel.from_mesh("pillar", profile="disk")
-    grid = GroundGrid.around((-0.9, 1.6), 2.6, size)
-    fine = GroundGrid.around((-0.9, 1.6), 2.6, 4 * size)
-    shading = np.asarray(model.ground_map(ShadowParams(k, rho), Sun(150.0, 40.0), Pose(), fine))
-    shading = shading.reshape(size, 4, size, 4).mean(axis=(1, 3))
-    rng = np.random.default_rng(seed)
-    img = np.clip(0.6 * shading + rng.normal(0, noise, shading.shape), 0, 1)
-    cv2.imwrite(str(folder / "top.png"), np.rint(img * 65535).astype(np.uint16))
-    dump_scene(SceneSpec(object=ObjectSpec("pillar"), photos={"top.png": PhotoSpec(
-        group="g", sun_azimuth_deg=150.0, sun_elevation_deg=40.0,
-        camera=CameraSpec("topdown", pixel_m=grid.pixel_m, origin_m=grid.origin_m))}),
-        folder / "scene.toml")
-
-
 def bench_same_model(seeds: int = 20, k: float = 0.012, rho: float = 0.25, noise: float = 0.01,
                      max_samples_per_photo: int | None = None) -> dict:
+    from data_synth import model_topdown_folder
     from fitting import FitOptions, fit_folder
     options = FitOptions(profiles=("disk",), blur=(False,), robust=False, sky_occlusion=False,
                          plots=False)  # the data were rendered without the sky term
@@ -54,8 +35,7 @@ def bench_same_model(seeds: int = 20, k: float = 0.012, rho: float = 0.25, noise
     ks, rhos, k_se, rho_se, secs, solve_secs, used = [], [], [], [], [], [], []
     with tempfile.TemporaryDirectory() as tmp:
         for seed in range(seeds):
-            folder = Path(tmp) / f"s{seed}"
-            _model_folder(folder, k, rho, noise, seed)
+            folder = model_topdown_folder(Path(tmp) / f"s{seed}", k, rho, noise, seed, group="g", time=None)
             (g,) = fit_folder(folder, options=options).groups
             ks.append(g.range_k)
             rhos.append(g.rho)
