@@ -27,6 +27,7 @@ from softshadow import (MeshError, Pose, SoftShadowModel, SunBelowHorizonError, 
 
 from .files import atomic_writer, software_versions
 from .grouping import PhotoGroup, group_photos, photo_time
+from .ignore_masks import IgnoreMaskError, ignore_mask_path, read_ignore_mask
 from .photos import Photo, PhotoError, list_photos, read_photo
 from .results import FitResults, GroupResult
 from .solve import FitOptions, fit_group
@@ -108,7 +109,7 @@ def _measure_without_scene(photo: Photo, when, scene: SceneSpec | None) -> Group
     pixel_m = None
     if scene is not None and scene.camera is not None and scene.camera.kind == "topdown":
         pixel_m = scene.camera.pixel_m
-    m = measure_shadow_edges(photo.gray, mask=photo.saturated, pixel_m=pixel_m, linear_rgb=photo.linear)
+    m = measure_shadow_edges(photo.gray, mask=photo.excluded, pixel_m=pixel_m, linear_rgb=photo.linear)
     result.seconds = _time.perf_counter() - start
     if not m.edges_found:
         result.error = m.reason or "no shadow edge found"
@@ -119,6 +120,7 @@ def _measure_without_scene(photo: Photo, when, scene: SceneSpec | None) -> Group
     result.n_profiles = int(m.n_profiles)
     result.converged = True
     result.identifiable = True
+    result.warnings, result.reliable = list(m.warnings), bool(m.reliable)
     return result
 
 
@@ -183,7 +185,7 @@ def _fit_photos(photos, scene, options, progress, done, on_group, jobs) -> FitRe
         views, group_skipped = [], []
         for name in group.photos:
             photo = by_name[name]
-            view = PhotoView(name, photo.gray, photo.saturated, time=times.get(name))
+            view = PhotoView(name, photo.gray, photo.excluded, time=times.get(name))
             try:
                 _camera_view(photo, scene.camera_for(name), view)
                 _sun_view(name, times.get(name), scene, view)
@@ -259,9 +261,15 @@ def fit_folder(path, scene: SceneSpec | str | Path | None = None, options: FitOp
     photos = []
     for f in files:
         try:
-            photos.append(read_photo(f, half_size=half_size))
+            photo = read_photo(f, half_size=half_size)
+            mask_path = ignore_mask_path(f, scene)
+            if mask_path is not None:
+                photo.ignore = read_ignore_mask(mask_path, photo.gray.shape)
+            photos.append(photo)
         except PhotoError as exc:
             skipped.append({"photo": f.name, "reason": exc.reason})
+        except IgnoreMaskError as exc:
+            skipped.append({"photo": f.name, "reason": str(exc)})
     if not photos:
         reasons = "; ".join(f"{s['photo']}: {s['reason']}" for s in skipped) or "no image files"
         raise FolderError(f"no readable photo in {folder} ({reasons})")
