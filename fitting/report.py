@@ -104,6 +104,9 @@ def _group_notes(g: GroupResult) -> list[str]:
         notes.append(f"{g.label}: not fitted: {g.error}")
     elif g.fitted and not g.converged:
         notes.append(f"{g.label}: the solver did not converge; values are its last iterate")
+    if g.error is None and (g.warnings or not g.reliable):
+        head = "NOT RELIABLE" if not g.reliable else "warning"
+        notes.append(f"{g.label}: {head}: " + ("; ".join(g.warnings) or "a consistency check failed"))
     return notes
 
 
@@ -321,6 +324,8 @@ def table2_csv(results: FitResults, reference=None, truth=None) -> str:
                  for c in cells), []))
     out.append(["converged"] + sum(([("true" if g.converged else "false") if g.error is None else "", ""]
                                     for g in groups), []))
+    out.append(["reliable"] + sum(([("true" if g.reliable else "false") if g.error is None else "", ""]
+                                   for g in groups), []))
     out.append(["error"] + sum(([g.error or "", ""] for g in groups), []))
     buf = io.StringIO()
     csv.writer(buf, lineterminator="\n").writerows(out)
