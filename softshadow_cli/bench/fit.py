@@ -10,6 +10,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import subprocess
@@ -23,12 +24,15 @@ import numpy as np
 __all__ = ["bench_same_model", "bench_table2", "bench_fit"]
 
 
-def bench_same_model(seeds: int = 20, k: float = 0.012, rho: float = 0.25, noise: float = 0.01) -> dict:
+def bench_same_model(seeds: int = 20, k: float = 0.012, rho: float = 0.25, noise: float = 0.01,
+                     max_samples_per_photo: int | None = None) -> dict:
     from data_synth import model_topdown_folder
     from fitting import FitOptions, fit_folder
     options = FitOptions(profiles=("disk",), blur=(False,), robust=False, sky_occlusion=False,
                          plots=False)  # the data were rendered without the sky term
-    ks, rhos, k_se, rho_se, secs, solve_secs = [], [], [], [], [], []
+    if max_samples_per_photo is not None:
+        options = dataclasses.replace(options, max_samples_per_photo=int(max_samples_per_photo))
+    ks, rhos, k_se, rho_se, secs, solve_secs, used = [], [], [], [], [], [], []
     with tempfile.TemporaryDirectory() as tmp:
         for seed in range(seeds):
             folder = model_topdown_folder(Path(tmp) / f"s{seed}", k, rho, noise, seed, group="g", time=None)
@@ -39,9 +43,11 @@ def bench_same_model(seeds: int = 20, k: float = 0.012, rho: float = 0.25, noise
             rho_se.append(g.rho_stderr)
             secs.append(g.seconds)
             solve_secs.append(g.solve_seconds)
+            used.append(g.n_samples)
     ks, rhos = np.array(ks), np.array(rhos)
     return {
         "truth": {"range_k": k, "rho": rho, "noise_sigma": noise, "seeds": seeds},
+        "samples_used": int(np.median(used)),
         "range_k": {"mean": float(ks.mean()), "std": float(ks.std(ddof=1)),
                     "crb": float(np.mean(k_se)), "std_over_crb": float(ks.std(ddof=1) / np.mean(k_se)),
                     "bias_over_crb": float((ks.mean() - k) / np.mean(k_se))},
