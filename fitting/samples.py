@@ -143,9 +143,10 @@ def select_samples(model: SoftShadowModel, pose: Pose, view: PhotoView, range_k_
     receiver is not the plane is sampled on it (``fitting.receiver_samples``).
     """
     if view.receiver is not None and view.receiver.kind != "plane":
-        from .receiver_samples import select_receiver_samples
-        return select_receiver_samples(model, pose, view, view.receiver, range_k_max, sun_margin_deg, max_samples,
-                                       seed, min_band_px, max_band_px, sky_occlusion)
+        from .receiver_samples import RECEIVER_SAMPLES_FACTOR, select_receiver_samples
+        return select_receiver_samples(model, pose, view, view.receiver, range_k_max, sun_margin_deg,
+                                       RECEIVER_SAMPLES_FACTOR * max_samples, seed, min_band_px, max_band_px,
+                                       sky_occlusion)
     h, w = view.shape
     sun = Sun(view.sun_azimuth_deg, view.sun_elevation_deg)
     # Boundary points on the ground, about one image pixel apart.

@@ -124,23 +124,27 @@ def test_photos_skip_range_images_and_masks(tmp_path):
     assert [p.name for p in photos] == ["IMG_1.png"] and skipped == []
 
 
-def _synth(tmp_path, preset):
+def _synth(tmp_path, preset, size=SMALL):
     from data_synth import RenderQuality, synthesize
     fast = RenderQuality(sun_samples=16, sky_samples=256, sky_fine_nodes=48, object_sky_samples=16)
-    return synthesize(tmp_path / preset, preset, size=SMALL, progress=False, render_quality=fast)
+    return synthesize(tmp_path / preset, preset, size=size, progress=False, render_quality=fast)
 
 
-@pytest.mark.parametrize("preset", ["depth-background", "wall"])
-def test_small_end_to_end_fit_on_the_receiver(tmp_path, preset):
-    """A physically rendered range-image and mesh receiver, fitted end to end at 240x180."""
+@pytest.mark.parametrize("preset, size", [("depth-background", (320, 240)), ("wall", SMALL)])
+def test_small_end_to_end_fit_on_the_receiver(tmp_path, preset, size):
+    """A physically rendered range-image and mesh receiver, fitted end to end at a small size.
+
+    There the penumbra is about 2 pixels wide, so k is only checked to a factor of 2 (the
+    full-size figures are in docs/receivers.md); fitted as flat ground, depth-background
+    read k 17x and rho 0.16 too large."""
     from fitting.api import fit_folder
     from fitting.solve import FitOptions
-    folder = _synth(tmp_path, preset)
+    folder = _synth(tmp_path, preset, size)
     truth = json.loads((folder / "truth.json").read_text())["groups"][0]
     (g,) = fit_folder(folder, options=FitOptions(plots=False)).groups
     assert g.error is None, g.error
-    assert abs(g.rho - truth["rho"]) < 0.03
-    assert abs(g.range_k / truth["range_k"] - 1) < 0.5
+    assert abs(g.rho - truth["rho"]) < 0.02
+    assert abs(math.log(g.range_k / truth["range_k"])) < math.log(2.0)
 
 
 def test_a_receiver_it_cannot_model_is_refused(tmp_path):
