@@ -49,8 +49,8 @@ class SweepSettings:
         self.fit_seeds = 2 if quick else 12
         self.meshes = ("pillar", "ball", "dragon") if quick else BENCH_MESHES
         # The paper's algorithm, fitted by grid search: its range (pixels) and expansion (L' tilt).
-        self.paper_ranges = (0, 2, 4) if quick else tuple(range(0, 41))
-        self.paper_expands = (0.0, 0.005) if quick else (0.0, 0.002, 0.004, 0.006, 0.008, 0.01, 0.012)
+        self.paper_ranges = (0, 2) if quick else tuple(range(0, 41))
+        self.paper_expands = (0.0,) if quick else (0.0, 0.002, 0.004, 0.006, 0.008, 0.01, 0.012)
         self.table2_samples = 64 if quick else 1024
 
 
