@@ -21,6 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
+from softshadow import linear_to_srgb, srgb_to_linear
+
 from .exif import read_exif
 from .ignore_masks import is_auxiliary
 
@@ -90,18 +92,6 @@ class Photo:
     @property
     def width(self) -> int:
         return int(self.linear.shape[1])
-
-
-def srgb_to_linear(encoded) -> np.ndarray:
-    """Exact piecewise sRGB EOTF (IEC 61966-2-1): encoded values in [0, 1] -> linear [0, 1]."""
-    c = np.asarray(encoded, dtype=np.float64)
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
-
-
-def linear_to_srgb(linear) -> np.ndarray:
-    """Inverse of ``srgb_to_linear``: linear [0, 1] -> sRGB-encoded [0, 1] (input clipped to [0, 1])."""
-    x = np.clip(np.asarray(linear, dtype=np.float64), 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
 
 
 # Look-up tables: each code value linearised once, exactly.
