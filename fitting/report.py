@@ -38,7 +38,8 @@ from .results import FitResults, GroupResult
 __all__ = [
     "PAPER_TABLE2", "PAPER_TIME_TOLERANCE_MIN", "software_versions", "nearest_paper_time",
     "reference_for_group", "brightness_stderr", "range_stderr_paper", "TableCell",
-    "write_results_json", "write_table2", "format_table", "write_report",
+    "write_results_json", "write_table2", "format_table", "write_report", "atomic_writer",
+    "REPORT_FILES", "clear_report",
 ]
 
 logger = logging.getLogger(__name__)
@@ -74,7 +75,7 @@ def software_versions() -> dict[str, str | None]:
 # --------------------------------------------------------------------------- atomic files
 
 @contextlib.contextmanager
-def _atomic_writer(path: Path, newline: str | None = None) -> Iterator[io.TextIOBase]:
+def atomic_writer(path: Path, newline: str | None = None) -> Iterator[io.TextIOBase]:
     """Open a temporary file beside ``path`` for writing text; on success it replaces
     ``path`` (os.replace is atomic within one file system), on error it is removed and
     ``path`` is left as it was."""
@@ -93,6 +94,22 @@ def _atomic_writer(path: Path, newline: str | None = None) -> Iterator[io.TextIO
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
         raise
+
+
+#: The files of a finished report in OUT_DIR (besides plots/*.png).
+REPORT_FILES = ("results.json", "table2.md", "table2.csv")
+
+
+def clear_report(out_dir) -> None:
+    """Remove a previous run's report (REPORT_FILES and plots/*.png) from OUT_DIR, so that a
+    refit that stops half-way never leaves old results beside new groups."""
+    out_dir = Path(out_dir)
+    for name in REPORT_FILES:
+        (out_dir / name).unlink(missing_ok=True)
+    plots = out_dir / "plots"
+    if plots.is_dir():
+        for f in plots.glob("*.png"):
+            f.unlink(missing_ok=True)
 
 
 def _umask() -> int:
@@ -130,7 +147,7 @@ def write_results_json(results: FitResults, out_dir) -> Path:
     """
     path = Path(out_dir) / "results.json"
     doc = results_document(results)
-    with _atomic_writer(path) as fh:
+    with atomic_writer(path) as fh:
         json.dump(doc, fh, indent=2, ensure_ascii=False, allow_nan=False, default=_json_default)
         fh.write("\n")
     return path
@@ -391,9 +408,9 @@ def write_table2(results: FitResults, out_dir, reference=None, truth=None) -> tu
     """
     out_dir = Path(out_dir)
     md_path, csv_path = out_dir / "table2.md", out_dir / "table2.csv"
-    with _atomic_writer(md_path) as fh:
+    with atomic_writer(md_path) as fh:
         fh.write(table2_markdown(results, reference, truth))
-    with _atomic_writer(csv_path, newline="") as fh:
+    with atomic_writer(csv_path, newline="") as fh:
         fh.write(table2_csv(results, reference, truth))
     return md_path, csv_path
 
