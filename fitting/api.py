@@ -198,6 +198,12 @@ def _fit_checked(model, pose, views: list[PhotoView], group: PhotoGroup,
             result.warnings += verdict.warnings
             result.reliable = False
         break
+    if result.fitted and result.identifiable and result.range_k is not None and result.range_k > options.range_k_max:
+        # The samples' band and the start were sized for k up to range_k_max: beyond it the band
+        # may cut the penumbra short.
+        result.warnings.append(f"k = {result.range_k:.4g} is beyond range_k_max = {options.range_k_max:g}: the "
+                               "samples may not cover the whole penumbra (raise --range-k-max)")
+        result.reliable = False
     if left_out and result.fitted:
         result.warnings.append("refitted without " + ", ".join(s["photo"] for s in left_out)
                                + ", which did not fit the other photos (see skipped)")

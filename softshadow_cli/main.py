@@ -143,13 +143,23 @@ def main(argv=None) -> int:
     _add_demo(sub)
     _add_bench(sub)
     args = parser.parse_args(argv)
-    _use_compilation_cache()
-    # NumPy's BLAS threads spin after each call and starve XLA's threads on a small machine
-    # (renders and solves ran 10-20x slower after a matrix product); the arrays BLAS sees
-    # here are small, so one thread costs nothing.
-    from threadpoolctl import threadpool_limits
-    with threadpool_limits(limits=1, user_api="blas"):
-        return int(args.func(args) or 0)
+    try:
+        _use_compilation_cache()
+        # NumPy's BLAS threads spin after each call and starve XLA's threads on a small machine
+        # (renders and solves ran 10-20x slower after a matrix product); the arrays BLAS sees
+        # here are small, so one thread costs nothing.
+        from threadpoolctl import threadpool_limits
+        with threadpool_limits(limits=1, user_api="blas"):
+            return int(args.func(args) or 0)
+    except KeyboardInterrupt:
+        return _fail(args.command, "interrupted", 130)
+    except Exception as exc:
+        # A bug or an unforeseen input: one line for the user, the traceback with --verbose.
+        if getattr(args, "verbose", False):
+            raise
+        first = (str(exc).splitlines() or [""])[0]
+        return _fail(args.command, f"unexpected error: {type(exc).__name__}: {first} "
+                                   "(--verbose shows the traceback)")
 
 
 if __name__ == "__main__":
