@@ -273,8 +273,9 @@ def test_ctrl_c_prints_one_line_and_resumes(one_group, tmp_path):
     text = err.decode(errors="replace")
     assert proc.returncode == 130, text
     assert "Traceback" not in text and "KeyboardInterrupt" not in text
-    lines = [ln for ln in text.replace("\r", "\n").splitlines() if ln.startswith("softshadow fit:")]
-    assert len(lines) == 1 and "run the same command again to resume" in lines[0]
+    lines = [ln for ln in text.replace("\r", "\n").splitlines() if "softshadow fit:" in ln]
+    assert len(lines) == 1 and lines[0].startswith("softshadow fit: interrupted"), text
+    assert "run the same command again to resume" in lines[0]
 
 
 # --------------------------------------------------------------------------- the command line
