@@ -21,13 +21,14 @@ from typing import Callable
 import cv2
 import jax
 import numpy as np
-from threadpoolctl import threadpool_limits
 
 from scene import CameraSpec, SceneError, SceneSpec, load_scene, photo_sun
-from softshadow import MeshError, Pose, SoftShadowModel, SunBelowHorizonError, check_sun_above_horizon
+from softshadow import (MeshError, Pose, SoftShadowModel, SunBelowHorizonError, check_sun_above_horizon,
+                        one_blas_thread)
 
-from .exif import intrinsics_from_exif
+from .files import software_versions
 from .grouping import PhotoGroup, group_photos, photo_time
+from .ignore_masks import IgnoreMaskError, ignore_mask_path, read_ignore_mask
 from .photo_check import judge, photo_agreement
 from .photos import Photo, PhotoError, list_photos, read_photo
 from .resume import GroupStore, group_key, photo_digest
@@ -85,11 +86,6 @@ def _safe_label(label: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", label).strip("_") or "group"
 
 
-def _software() -> dict:
-    from .report import software_versions
-    return {k: v for k, v in software_versions().items() if v is not None}
-
-
 def _camera_view(photo: Photo, spec: CameraSpec | None, view: PhotoView) -> None:
     """Fill the view's camera or grid from the scene; markers are registered here."""
     h, w = photo.gray.shape
@@ -102,8 +98,8 @@ def _camera_view(photo: Photo, spec: CameraSpec | None, view: PhotoView) -> None
         view.camera = cam
     else:
         from .markers import board_outline_world, register_board
-        K = np.asarray(spec.K) if spec.K is not None else intrinsics_from_exif(photo.exif, w, h)
-        reg = register_board(photo.gray, spec, K=K, exif=photo.exif)
+        # Intrinsics: scene.toml's K with its distortion, else EXIF, else fitted (register_board).
+        reg = register_board(photo.gray, spec, exif=photo.exif)
         view.camera = reg.camera
         view.reprojection_error_px = reg.reprojection_error_px
         outline = board_outline_world(spec)
@@ -155,7 +151,7 @@ def _measure_without_scene(photo: Photo, when, scene: SceneSpec | None) -> Group
     pixel_m = None
     if scene is not None and scene.camera is not None and scene.camera.kind == "topdown":
         pixel_m = scene.camera.pixel_m
-    m = measure_shadow_edges(photo.gray, mask=photo.saturated, pixel_m=pixel_m, linear_rgb=photo.linear)
+    m = measure_shadow_edges(photo.gray, mask=photo.excluded, pixel_m=pixel_m, linear_rgb=photo.linear)
     result.seconds = _time.perf_counter() - start
     if not m.edges_found:
         result.error = m.reason or "no shadow edge found"
@@ -166,6 +162,7 @@ def _measure_without_scene(photo: Photo, when, scene: SceneSpec | None) -> Group
     result.n_profiles = int(m.n_profiles)
     result.converged = True
     result.identifiable = True
+    result.warnings, result.reliable = list(m.warnings), bool(m.reliable)
     return result
 
 
@@ -227,21 +224,21 @@ def fit_photos(photos: list[Photo], scene: SceneSpec | None = None, options: Fit
     jobs: groups fitted at once (threads).
     """
     # Fits run in float64 (LM in float32 stalls short of its tolerances), scoped to this call so
-    # that a caller's own JAX code keeps its precision; one BLAS thread, see softshadow_cli.main.
-    with jax.enable_x64(True), threadpool_limits(limits=1, user_api="blas"):
+    # that a caller's own JAX code keeps its precision; one BLAS thread (softshadow.one_blas_thread).
+    with jax.enable_x64(True), one_blas_thread():
         return _fit_photos(photos, scene, options or FitOptions(), half_size, progress, store, on_group,
                            jobs)
 
 
 def _in_float64(fn, *args):
     """fn(*args) in float64 and one BLAS thread: JAX's precision switch is per thread."""
-    with jax.enable_x64(True), threadpool_limits(limits=1, user_api="blas"):
+    with jax.enable_x64(True), one_blas_thread():
         return fn(*args)
 
 
 def _fit_photos(photos, scene, options, half_size, progress, store, on_group, jobs) -> FitResults:
     skipped: list[dict] = []
-    software = _software()
+    software = software_versions()
     by_name = {p.name: p for p in photos}
     times = {}
     for p in photos:
@@ -285,7 +282,7 @@ def _fit_photos(photos, scene, options, half_size, progress, store, on_group, jo
         views, group_skipped = [], []
         for name in group.photos:
             photo = by_name[name]
-            view = PhotoView(name, photo.gray, photo.saturated, time=times.get(name))
+            view = PhotoView(name, photo.gray, photo.excluded, time=times.get(name))
             try:
                 _camera_view(photo, scene.camera_for(name), view)
                 _sun_view(name, times.get(name), scene, view)
@@ -368,9 +365,15 @@ def fit_folder(path, scene: SceneSpec | str | Path | None = None, options: FitOp
     photos = []
     for f in files:
         try:
-            photos.append(read_photo(f, half_size=half_size))
+            photo = read_photo(f, half_size=half_size)
+            mask_path = ignore_mask_path(f, scene)
+            if mask_path is not None:
+                photo.ignore = read_ignore_mask(mask_path, photo.gray.shape)
+            photos.append(photo)
         except PhotoError as exc:
             skipped.append({"photo": f.name, "reason": exc.reason})
+        except IgnoreMaskError as exc:
+            skipped.append({"photo": f.name, "reason": str(exc)})
     if not photos:
         raise FolderError(f"no readable photo in {folder}: {unreadable_summary(skipped)}", skipped)
     store = None

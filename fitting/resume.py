@@ -19,7 +19,7 @@ from pathlib import Path
 
 from scene import SceneSpec, scene_to_dict
 
-from .report import atomic_writer
+from .files import atomic_writer
 from .results import GroupResult
 
 __all__ = ["photo_digest", "group_key", "GroupStore", "RESULT_OPTIONS"]

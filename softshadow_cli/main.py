@@ -151,11 +151,8 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     try:
         _use_compilation_cache()
-        # NumPy's BLAS threads spin after each call and starve XLA's threads on a small machine
-        # (renders and solves ran 10-20x slower after a matrix product); the arrays BLAS sees
-        # here are small, so one thread costs nothing.
-        from threadpoolctl import threadpool_limits
-        with threadpool_limits(limits=1, user_api="blas"):
+        from softshadow import one_blas_thread
+        with one_blas_thread():
             return int(args.func(args) or 0)
     except KeyboardInterrupt:
         return _fail(args.command, "interrupted", 130)
@@ -164,8 +161,8 @@ def main(argv=None) -> int:
         if getattr(args, "verbose", False):
             raise
         first = (str(exc).splitlines() or [""])[0]
-        return _fail(args.command, f"unexpected error: {type(exc).__name__}: {first} "
-                                   "(--verbose shows the traceback)")
+        return _fail(args.command, f"unexpected error: {type(exc).__name__}: {first}"
+                     + (" (--verbose shows the traceback)" if hasattr(args, "verbose") else ""))
 
 
 if __name__ == "__main__":
