@@ -164,6 +164,12 @@ def _synthesize(out_dir, preset, seed, renderer, size, fmt, quality, progress, f
         raise ValueError(f"cameras must be 'explicit' or 'markers', got {cameras!r}")
     if not 1 <= int(quality) <= 100:
         raise ValueError(f"JPEG quality must be 1..100, got {quality}")
+    if preset == "street":
+        if renderer != "physical":
+            raise ValueError("preset 'street' is rendered by the physical renderer only")
+        from .street import synthesize_street
+        _prepare_out_dir(Path(out_dir), force)
+        return synthesize_street(out_dir, seed, size, fmt or "jpg", quality, render_quality, noise)
     plan: PresetPlan = build_preset(preset, seed, size)
     fmt = fmt or plan.fmt
     if fmt not in FORMATS:
