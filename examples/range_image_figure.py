@@ -29,14 +29,14 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from data_synth import GroundAppearance, RenderQuality, procedural_texture, srgb_encode, synthesize, texture_coordinates
+from data_synth import GroundAppearance, RenderQuality, procedural_texture, synthesize, texture_coordinates
 from fitting.photos import read_photo
 from fitting.receiver_light import plane_sky_fraction, shadow_factor, sun_incidence
 from fitting.receiver_points import ReceiverSurface, read_depth
 from fitting.receiver_samples import receiver_plan
 from fitting.views import PhotoView
 from scene import load_scene
-from softshadow import Pose, ShadowParams, SoftShadowModel, Sun, object_mask
+from softshadow import Pose, ShadowParams, SoftShadowModel, Sun, linear_to_srgb, object_mask
 from softshadow_cli.synth_command import parse_size
 
 
@@ -88,14 +88,14 @@ def main(argv=None) -> dict:
     im = ax[0].imshow(depth, cmap="viridis")
     fig.colorbar(im, ax=ax[0], fraction=0.035, label="z_cam (m)")
     ax[0].set_title("range image (z along the optical axis)")
-    ax[1].imshow(srgb_encode(np.clip(grey, 0, 1).astype(np.float32)), cmap="gray", vmin=0, vmax=1)
+    ax[1].imshow(linear_to_srgb(np.clip(grey, 0, 1).astype(np.float32)), cmap="gray", vmin=0, vmax=1)
     ax[1].set_title("soft shadow on the range image, without colours")
     scale = np.nanpercentile(colour, 99.5) / 0.85
     shown = np.where(np.isfinite(colour), np.clip(colour / scale, 0, 1), sky)
     shown[on_object] = 0.35
-    ax[2].imshow(srgb_encode(shown.astype(np.float32)))
+    ax[2].imshow(linear_to_srgb(shown.astype(np.float32)))
     ax[2].set_title("with the background's colours")
-    ax[3].imshow(srgb_encode(np.clip(photo.linear / np.percentile(photo.linear, 99), 0, 1)))
+    ax[3].imshow(linear_to_srgb(np.clip(photo.linear / np.percentile(photo.linear, 99), 0, 1)))
     ax[3].set_title("physical render (data_synth) for comparison")
     for a in ax:
         a.set_axis_off()
