@@ -20,13 +20,13 @@ from .plan import (BACKENDS, GridPlan, PointPlan, bucket_size, concatenate_plans
                    light_band_widths, plan_grid, plan_points)
 from .posed import PosedOccluder, pose_matrix, posed_vertices
 from .raster import project_to_ground
-from .shadowmap import LightFrame, ShadowMap, depth_bias, faces_away, rasterise_depth, shadow_map
+from .shadowmap import BIAS_PX, LightFrame, ShadowMap, depth_bias, faces_away, rasterise_depth, shadow_map
 from .render import CameraRender, SoftShadowModel, object_mask
 from .sun import SunBelowHorizonError, check_sun_above_horizon, light_direction, sun_direction
 from .threads import one_blas_thread
 
 __all__ = [
-    "BACKENDS", "LightFrame", "ShadowMap", "depth_bias", "faces_away", "light_band_widths",
+    "BACKENDS", "BIAS_PX", "LightFrame", "ShadowMap", "depth_bias", "faces_away", "light_band_widths",
     "rasterise_depth", "shadow_map",
     "BUILTIN_MESHES", "CameraRender", "GridPlan", "GroundGrid", "MeshError", "Occluder", "PROFILES",
     "PinholeCamera", "PointPlan", "Pose", "PosedOccluder", "RULES", "ShadowParams", "Silhouette",

@@ -225,8 +225,9 @@ def _plan_points_light(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, 
     if not (n and len(sil.vertex_ids)):
         return PointPlan(edges, edge_id, hard, active, near_boundary)
     frame = LightFrame.of_light(light, 0.5 * (world.min(0) + world.max(0)))
-    uv_v, d_v = frame.project(world)
-    uv_all, d_all = frame.project(points)
+    # In ``dtype`` (float32 rounds as a float32 pipeline would), the rest in float64.
+    uv_v, d_v = (a.astype(np.float64) for a in frame.project(world, dtype))
+    uv_all, d_all = (a.astype(np.float64) for a in frame.project(points, dtype))
     ids = sil.vertex_ids
     edge_depth = np.minimum(d_v[ids[:, 0]], d_v[ids[:, 1]])  # the edge's end nearer the sun
     # The region the shadow can reach: the occluder's view padded by the widest wedge any

@@ -77,9 +77,7 @@ class LightFrame:
     def project(self, points: np.ndarray, dtype=np.float64) -> tuple[np.ndarray, np.ndarray]:
         """Light-space (u, v) (N, 2) and depth (N,) of world points (N, 3), computed in ``dtype``."""
         p = np.asarray(points, dtype).reshape(-1, 3) - self.origin.astype(dtype)
-        basis = np.stack([self.e1, self.e2, self.light], 1).astype(dtype)
-        # Elementwise rather than a BLAS matmul on a tall array (it contends with XLA's threads).
-        out = p[:, 0:1] * basis[0] + p[:, 1:2] * basis[1] + p[:, 2:3] * basis[2]
+        out = p @ np.stack([self.e1, self.e2, self.light], 1).astype(dtype)
         return out[:, :2], out[:, 2]
 
 
@@ -175,7 +173,8 @@ class ShadowMap:
 
     grid: a ``GroundGrid`` whose (x, y) are light-space (u, v); depth (H, W) nearest depth
     at pixel centres (+inf: no face); face_id (H, W) index into ``plane`` (-1: none);
-    plane (F, 3) each face's depth plane d = A u + B v + C; slope (F,) its |grad d|
+    plane (F, 3) each face's depth plane (A, B, d0), d = d0 + A (u - u0) + B (v - v0) about
+    its first corner (u0, v0) = triangle[:, 0]; slope (F,) its |grad d|
     (tan of the angle between the face's normal and the light); triangle (F, 3, 2) its
     light-space corners; scale: the magnitude of the coordinates, for the rounding allowance.
     """
@@ -224,8 +223,7 @@ class ShadowMap:
             b2 = (ex1 * py - ey1 * px) / area
             tol = -1e-7
             inside = (f >= 0) & (b1 >= tol) & (b2 >= tol) & (b1 + b2 <= 1.0 - tol)
-            p = self.plane[fi]
-            best[todo] = np.where(inside, p[:, 0] * u + p[:, 1] * v + p[:, 2], inf)
+            best[todo] = np.where(inside, self._plane_at(fi, u, v), inf)
             todo = todo[~inside]
         slope = np.zeros(len(uv), self.plane.dtype)
         exact = np.isfinite(best)
@@ -233,10 +231,14 @@ class ShadowMap:
         if len(miss):
             face = self._nearest_face(rows[miss], cols[miss])
             has = face >= 0
-            p = self.plane[np.maximum(face, 0)]
-            best[miss] = np.where(has, p[:, 0] * uv[miss, 0] + p[:, 1] * uv[miss, 1] + p[:, 2], inf)
+            best[miss] = np.where(has, self._plane_at(np.maximum(face, 0), uv[miss, 0], uv[miss, 1]), inf)
             slope[miss] = np.where(has, self.slope[np.maximum(face, 0)], 0.0)
         return best, slope, exact
+
+    def _plane_at(self, face: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Depth of faces' planes (N,) at light-space points (u, v) (N,)."""
+        p, corner = self.plane[face], self.triangle[face, 0]
+        return p[:, 2] + p[:, 0] * (u - corner[:, 0]) + p[:, 1] * (v - corner[:, 1])
 
     def _nearest_face(self, rows: np.ndarray, cols: np.ndarray, reach: int = 2) -> np.ndarray:
         """The face id (N,) of the covered pixel nearest each pixel, within ``reach`` (-1: none)."""
@@ -271,13 +273,17 @@ def depth_bias(pixel_m: float, slope_face, slope_receiver=0.0, scale: float = 1.
 
 
 def _face_planes(uvd: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Depth planes (F, 3) d = A u + B v + C and slopes (F,) of faces with light-space vertices."""
+    """Depth planes (F, 3) and slopes (F,) of faces with light-space vertices uvd (V, 3).
+
+    A plane is (A, B, d0): d = d0 + A (u - u0) + B (v - v0) about the face's first corner
+    (u0, v0, d0). Relative to the corner, not as A u + B v + C: a face nearly edge-on to the
+    light has large A, B, and C = d0 - A u0 - B v0 cancels catastrophically in float32.
+    """
     p = uvd[faces]
     n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
     nd = np.where(np.abs(n[:, 2]) > 1e-300, n[:, 2], 1e-300)
     a, b = -n[:, 0] / nd, -n[:, 1] / nd
-    c = p[:, 0, 2] - a * p[:, 0, 0] - b * p[:, 0, 1]
-    return np.stack([a, b, c], 1), np.hypot(a, b)
+    return np.stack([a, b, p[:, 0, 2]], 1), np.hypot(a, b)
 
 
 def shadow_map(grid: GroundGrid, uv: np.ndarray, depth: np.ndarray, faces: np.ndarray,
