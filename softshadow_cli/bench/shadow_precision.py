@@ -11,6 +11,8 @@ moved 100 m and 1 km away (float32 rounds world coordinates to ~8 um and
 - ``depth_error_m``: the occluder depth at the receiver points (the face plane
   at the point), float32 minus float64, median / 99th percentile / max;
 - ``receiver_depth_error_m``: the same for the receiver points' own depth;
+- ``lookups``, ``depth_error_over_bias``: points looked up in the map, and how many of them
+  have a float32 occluder-depth error above ``bias_m``;
 - ``hard_flips``: receiver points whose hard-shadow decision differs;
 - ``alpha_rms``, ``alpha_max``: alpha, float32 plan and evaluation against float64;
 - ``bias_m``: the float32 bias of an exact lookup at that map's pixel (BIAS_PX pixels plus
@@ -73,18 +75,21 @@ def bench_shadow_precision(size: int = 512, offsets_m=(0.0, 100.0, 1000.0)) -> d
         plan64 = model.plan_points(sun, pose, pts, 0.01, normals)
         plan32 = model.plan_points(sun, pose, pts, 0.01, normals, dtype=np.float32)
         n = len(pts)
-        a64 = np.asarray(model.at_points(params, sun, pose, pts, normals, plan=plan64))
+        with jax.enable_x64(True):
+            a64 = np.asarray(model.at_points(params, sun, pose, pts, normals, plan=plan64))
         with jax.enable_x64(False):
             a32 = np.asarray(model.at_points(ShadowParams(np.float32(0.01), np.float32(0.3)), sun, pose,
                                              pts.astype(np.float32), normals, plan=plan32))
         alpha = lambda s: (1.0 - s.astype(np.float64)) / 0.7
         q = lambda x: [float(f"{v:.3g}") for v in (np.median(x), np.percentile(x, 99), x.max())]
+        bias = float(depth_bias(pixel_m, 0.0, 0.0, float(np.abs(pts).max()), np.float32))
         out[f"offset_{offset:g}_m"] = {
+            "lookups": int(both.sum()), "depth_error_over_bias": int(np.count_nonzero(err > bias)),
             "depth_error_m": q(err), "receiver_depth_error_m": q(perr),
             "hard_flips": int(np.count_nonzero(plan64.hard[:n] != plan32.hard[:n])),
             "alpha_rms": float(f"{np.sqrt(np.mean((alpha(a32) - alpha(a64)) ** 2)):.3g}"),
             "alpha_max": float(f"{np.abs(alpha(a32) - alpha(a64)).max():.3g}"),
-            "bias_m": float(f"{float(depth_bias(pixel_m, 0.0, 0.0, float(np.abs(pts).max()), np.float32)):.3g}"),
+            "bias_m": float(f"{bias:.3g}"),
             "map_pixel_m": float(f"{pixel_m:.3g}")}
     out["legend"] = "error triples: median, 99th percentile, max (metres)"
     return out
