@@ -22,7 +22,7 @@ from typing import Mapping
 import numpy as np
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
-from matplotlib.ticker import MultipleLocator
+from matplotlib.ticker import FuncFormatter, MultipleLocator
 from matplotlib.transforms import offset_copy
 
 from .comparison import (brightness_stderr, groups_in_time_order, minutes_of_day, range_stderr_paper,
@@ -362,7 +362,8 @@ def plot_folders_vs_time(summary, path) -> Path | None:
                         capsize=2, lw=1, label=folder)
     ax_k.set_ylabel("range k")
     ax_rho.set_ylabel("brightness rho")
-    ax_rho.set_xlabel("time of day (hours)")
+    ax_rho.set_xlabel("time of day")
+    ax_rho.xaxis.set_major_formatter(FuncFormatter(lambda h, _: f"{int(h) % 24:02d}:{round(h % 1 * 60) % 60:02d}"))
     ax_k.set_title(f"{len(folders)} folder(s): k and rho against time of day")
     for ax in (ax_k, ax_rho):
         ax.grid(True, alpha=0.3)

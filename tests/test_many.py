@@ -96,7 +96,9 @@ def test_interrupted_run_resumes_on_an_existing_cluster_from_the_cli(root, first
     kept = {name: (out / name / "results.json").stat().st_mtime_ns for name in GOOD[:2]}
     group_file = next((out / "2026-04-21" / "groups").glob("*.json"))
     group_before = json.loads(group_file.read_text())
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+    # An existing cluster reached by its tcp:// address (its worker a thread here, to start fast).
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp",
+                      dashboard_address=None) as cluster:
         code = main(["fit", str(root), "--out", str(out), "--recursive", "--no-plots",
                      "--scheduler", cluster.scheduler_address])
     assert code == 0
