@@ -1,4 +1,4 @@
-"""Camera rays and what they hit: the receiver (plane or height field) or the object.
+"""Camera rays and what they hit: the receiver (plane, height field or mesh) or the object.
 
 Pinhole cameras follow softshadow.camera (OpenCV convention); a top-down map
 (``GroundGrid``) is an orthographic camera looking straight down, north up.
@@ -129,20 +129,22 @@ def trace(rays: ViewRays, object_mesh: trimesh.Trimesh | None, receiver) -> Surf
     points = np.zeros((n, 3))
     normals = np.zeros((n, 3))
     t_recv = np.full(n, np.inf)
+    tri = np.zeros(n, np.int64)
     if receiver.mesh is None:  # the plane z = 0, analytically
         with np.errstate(divide="ignore", invalid="ignore"):
             t = -o[:, 2] / d[:, 2]
         ok = np.isfinite(t) & (t > 0)
         t_recv[ok] = t[ok]
     else:
-        iray, loc, _ = _first_hits(receiver.mesh, o, d)
+        iray, loc, itri = _first_hits(receiver.mesh, o, d)
         t_recv[iray] = np.einsum("nj,nj->n", loc - o[iray], d[iray])
+        tri[iray] = itri
     recv_valid = np.isfinite(t_recv)
     recv_pts = o + np.where(recv_valid, t_recv, 0.0)[:, None] * d
     kind[recv_valid] = KIND_RECEIVER
     points[recv_valid] = recv_pts[recv_valid]
     if recv_valid.any():
-        normals[recv_valid] = receiver.normal(recv_pts[recv_valid, :2])
+        normals[recv_valid] = receiver.surface_normals(recv_pts[recv_valid], tri[recv_valid])
     if object_mesh is not None:
         cand = _object_candidates(rays, object_mesh.bounds)
         if len(cand):

@@ -11,8 +11,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from softshadow import GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun
-from scene import CameraSpec, ObjectSpec, PhotoSpec, SceneSpec, dump_scene
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
 MITSUBA = SHARED / "data" / "mitsuba"
@@ -22,27 +20,9 @@ SUN = (150.0, 40.0)
 
 
 def _render_folder(folder: Path, k=TRUE_K, rho=TRUE_RHO, noise=0.004, seed=0, size=192):
-    """A top-down 16-bit linear PNG of the pillar's soft shadow (disk profile), with scene.toml.
-
-    Each pixel averages 4 x 4 point samples, as a sensor pixel integrates over its area.
-    """
-    import cv2
-    folder.mkdir(parents=True, exist_ok=True)
-    model = SoftShadowModel.from_mesh("pillar", profile="disk")
-    grid = GroundGrid.around((-0.9, 1.6), 2.6, size)
-    fine = GroundGrid.around((-0.9, 1.6), 2.6, 4 * size)
-    shading = np.asarray(model.ground_map(ShadowParams(k, rho), Sun(*SUN), Pose(), fine))
-    shading = shading.reshape(size, 4, size, 4).mean(axis=(1, 3))
-    rng = np.random.default_rng(seed)
-    img = np.clip(0.6 * shading + rng.normal(0, noise, shading.shape), 0, 1)
-    cv2.imwrite(str(folder / "top.png"), np.rint(img * 65535).astype(np.uint16))
-    scene = SceneSpec(object=ObjectSpec("pillar"),
-                      photos={"top.png": PhotoSpec(time="2026-04-20T10:30:00+09:00", group="10:30",
-                                                   sun_azimuth_deg=SUN[0], sun_elevation_deg=SUN[1],
-                                                   camera=CameraSpec("topdown", pixel_m=grid.pixel_m,
-                                                                     origin_m=grid.origin_m))})
-    dump_scene(scene, folder / "scene.toml")
-    return folder
+    """A top-down 16-bit linear PNG of the pillar's soft shadow (disk profile), with scene.toml."""
+    from data_synth import model_topdown_folder
+    return model_topdown_folder(folder, k, rho, noise, seed, size, SUN)
 
 
 @pytest.fixture(scope="module")
@@ -109,6 +89,23 @@ def test_no_shadow_in_view_is_a_group_error_not_a_crash(tmp_path):
     (g,) = results.groups
     assert g.error is not None and "shadow" in g.error
     assert results.n_fitted == 0
+
+
+def test_a_penumbra_under_a_pixel_is_reported_as_an_upper_bound(tmp_path):
+    """k = 0.0005 throws a penumbra of about 0.2 px here: k is not identifiable, range_k is an
+    upper bound above the truth, and the group says so."""
+    from fitting.api import fit_folder
+    from fitting.solve import FitOptions
+    folder = _render_folder(tmp_path / "sharp", k=0.0005)
+    (g,) = fit_folder(folder, options=FitOptions(sky_occlusion=False, plots=False)).groups
+    assert g.error is None
+    assert not g.identifiable
+    assert g.range_k >= 0.0005
+    assert g.penumbra_px is None or g.penumbra_px < 0.8
+    assert any("upper bound" in w for w in g.warnings)
+    assert abs(g.rho - TRUE_RHO) < 0.01  # rho is still measured
+    data = g.to_json()
+    assert data["identifiable"] is False
 
 
 @pytest.mark.parametrize("name", ["pillar-yaw30-topdown", "ball-topdown", "pillar-sun1deg-photo"])
