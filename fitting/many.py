@@ -8,8 +8,9 @@ against time of day, one line per folder.
 The work runs on ``dask.distributed``: a ``LocalCluster`` of worker processes with one
 thread each (XLA already uses threads inside a fit), or an existing cluster given by its
 scheduler address. Workers use JAX's persistent compilation cache (``cache_dir``, by
-default ``softshadow.default_cache_dir()``: ``SOFTSHADOW_JAX_CACHE`` or ``~/.cache/softshadow/jax``), so a worker loads the
-solver another one compiled instead of compiling it again.
+default ``softshadow.default_cache_dir()``: ``SOFTSHADOW_JAX_CACHE`` or
+``~/.cache/softshadow/jax``), so a worker loads the solver another one compiled instead of
+compiling it again.
 
 Failures and resuming: a folder that fails (unreadable, no photos, a crash, a lost
 worker) gets a row with its reason in ``error`` and never stops the others. A folder that
@@ -42,7 +43,8 @@ __all__ = ["SUMMARY_COLUMNS", "DONE_MARKER", "find_photo_folders", "fit_many", "
 #: summary.csv columns: the CONVENTIONS contract, then the reason a folder or group failed.
 SUMMARY_COLUMNS = ("folder", "label", "time", "range_k", "range_stderr", "rho", "rho_stderr",
                    "sun_azimuth_deg", "sun_elevation_deg", "reliable", "photos", "error")
-#: Written into a folder's output after its results.json: the folder is done.
+#: Written into a folder's output after its results.json: the folder is done (JSON: finished,
+#: groups, fitted, seconds spent fitting it).
 DONE_MARKER = ".softshadow-done"
 
 
@@ -107,10 +109,11 @@ def fit_one_folder(folder, out_dir, options: FitOptions | None = None, force: bo
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     results: FitResults = fit_and_report(folder, out_dir, options, force=force)
+    seconds = _time.perf_counter() - start
     marker = {"finished": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-              "groups": len(results.groups), "fitted": results.n_fitted}
+              "groups": len(results.groups), "fitted": results.n_fitted, "seconds": round(seconds, 3)}
     (out_dir / DONE_MARKER).write_text(json.dumps(marker) + "\n")
-    return [g.to_json() for g in results.groups], _time.perf_counter() - start
+    return [g.to_json() for g in results.groups], seconds
 
 
 def _task(folder: str, out_dir: str, options, force: bool, cache_dir) -> dict:
@@ -179,8 +182,8 @@ def fit_many(root, out, scheduler: str = "local", workers: int | None = None,
     scheduler: "local" (a LocalCluster of ``workers`` processes, default one per core) or
     the address of an existing scheduler ("tcp://HOST:8786").
     force: refit folders already done (and their groups).
-    cache_dir: JAX's compilation cache for the workers (default: ``softshadow.default_cache_dir()`` as
-    each worker sees it).
+    cache_dir: JAX's compilation cache for the workers (default:
+    ``softshadow.default_cache_dir()`` as each worker sees it).
     progress: a tqdm bar over folders on stderr; log: where one-line notes go (the
     dashboard address; default stderr).
     Raises ValueError when ``root`` holds no photo folder or the scheduler is not valid.
