@@ -7,8 +7,8 @@ sky (``data_synth.physical``), independent of the project's shadow model; the
 ``model`` renderer uses softshadow.render.SoftShadowModel. See docs/data_synth.md.
 """
 
-from .camera_pipeline import (SensorSettings, camera_pipeline, fit_handheld_camera, handheld_camera, srgb_decode,
-                              srgb_encode, topdown_grid)
+from .camera_pipeline import (SensorSettings, camera_pipeline, fit_handheld_camera, handheld_camera,
+                              topdown_grid)
 from .image_io import FORMATS, PhotoMetadata, dng_available, exif_bytes, write_photo
 from .lighting import SUN_RADIUS_DEG, SunSky
 from .physical import (SkyVisibilityMap, irradiance, shadow_reach, sky_visibility, sky_visibility_map,
@@ -27,6 +27,6 @@ __all__ = [
     "RenderQuality", "SUN_RADIUS_DEG", "SensorSettings", "SkyVisibilityMap", "SunSky", "SynthScene",
     "bank_terrain", "build_preset", "camera_pipeline", "dng_available", "exif_bytes", "fit_handheld_camera",
     "handheld_camera", "irradiance", "make_renderer", "model_topdown_folder", "posed_mesh", "procedural_texture",
-    "shadow_reach", "sky_visibility", "sky_visibility_map", "srgb_decode", "srgb_encode", "steps_receiver",
+    "shadow_reach", "sky_visibility", "sky_visibility_map", "steps_receiver",
     "sun_visibility", "synthesize", "texture_coordinates", "topdown_grid", "wall_receiver", "write_photo",
 ]

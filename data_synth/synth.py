@@ -20,7 +20,7 @@ import numpy as np
 import trimesh
 
 from scene import CameraSpec, ObjectSpec, PhotoSpec, ReceiverSpec, SceneSpec, SiteSpec, dump_scene
-from softshadow import GroundGrid, PinholeCamera, brightness_to_paper, builtin_mesh, pose_matrix
+from softshadow import GroundGrid, PinholeCamera, brightness_to_paper, builtin_mesh, one_blas_thread, pose_matrix
 
 from .camera_pipeline import camera_pipeline, fit_handheld_camera, topdown_grid
 from .image_io import EXTENSIONS, FORMATS, PhotoMetadata, write_corrupt_jpeg, write_photo
@@ -150,6 +150,13 @@ def synthesize(out_dir, preset: str = "table2", seed: int = 0, renderer: str = "
     cameras: 'explicit' writes K, R, t per photo; 'markers' leaves registration to the
     printed board ([camera] kind = "markers"). noise: sensor noise on/off.
     """
+    with one_blas_thread():  # an entry point (softshadow.one_blas_thread)
+        return _synthesize(out_dir, preset, seed, renderer, size, fmt, quality, progress, force, write_sun,
+                           cameras, render_quality, noise)
+
+
+def _synthesize(out_dir, preset, seed, renderer, size, fmt, quality, progress, force, write_sun, cameras,
+                render_quality, noise) -> Path:
     t_start = time.perf_counter()
     if renderer not in RENDERERS:
         raise ValueError(f"unknown renderer {renderer!r}; choose one of {RENDERERS}")
@@ -157,6 +164,12 @@ def synthesize(out_dir, preset: str = "table2", seed: int = 0, renderer: str = "
         raise ValueError(f"cameras must be 'explicit' or 'markers', got {cameras!r}")
     if not 1 <= int(quality) <= 100:
         raise ValueError(f"JPEG quality must be 1..100, got {quality}")
+    if preset == "street":
+        if renderer != "physical":
+            raise ValueError("preset 'street' is rendered by the physical renderer only")
+        from .street import synthesize_street
+        _prepare_out_dir(Path(out_dir), force)
+        return synthesize_street(out_dir, seed, size, fmt or "jpg", quality, render_quality, noise)
     plan: PresetPlan = build_preset(preset, seed, size)
     fmt = fmt or plan.fmt
     if fmt not in FORMATS:

@@ -33,14 +33,7 @@ class ViewRays:
 
 def pinhole_rays(camera: PinholeCamera) -> ViewRays:
     rows, cols = np.mgrid[0:camera.height, 0:camera.width]
-    if camera.dist is not None and np.any(camera.dist):
-        d = camera.pixel_rays(cols, rows)
-    else:  # the same as camera.pixel_rays, elementwise (BLAS threads fight Embree's here)
-        Kinv = np.linalg.inv(camera.K)
-        x = (Kinv[0, 0] * cols + Kinv[0, 1] * rows + Kinv[0, 2]).ravel()
-        y = (Kinv[1, 1] * rows + Kinv[1, 2]).ravel()
-        R = camera.R
-        d = np.stack([R[0, j] * x + R[1, j] * y + R[2, j] for j in range(3)], -1)
+    d = camera.pixel_rays(cols, rows)
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     o = np.broadcast_to(camera.centre, d.shape)
     return ViewRays(o, d, camera.width, camera.height, camera)

@@ -150,11 +150,8 @@ def main(argv=None) -> int:
     _add_bench(sub)
     args = parser.parse_args(argv)
     _use_compilation_cache()
-    # NumPy's BLAS threads spin after each call and starve XLA's threads on a small machine
-    # (renders and solves ran 10-20x slower after a matrix product); the arrays BLAS sees
-    # here are small, so one thread costs nothing.
-    from threadpoolctl import threadpool_limits
-    with threadpool_limits(limits=1, user_api="blas"):
+    from softshadow import one_blas_thread
+    with one_blas_thread():
         return int(args.func(args) or 0)
 
 
