@@ -72,9 +72,14 @@ def test_sweep_quick_writes_json_report_and_plot(tmp_path, monkeypatch, capsys):
     for sweep in ("resolution", "profile", "dtype", "lod"):
         assert result[sweep] and all("error" in c for c in result[sweep])
     assert [c["dtype"] for c in result["dtype"]] == ["float32", "float64"]
+    for key in ("pillar", "ball", "dragon"):  # the paper's algorithm, hard and soft, beside Table 3
+        row = result["paper"]["table3"][key]
+        assert row["paper_soft_ms"] > row["paper_hard_ms"] and "error" in row["soft"] and "error" in row["hard"]
+    assert [r["label"] for r in result["paper"]["table2"]] == ["09:20", "13:21", "16:21"]
     assert "fit_samples" not in result  # --no-fit (the fit sweep reuses fit.bench_same_model)
     assert result["environment"]["versions"]["jax"]
     assert list((tmp_path / "cache").glob("reference-*.npz"))  # the truth is cached
     text = md.read_text()
     assert "img/speed_vs_error_pareto.png" in text and result["environment"]["date_utc"] in text
+    assert "Table 3" in text and "Table 2 in the paper's own parameters" in text
     assert (md.parent / "img" / "speed_vs_error_pareto.png").stat().st_size > 1000
