@@ -237,7 +237,9 @@ def _synthesize(out_dir, preset, seed, renderer, size, fmt, quality, progress, f
             continue
         exif_time = photo.time if (photo.exif_time and fmt == "jpg") else None
         site = plan.site or {}
-        meta = PhotoMetadata(exif_time, site.get("latitude"), site.get("longitude"))
+        focal = float(camera.K[0][0]) if isinstance(camera, PinholeCamera) else None
+        meta = PhotoMetadata(exif_time, site.get("latitude"), site.get("longitude"), focal_px=focal,
+                             size=tuple(plan.size))
         write_photo(out / name, linear, fmt, quality, meta)
         files.append(name)
         entry = PhotoSpec(camera=cam_spec if (cameras == "explicit" or cam_spec.kind == "topdown") else None)

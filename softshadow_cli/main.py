@@ -149,10 +149,20 @@ def main(argv=None) -> int:
     _add_demo(sub)
     _add_bench(sub)
     args = parser.parse_args(argv)
-    _use_compilation_cache()
-    from softshadow import one_blas_thread
-    with one_blas_thread():
-        return int(args.func(args) or 0)
+    try:
+        _use_compilation_cache()
+        from softshadow import one_blas_thread
+        with one_blas_thread():
+            return int(args.func(args) or 0)
+    except KeyboardInterrupt:
+        return _fail(args.command, "interrupted", 130)
+    except Exception as exc:
+        # A bug or an unforeseen input: one line for the user, the traceback with --verbose.
+        if getattr(args, "verbose", False):
+            raise
+        first = (str(exc).splitlines() or [""])[0]
+        return _fail(args.command, f"unexpected error: {type(exc).__name__}: {first}"
+                     + (" (--verbose shows the traceback)" if hasattr(args, "verbose") else ""))
 
 
 if __name__ == "__main__":

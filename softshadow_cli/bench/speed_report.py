@@ -129,6 +129,25 @@ def _paper_sections(paper: dict) -> list[str]:
     return L
 
 
+def _table1_section(rows: list[dict]) -> list[str]:
+    d = rows[0]["diameter_m"]
+    L = ["## Table 1: expansion ratio S/H", "",
+         f"A sphere {1000 * d:.0f} mm across held 0.3, 1.5 and 3 m from the ground along the light (sun "
+         "elevation 60 deg, the real sun's disk), rendered top-down by the physical ray caster. Measured: "
+         "across the light through the shadow's centre, S where any of the sun's disk is hidden (visible "
+         "fraction < 0.98), H where all of it is (< 0.02). Predicted: k fitted to the same map with this "
+         "renderer (linear profile), S/H = (D + 2 k d) / (D - 2 k d). The ratio depends on the object's "
+         "size, which the paper does not give; at this size it lands near the paper's.", "",
+         "| distance (m) | pixel (mm) | measured S (mm) | measured H (mm) | measured S/H (%) | fitted k | "
+         "true tan r | predicted S/H (%) | paper S/H (%) |", "|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for r in rows:
+        L.append(f"| {r['distance_m']} | {1000 * r['pixel_m']:.2f} | {1000 * r['measured_S_m']:.1f} | "
+                 f"{1000 * r['measured_H_m']:.1f} | {_f(r['measured_ratio_percent'], '{:.1f}')} | "
+                 f"{r['fitted_k']:.5f} | {r['truth_k']:.5f} | {r['predicted_ratio_percent']:.1f} | "
+                 f"{_f(r['paper_ratio_percent'], '{:.0f}')} |")
+    return L
+
+
 def write_report(result: dict, md_path: Path, json_name: str | None = None) -> None:
     """docs/speed_vs_error.md and its plot (in ``img/`` beside it), from a sweep's result."""
     md_path = Path(md_path)
@@ -189,6 +208,8 @@ def write_report(result: dict, md_path: Path, json_name: str | None = None) -> N
                      f"{r['group_seconds_after_compile']['median']:.2f} |")
     if "paper" in result:
         L += [""] + _paper_sections(result["paper"])
+    if result.get("table1"):
+        L += [""] + _table1_section(result["table1"])
     if json_name:
         L += ["", f"The raw figures: [{json_name}]({json_name})."]
     md_path.parent.mkdir(parents=True, exist_ok=True)

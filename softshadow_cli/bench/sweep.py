@@ -191,6 +191,9 @@ def run_sweep(settings: SweepSettings, fit: bool = True, progress=print) -> dict
     out["paper"] = {"table3": bench_paper_table3(scenes, settings)}
     progress("bench sweep: the paper's algorithm fitted to the table2 lights (Table 2)")
     out["paper"]["table2"] = bench_paper_table2(settings)
+    progress("bench sweep: Table 1 (expansion ratios)")
+    from .table1 import bench_table1
+    out["table1"] = bench_table1(pixels=64 if settings.quick else 512, samples=64 if settings.quick else 512)
     if fit:
         progress("bench sweep: fit samples per photo")
         out["fit_samples"] = fit_samples_sweep(settings)
