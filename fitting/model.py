@@ -29,7 +29,7 @@ from softshadow import PROFILES, PointPlan, Pose, blurred_profile_alpha, light_d
 
 __all__ = ["GroupArrays", "FitConfig", "FitParams", "Prediction", "K_SCALE", "k_from_raw", "raw_from_k", "rho_from_raw",
            "raw_from_rho", "predict", "angular_pixel_gradient", "residuals", "pseudo_huber",
-           "sample_light", "edge_terms", "shadow_alpha"]
+           "sample_light", "edge_terms", "shadow_terms", "shadow_alpha", "residuals_of"]
 
 K_SCALE = 0.01
 
@@ -205,23 +205,29 @@ def edge_terms(shape: Float[Array, "4"], group: GroupArrays, pose: Pose, config:
 
 
 @jax.custom_jvp
-def shadow_alpha(shape: Float[Array, "4"], group: GroupArrays, pose: Pose, config: FitConfig):
-    """Alpha (n,) as ``edge_terms``, differentiable in ``shape`` only (the fit's constants
-    group, pose and config get no derivative).
+def shadow_terms(shape: Float[Array, "4"], group: GroupArrays, pose: Pose, config: FitConfig):
+    """Alpha, u and |du/dpixel| (n,) each, as ``edge_terms``, differentiable in ``shape`` only
+    (the fit's constants group, pose and config get no derivative).
 
-    Its JVP forms the (n, 4) Jacobian once, in the primal pass; the solver's Jacobian with
+    Its JVP forms the (n, 4) Jacobians once, in the primal pass; the solver's Jacobian with
     respect to all the fit's parameters (4 + 4 per photo + rho) then costs one small
-    matrix product per column instead of a pass through the edge geometry each.
+    matrix product per column instead of a pass through the edge geometry each (the
+    tangents of outputs nobody uses are dropped by XLA).
     """
-    return edge_terms(shape, group, pose, config)[0]
+    return edge_terms(shape, group, pose, config)
 
 
-@shadow_alpha.defjvp
-def _shadow_alpha_jvp(primals, tangents):
+@shadow_terms.defjvp
+def _shadow_terms_jvp(primals, tangents):
     shape, group, pose, config = primals
-    alpha, linear = jax.linearize(lambda s: edge_terms(s, group, pose, config)[0], shape)
-    jac = jax.vmap(linear, out_axes=1)(jnp.eye(shape.shape[0], dtype=shape.dtype))
-    return alpha, jac @ tangents[0]
+    out, linear = jax.linearize(lambda s: edge_terms(s, group, pose, config), shape)
+    jacs = jax.vmap(linear, out_axes=1)(jnp.eye(shape.shape[0], dtype=shape.dtype))
+    return out, tuple(j @ tangents[0] for j in jacs)
+
+
+def shadow_alpha(shape: Float[Array, "4"], group: GroupArrays, pose: Pose, config: FitConfig):
+    """Alpha (n,) of ``shadow_terms``."""
+    return shadow_terms(shape, group, pose, config)[0]
 
 
 def _shaded(params: FitParams, group: GroupArrays, alpha):
@@ -245,15 +251,19 @@ class Prediction(NamedTuple):
 
 def predict(params: FitParams, group: GroupArrays, pose: Pose, config: FitConfig) -> Prediction:
     """The model's values and edge terms at every sample (``Prediction``)."""
-    alpha, u, slope = edge_terms(_shape_vector(params), group, pose, config)
+    alpha, u, slope = shadow_terms(_shape_vector(params), group, pose, config)
     return Prediction(_shaded(params, group, alpha), alpha, u, slope)
 
 
-
-def residuals(params: FitParams, args):
-    """Weighted residuals relative to each photo's lit level (robust-transformed if asked)."""
-    group, pose, config = args
-    pred = _shaded(params, group, shadow_alpha(_shape_vector(params), group, pose, config))
-    r = group.weight * (group.observed - pred) / group.scale[group.photo]
+def residuals_of(prediction: Prediction, group: GroupArrays, config: FitConfig):
+    """Weighted residuals (n,) of a prediction, relative to each photo's lit level
+    (robust-transformed if asked)."""
+    r = group.weight * (group.observed - prediction.values) / group.scale[group.photo]
     robust = pseudo_huber(r, jnp.maximum(config.huber_delta, 1e-12))
     return jnp.where(config.huber_delta > 0, robust, r)
+
+
+def residuals(params: FitParams, args):
+    """``residuals_of`` the model at ``params``; args = (group, pose, config)."""
+    group, pose, config = args
+    return residuals_of(predict(params, group, pose, config), group, config)

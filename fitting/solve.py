@@ -24,7 +24,7 @@ from scipy.stats import median_abs_deviation
 from softshadow import GroundGrid, Pose, SoftShadowModel, Sun, bucket_size, concatenate_plans
 
 from .model import (K_SCALE, FitConfig, FitParams, GroupArrays, Prediction, angular_pixel_gradient, predict,
-                    raw_from_k, raw_from_rho, residuals)
+                    raw_from_k, raw_from_rho, residuals, residuals_of)
 from .overlay import fitted_alpha_image
 from .results import GroupResult, OverlayPlotData, ProfilePlotData
 from .samples import NoShadowInView, PhotoSamples, select_samples
@@ -211,10 +211,15 @@ def _solve(params: FitParams, args, max_steps: int, start_raw_ks, prepare) -> So
     solver = optx.LevenbergMarquardt(rtol=LM_RTOL, atol=LM_ATOL)
     sol = optx.least_squares(residuals, solver, params, args=args, max_steps=max_steps, throw=False)
     n_photos = params.n_photos
-    of_vector = lambda x: residuals(FitParams.from_vector(x, n_photos), args)
-    x = sol.value.vector()
-    return Solution(sol.value, sol.result == optx.RESULTS.successful, sol.stats["num_steps"],
-                    of_vector(x), jax.jacfwd(of_vector)(x), predict(sol.value, group, pose, config),
+
+    def at(x):  # residuals, with the prediction they come from (one trace of the edge geometry)
+        p = FitParams.from_vector(x, n_photos)
+        pred = predict(p, group, pose, config)
+        r = residuals_of(pred, group, config)
+        return r, (r, pred)
+
+    jac, (r, pred) = jax.jacfwd(at, has_aux=True)(sol.value.vector())
+    return Solution(sol.value, sol.result == optx.RESULTS.successful, sol.stats["num_steps"], r, jac, pred,
                     group.grad_t_pixel)
 
 

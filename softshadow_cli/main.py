@@ -123,9 +123,12 @@ def _add_bench(sub):
                        description="Benchmarks: speed against error, as JSON.")
     p.add_argument("--json", dest="json_path", help="also write the JSON here")
     p.add_argument("--quick", action="store_true", help="fewer repeats and sizes")
-    p.add_argument("--what", default="render", choices=("render", "fit", "all", "sweep"),
+    p.add_argument("--what", default="render",
+                   choices=("render", "fit", "all", "sweep", "receiver", "precision"),
                    help="render / fit benchmarks, both (all), or the speed-against-error sweep with its "
-                        "image and parameter errors against a known truth (sweep)")
+                        "image and parameter errors against a known truth (sweep); the light-space back "
+                        "end on a 512x512 range image beside the ground map (receiver, also in render); "
+                        "the shadow map's depth in float32 against float64 (precision)")
     p.add_argument("--report", help="with --what sweep: also write the Markdown report here (and its plot "
                                     "in img/ beside it), e.g. docs/speed_vs_error.md")
     p.add_argument("--no-fit", dest="fit", action="store_false",

@@ -16,6 +16,7 @@ from softshadow_cli.bench.meshes import bench_mesh, decimated, mit_dragon
 from softshadow_cli.bench.reference import PhysicalReference, block_mean
 from softshadow_cli.bench.speed_report import pareto_front
 from softshadow_cli.bench.sweep import image_error, linear_equivalent_k
+from softshadow_cli.bench.scaling import loglog_slope
 from softshadow_cli.bench.table1 import crossing_width
 from softshadow_cli.main import main
 
@@ -58,6 +59,24 @@ def test_crossing_width_interpolates_both_ends():
     assert crossing_width(np.ones(5), 0.5, 1.0) == 0.0
 
 
+def test_loglog_slope():
+    x = np.array([10.0, 100.0, 1000.0])
+    assert loglog_slope(x, 3 * x ** 1.5) == pytest.approx(1.5)
+    assert loglog_slope([1.0], [2.0]) is None
+
+
+def test_naive_renderer_matches_the_renderer_on_the_pillar():
+    from softshadow import Pose, ShadowParams, SoftShadowModel, Sun
+    from softshadow_cli.bench.naive import NaiveRenderer
+    from softshadow_cli.bench.sweep import scene_grid
+    mesh = bench_mesh("pillar")
+    s = -np.asarray(Sun(200.0, 40.0).light_np)
+    grid = scene_grid(mesh, s, 48)
+    naive = NaiveRenderer(mesh).render(s, grid, 0.02, 0.2)
+    ours = np.asarray(SoftShadowModel.from_mesh(mesh).ground_map(ShadowParams(0.02, 0.2), Sun(200.0, 40.0), Pose(), grid))
+    assert np.sqrt(np.mean((naive - ours) ** 2)) < 0.01 and np.mean(np.abs(naive - ours) > 0.05) < 0.01
+
+
 def test_linear_ramp_closest_to_the_disk_profile():
     # CONVENTIONS: the best-fitting linear ramp to a real disk is about 0.854 tan r.
     assert linear_equivalent_k(0.01) == pytest.approx(0.00854, abs=3e-5)
@@ -87,6 +106,9 @@ def test_sweep_quick_writes_json_report_and_plot(tmp_path, monkeypatch, capsys):
         assert row["paper_soft_ms"] > row["paper_hard_ms"] and "error" in row["soft"] and "error" in row["hard"]
     assert [r["label"] for r in result["paper"]["table2"]] == ["09:20", "13:21", "16:21"]
     assert [r["distance_m"] for r in result["table1"]] == [0.3, 1.5, 3.0]
+    sc = result["scaling"]
+    assert [r["faces"] for r in sc["by_faces"]] == [176, 1472] and "median_ms" in sc["by_faces"][0]["naive"]
+    assert set(sc["slope_vs_faces"]) == {"softshadow", "paper", "naive"}
     assert all(r["measured_S_m"] > r["measured_H_m"] > 0 for r in result["table1"])
     assert "fit_samples" not in result  # --no-fit (the fit sweep reuses fit.bench_same_model)
     assert result["environment"]["versions"]["jax"]
@@ -95,3 +117,4 @@ def test_sweep_quick_writes_json_report_and_plot(tmp_path, monkeypatch, capsys):
     assert "img/speed_vs_error_pareto.png" in text and result["environment"]["date_utc"] in text
     assert "Table 1" in text and "Table 3" in text and "Table 2 in the paper's own parameters" in text
     assert (md.parent / "img" / "speed_vs_error_pareto.png").stat().st_size > 1000
+    assert (md.parent / "img" / "speed_vs_error_scaling.png").stat().st_size > 1000

@@ -112,20 +112,24 @@ def _paper_sections(paper: dict) -> list[str]:
               "quadrilateral, and a silhouette pixel of intensity I makes its (2I+1) x (2I+1) neighbourhood "
               "soft. So `range` is the soft band's width in shadow-texture pixels at the shadow's far end: a "
               "screen-space number, inversely proportional to the pixel size, not 100 k. The model's linear "
-              "penumbra at the tip of a pillar of height h is 2 k h / sin^2(E) long on the ground, hence "
-              "**range = 2 k h / (sin^2(E) * pixel size)** with the linear-ramp k (about 0.854 tan r for a "
-              "sun disk of radius r).", "",
+              "penumbra at the tip of a pillar of height h is 2 k h / sin^2(E) long on the ground, so a band "
+              "that matched it would have range = 2 k h / (sin^2(E) * pixel size), with the linear-ramp k "
+              "(about 0.854 tan r for a sun disk of radius r): the column \"range from true k\". The fit "
+              "reads a fraction c of that (the last column): its expansion moves the outline outwards and "
+              "takes part of the width, and its band is a square neighbourhood. So at a given resolution "
+              "**range = c * 2 k h / (sin^2(E) * pixel size)** with c as measured below.", "",
               "Below, the table2 preset's three lights (the same sun positions, disk radii and rho as its "
               "photos) rendered top-down by the physical ray caster over each shadow's square, then fitted "
               "with the paper's algorithm (range, expansion, rho; grid search):", "",
               "| time | sun elev. (deg) | pixel (mm) | true k | true rho | paper range | fitted range (px) | "
-              "range from true k (px) | fitted expansion | paper brightness | fitted brightness | true brightness |",
-              "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+              "range from true k (px) | fitted expansion | paper brightness | fitted brightness | true brightness | c = fitted / from k |",
+              "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
         for r in paper["table2"]:
             L.append(f"| {r['label']} | {r['sun_elevation_deg']:.1f} | {1000 * r['pixel_m']:.1f} | "
                      f"{r['truth_range_k']:.5f} | {r['truth_rho']:.3f} | {_f(r['paper_range'], '{:.0f}')} | "
                      f"{r['fitted_range_px']:.0f} | {r['predicted_range_px']:.1f} | {r['fitted_expand']:.3f} | "
-                     f"{_f(r['paper_brightness'], '{:.0f}')} | {r['fitted_brightness']:.1f} | {r['truth_brightness']:.1f} |")
+                     f"{_f(r['paper_brightness'], '{:.0f}')} | {r['fitted_brightness']:.1f} | {r['truth_brightness']:.1f} | "
+                     f"{r['fitted_range_px'] / r['predicted_range_px']:.2f} |")
     return L
 
 
@@ -148,6 +152,57 @@ def _table1_section(rows: list[dict]) -> list[str]:
     return L
 
 
+def scaling_plot(scaling: dict, path: Path) -> None:
+    """Time against faces and against pixels (log-log) for the three renderers."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4.2))
+    for r, style in (("softshadow", "o-"), ("paper", "s-"), ("naive", "^-")):
+        rows = [x for x in scaling["by_faces"] if "median_ms" in x[r]]
+        axes[0].plot([x["faces"] for x in rows], [x[r]["median_ms"] for x in rows], style, label=r)
+        for name, ls in (("pillar", "-"), ("dragon", "--")):
+            rows = [x for x in scaling["by_pixels"] if x["case"].startswith(name) and "median_ms" in x[r]]
+            axes[1].plot([x["pixels"] for x in rows], [x[r]["median_ms"] for x in rows], style[0] + ls,
+                         label=f"{r}, {name}")
+    axes[0].set_xlabel(f"faces ({scaling['pixels_for_faces']}^2 px map)")
+    axes[1].set_xlabel("pixels")
+    for ax in axes:
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_ylabel("median ms")
+        ax.grid(True, which="both", lw=0.3)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def _scaling_section(scaling: dict) -> list[str]:
+    sf = scaling["slope_vs_faces"]
+    L = ["## Scaling", "",
+         "Time against faces and against pixels for this renderer, the paper's algorithm and the naive "
+         "renderer (every pixel against every silhouette edge, NumPy; the same linear-ramp model by brute "
+         "force, left out where its table would exceed 1.5e8 pixel-edge pairs). Slopes are least-squares "
+         "fits of log time against log faces or log pixels.", "",
+         "![scaling](img/speed_vs_error_scaling.png)", "",
+         f"Slopes against faces: this renderer {_f(sf['softshadow'], '{:.2f}')}, the paper's algorithm "
+         f"{_f(sf['paper'], '{:.2f}')}, naive {_f(sf['naive'], '{:.2f}')}. Against pixels: " +
+         "; ".join(f"{name}: this renderer {_f(v['softshadow'], '{:.2f}')}, paper {_f(v['paper'], '{:.2f}')}, "
+                   f"naive {_f(v['naive'], '{:.2f}')}" for name, v in scaling["slope_vs_pixels"].items()) + ".", "",
+         "| case | faces | pixels | silhouette edges | this renderer (ms) | peak extra (MB) | paper (ms) | naive (ms) | naive vs this renderer (RMS) |",
+         "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for x in scaling["by_faces"] + scaling["by_pixels"]:
+        nv = x["naive"]
+        L.append(f"| {x['case']} | {x['faces']} | {x['pixels']} | {x['silhouette_edges']} | "
+                 f"{x['softshadow']['median_ms']:.1f} | {_f(x['softshadow'].get('peak_extra_mb'), '{:.0f}')} | "
+                 f"{x['paper']['median_ms']:.1f} | "
+                 f"{_f(nv.get('median_ms'), '{:.1f}') if 'median_ms' in nv else 'skipped'} | "
+                 f"{_f(x.get('naive_vs_softshadow_rms'))} |")
+    return L
+
+
 def write_report(result: dict, md_path: Path, json_name: str | None = None) -> None:
     """docs/speed_vs_error.md and its plot (in ``img/`` beside it), from a sweep's result."""
     md_path = Path(md_path)
@@ -162,7 +217,9 @@ def write_report(result: dict, md_path: Path, json_name: str | None = None) -> N
          "of one run as ratios.", "",
          f"- Date: {env['date_utc']}",
          f"- Machine: {m['cpu']}, {m['cores']} cores, {m['memory_gb']} GB, {m['platform']}",
-         "- Versions: " + ", ".join(f"{k} {val}" for k, val in v.items() if val), "",
+         "- Versions: " + ", ".join(f"{k} {val}" for k, val in v.items() if val), ""]
+    L += [f"- Note: {n}" for n in result.get("notes", [])] + ([""] if result.get("notes") else [])
+    L += [
          "## The scene and the truth", "",
          f"A top-down ground map of each mesh's shadow: sun azimuth {s['sun_azimuth_deg']} deg, elevation "
          f"{s['sun_elevation_deg']} deg, the real sun's disk (radius {s['sun_radius_deg']} deg), a uniform sky "
@@ -210,6 +267,9 @@ def write_report(result: dict, md_path: Path, json_name: str | None = None) -> N
         L += [""] + _paper_sections(result["paper"])
     if result.get("table1"):
         L += [""] + _table1_section(result["table1"])
+    if result.get("scaling"):
+        scaling_plot(result["scaling"], md_path.parent / "img" / "speed_vs_error_scaling.png")
+        L += [""] + _scaling_section(result["scaling"])
     if json_name:
         L += ["", f"The raw figures: [{json_name}]({json_name})."]
     md_path.parent.mkdir(parents=True, exist_ok=True)

@@ -194,6 +194,9 @@ def run_sweep(settings: SweepSettings, fit: bool = True, progress=print) -> dict
     progress("bench sweep: Table 1 (expansion ratios)")
     from .table1 import bench_table1
     out["table1"] = bench_table1(pixels=64 if settings.quick else 512, samples=64 if settings.quick else 512)
+    progress("bench sweep: scaling against faces and pixels")
+    from .scaling import bench_scaling
+    out["scaling"] = bench_scaling(quick=settings.quick, repeats=settings.repeats if settings.quick else 3)
     if fit:
         progress("bench sweep: fit samples per photo")
         out["fit_samples"] = fit_samples_sweep(settings)
