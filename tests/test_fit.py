@@ -1,5 +1,5 @@
 """The fitter end to end: same-model data with known truth, bad input, the CLI contract,
-and the independent Mitsuba renders (skipped without ../shared)."""
+and the independent Mitsuba renders (vendored in tests/data/mitsuba)."""
 
 from __future__ import annotations
 
@@ -11,11 +11,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from datapaths import MITSUBA
 from softshadow import GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun
 from scene import CameraSpec, ObjectSpec, PhotoSpec, SceneSpec, dump_scene
 
-SHARED = Path(__file__).resolve().parents[2] / "shared"
-MITSUBA = SHARED / "data" / "mitsuba"
 
 TRUE_K, TRUE_RHO = 0.012, 0.25
 SUN = (150.0, 40.0)
@@ -53,11 +52,12 @@ def same_model_folder(tmp_path_factory):
 def test_same_model_fit_recovers_truth_with_honest_errors(same_model_folder):
     from fitting.api import fit_folder
     from fitting.solve import FitOptions
-    # The data were rendered by the model alone, without the sky the pillar hides.
-    results = fit_folder(same_model_folder, options=FitOptions(sky_occlusion=False))
+    # The data were rendered by the model alone, without the sky the pillar hides. Both profiles
+    # are offered: the data were made with the disk profile, and BIC must see it.
+    results = fit_folder(same_model_folder, options=FitOptions(sky_occlusion=False, profiles=("linear", "disk")))
     (g,) = results.groups
     assert g.error is None and g.converged
-    assert g.profile == "disk"  # the data were made with the disk profile; BIC must see it
+    assert g.profile == "disk"
     assert abs(g.range_k - TRUE_K) / TRUE_K < 0.05
     assert abs(g.rho - TRUE_RHO) < 0.01
     # One-sigma errors: the truth lies within a few of them (not absurdly small or large).
@@ -114,8 +114,6 @@ def test_no_shadow_in_view_is_a_group_error_not_a_crash(tmp_path):
 @pytest.mark.parametrize("name", ["pillar-yaw30-topdown", "ball-topdown", "pillar-sun1deg-photo"])
 def test_independent_mitsuba_renders(name):
     folder = MITSUBA / name
-    if not folder.exists():
-        pytest.skip(f"{folder} is absent (../shared is not beside the repository)")
     from fitting.api import fit_folder
     truth = json.loads((folder / "truth.json").read_text())["groups"][0]
     (g,) = fit_folder(folder).groups

@@ -14,13 +14,14 @@ import pytest
 import tifffile
 from PIL import Image, ImageOps
 
+from datapaths import WORKSPACE
 from fitting.exif import (FULL_FRAME_DIAGONAL_MM, intrinsics_from_exif, photo_time_from_exif,
                           read_exif)
 from fitting.photos import (IMAGE_EXTENSIONS, RAW_EXTENSIONS, PhotoError, apply_orientation,
                             linear_to_srgb, list_photos, read_photo, srgb_to_linear)
 
-# The project's shared real data (../shared/data next to the repository); absent in CI.
-RAW_DIR = Path(__file__).resolve().parents[2] / "shared" / "data" / "raw"
+# Real RAW files without a licence to copy them (../shared/data/raw, development workspace only).
+RAW_DIR = WORKSPACE / "raw"
 RAW_FILES = ["RAW_KODAK_DC50.KDC", "QT150_27.QTK"]
 
 
