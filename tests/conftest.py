@@ -5,7 +5,7 @@
   resolve. This must happen before any JAX array is created, hence here. The
   float32 path that the command line uses is tested inside
   ``jax.enable_x64(False)`` scopes (tests/test_float32.py).
-- Hypothesis profiles (docs/testing.md): ``ci`` (25 derandomised examples, no
+- Hypothesis profiles (docs/testing.md): ``ci`` (20 derandomised examples, no
   deadline: JAX compiles on the first example; no shrinking) is chosen when the
   environment variable CI is set; ``dev`` (50 random examples, with shrinking)
   otherwise; ``long`` (500 examples) for a thorough local run.
@@ -25,9 +25,9 @@ from hypothesis import HealthCheck, Phase, settings  # noqa: E402  (after the JA
 _SLOW_OK = [HealthCheck.too_slow, HealthCheck.data_too_large]
 
 # CI: no shrinking (a failure is reported as found; shrinking a renderer scene takes minutes).
-# 25 examples: the property tests' examples share one compiled evaluation each (fixed shapes,
+# 20 examples: the property tests' examples share one compiled evaluation each (fixed shapes,
 # tests/gradcheck.py), so after the first example each costs a plan and a few evaluations.
-settings.register_profile("ci", max_examples=25, deadline=None, derandomize=True,
+settings.register_profile("ci", max_examples=20, deadline=None, derandomize=True,
                           phases=(Phase.explicit, Phase.reuse, Phase.generate),
                           suppress_health_check=_SLOW_OK, print_blob=True)
 settings.register_profile("dev", max_examples=50, deadline=None,

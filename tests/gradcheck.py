@@ -9,6 +9,8 @@ and is left out, but most points must remain.
 
 from __future__ import annotations
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -85,3 +87,15 @@ def check_point_gradients(mdl, theta0: np.ndarray, points: np.ndarray, range_k_m
             f"{name}: autodiff {jac[smooth, i][worst]:.6g} vs finite difference "
             f"{central[smooth][worst]:.6g} (scale {scale:.3g})")
     return jac[keep]
+
+
+def fixed_shape_grid_plan(mdl, sun, pose, grid, range_k_max):
+    """plan_grid with every pixel's slot in the band and EDGE_PAD edges (same values, one
+    compiled shape per grid size, whatever the band's size)."""
+    plan = mdl.plan_grid(sun, pose, grid, range_k_max=range_k_max)
+    size = grid.height * grid.width
+    index = np.full(size, size, np.int32)
+    index[:plan.n_band] = np.asarray(plan.band_index)[:plan.n_band]
+    n_edges = int(np.asarray(plan.plan.edges.outward_sign).shape[0])
+    points = concatenate_plans([plan.plan], [plan.n_band], pad_to=size, edge_pad_to=max(EDGE_PAD, n_edges))
+    return dataclasses.replace(plan, band_index=index, plan=points)
