@@ -7,24 +7,26 @@ sky (``data_synth.physical``), independent of the project's shadow model; the
 ``model`` renderer uses softshadow.render.SoftShadowModel. See docs/data_synth.md.
 """
 
-from .camera_pipeline import (SensorSettings, camera_pipeline, fit_handheld_camera, handheld_camera, srgb_decode,
-                              srgb_encode, topdown_grid)
+from .camera_pipeline import (SensorSettings, camera_pipeline, fit_handheld_camera, handheld_camera,
+                              topdown_grid)
 from .image_io import FORMATS, PhotoMetadata, dng_available, exif_bytes, write_photo
 from .lighting import SUN_RADIUS_DEG, SunSky
 from .physical import (SkyVisibilityMap, irradiance, shadow_reach, sky_visibility, sky_visibility_map,
                        sun_visibility)
 from .presets import PRESETS, PresetPlan, build_preset
-from .receivers import HeightfieldReceiver, PlaneReceiver, bank_terrain
+from .receivers import (HeightfieldReceiver, MeshReceiver, PlaneReceiver, bank_terrain, steps_receiver,
+                        texture_coordinates, wall_receiver)
+from .same_model import model_topdown_folder
 from .renderers import RENDERERS, ModelRenderer, PhysicalRenderer, RenderQuality, SynthScene, make_renderer
 from .synth import OutputExistsError, posed_mesh, synthesize
 from .textures import BoardSpec, GroundAppearance, PaperSheet, procedural_texture
 
 __all__ = [
-    "BoardSpec", "FORMATS", "GroundAppearance", "HeightfieldReceiver", "ModelRenderer", "OutputExistsError",
+    "BoardSpec", "FORMATS", "GroundAppearance", "HeightfieldReceiver", "MeshReceiver", "ModelRenderer", "OutputExistsError",
     "PRESETS", "PaperSheet", "PhotoMetadata", "PhysicalRenderer", "PlaneReceiver", "PresetPlan", "RENDERERS",
     "RenderQuality", "SUN_RADIUS_DEG", "SensorSettings", "SkyVisibilityMap", "SunSky", "SynthScene",
     "bank_terrain", "build_preset", "camera_pipeline", "dng_available", "exif_bytes", "fit_handheld_camera",
-    "handheld_camera", "irradiance", "make_renderer", "posed_mesh", "procedural_texture", "shadow_reach",
-    "sky_visibility", "sky_visibility_map", "srgb_decode", "srgb_encode", "sun_visibility", "synthesize",
-    "topdown_grid", "write_photo",
+    "handheld_camera", "irradiance", "make_renderer", "model_topdown_folder", "posed_mesh", "procedural_texture",
+    "shadow_reach", "sky_visibility", "sky_visibility_map", "steps_receiver",
+    "sun_visibility", "synthesize", "texture_coordinates", "topdown_grid", "wall_receiver", "write_photo",
 ]

@@ -23,7 +23,7 @@ import numpy as np
 from softshadow import GroundGrid, PinholeCamera, look_at_camera
 
 __all__ = ["SensorSettings", "handheld_camera", "fit_handheld_camera", "topdown_grid", "expose",
-           "apply_optics", "apply_sensor_noise", "srgb_encode", "srgb_decode", "camera_pipeline"]
+           "apply_optics", "apply_sensor_noise", "camera_pipeline"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -145,18 +145,6 @@ def apply_sensor_noise(image: np.ndarray, settings: SensorSettings, rng: np.rand
     electrons = rng.poisson(np.clip(image, 0.0, None).astype(np.float64) * settings.full_well_e)
     electrons = electrons + rng.normal(0.0, settings.read_noise_e, image.shape)
     return np.clip(electrons / settings.full_well_e, 0.0, 1.0).astype(np.float32)
-
-
-def srgb_encode(linear: np.ndarray) -> np.ndarray:
-    """IEC 61966-2-1 sRGB transfer function, linear [0, 1] -> encoded [0, 1]."""
-    x = np.clip(linear, 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
-
-
-def srgb_decode(encoded: np.ndarray) -> np.ndarray:
-    """Inverse of ``srgb_encode``."""
-    x = np.clip(encoded, 0.0, 1.0)
-    return np.where(x <= 0.04045, x / 12.92, np.power((x + 0.055) / 1.055, 2.4))
 
 
 def camera_pipeline(radiance: np.ndarray, lit_irradiance: float, settings: SensorSettings,

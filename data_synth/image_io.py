@@ -19,7 +19,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from .camera_pipeline import srgb_encode
+from softshadow import linear_to_srgb
+
 
 __all__ = ["FORMATS", "EXTENSIONS", "PhotoMetadata", "exif_bytes", "write_photo", "write_corrupt_jpeg",
            "dng_available"]
@@ -146,7 +147,7 @@ def write_photo(path: str | Path, linear: np.ndarray, fmt: str, quality: int = 9
         from PIL import Image
         if not 1 <= int(quality) <= 100:
             raise ValueError(f"JPEG quality must be 1..100, got {quality}")
-        enc = np.round(srgb_encode(linear) * 255.0).astype(np.uint8)
+        enc = np.round(linear_to_srgb(linear) * 255.0).astype(np.uint8)
         buf = io.BytesIO()
         kwargs = {"quality": int(quality)}
         if meta is not None:
@@ -167,7 +168,7 @@ def write_photo(path: str | Path, linear: np.ndarray, fmt: str, quality: int = 9
 def write_corrupt_jpeg(path: str | Path, linear: np.ndarray, quality: int = 92) -> Path:
     """A JPEG cut off inside its headers (before the scan), followed by junk: unreadable."""
     from PIL import Image
-    enc = np.round(srgb_encode(linear) * 255.0).astype(np.uint8)
+    enc = np.round(linear_to_srgb(linear) * 255.0).astype(np.uint8)
     buf = io.BytesIO()
     Image.fromarray(enc, "RGB").save(buf, "JPEG", quality=int(quality))
     data = buf.getvalue()

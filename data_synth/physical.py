@@ -53,11 +53,6 @@ def _any_hit(mesh: trimesh.Trimesh, origins: np.ndarray, directions: np.ndarray)
     return out
 
 
-def _dot(points: np.ndarray, vector: np.ndarray) -> np.ndarray:
-    """points (N, 3) . vector (3,) -> (N,), elementwise: BLAS threads fight Embree's here."""
-    return points[:, 0] * vector[0] + points[:, 1] * vector[1] + points[:, 2] * vector[2]
-
-
 def shadow_reach(occluder_vertices: np.ndarray, sun: SunSky, points: np.ndarray,
                  margin_m: float = 0.01, widen: float = 1.5) -> np.ndarray:
     """Points (N, 3) that any direction of the sun's disk may see blocked by the occluder.
@@ -71,8 +66,8 @@ def shadow_reach(occluder_vertices: np.ndarray, sun: SunSky, points: np.ndarray,
     s = sun.direction
     t1, t2 = orthonormal_basis(s)
     v = np.asarray(occluder_vertices, dtype=np.float64)
-    va = np.stack([_dot(v, t1), _dot(v, t2)], -1)
-    top = float(np.max(_dot(v, s)))
+    va = np.stack([v @ t1, v @ t2], -1)
+    top = float(np.max(v @ s))
     try:
         hull = ConvexHull(va)
         eq = hull.equations  # rows (nx, ny, c): inside where nx x + ny y + c <= 0
@@ -85,9 +80,9 @@ def shadow_reach(occluder_vertices: np.ndarray, sun: SunSky, points: np.ndarray,
     chunk = 262_144
     for a in range(0, len(pts), chunk):
         p = pts[a:a + chunk]
-        depth = top - _dot(p, s)  # how far the occluder's top lies beyond p along the sun
-        pa, pb = _dot(p, t1), _dot(p, t2)
-        dist = pa[:, None] * eq[:, 0] + pb[:, None] * eq[:, 1] + eq[:, 2]
+        depth = top - p @ s  # how far the occluder's top lies beyond p along the sun
+        pa, pb = p @ t1, p @ t2
+        dist = np.stack([pa, pb], -1) @ eq[:, :2].T + eq[:, 2]
         dilate = np.maximum(depth, 0.0) * tan_r + margin_m
         out[a:a + chunk] = (depth > -margin_m) & np.all(dist <= dilate[:, None], axis=1)
     return out
@@ -260,5 +255,5 @@ def sky_visibility_map(mesh: trimesh.Trimesh | None, receiver, object_bounds: np
 
 def irradiance(sun: SunSky, normals: np.ndarray, sun_vis: np.ndarray, sky_vis: np.ndarray) -> np.ndarray:
     """E (N,) = E_sun_normal max(n.s, 0) V_sun + pi L_sky V_sky."""
-    cos_s = np.clip(_dot(np.asarray(normals).reshape(-1, 3), sun.direction), 0.0, None)
+    cos_s = np.clip(np.asarray(normals).reshape(-1, 3) @ sun.direction, 0.0, None)
     return sun.sun_normal_irradiance * cos_s * sun_vis + sun.sky_horizontal_irradiance * sky_vis

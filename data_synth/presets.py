@@ -14,6 +14,12 @@ Random choices (viewpoint jitter, exposure, ...) come from the seed.
   two handheld photos and one top-down map.
 - ``depth-background``: the pillar in front of a rising bank (a height field),
   seen by a camera that also writes a range image (z-depth) per photo.
+- ``steps``: the pillar beside a flight of four steps (a mesh receiver) that
+  climbs along its shadow at 10:30 on 20 April: the shadow runs over treads
+  and sunlit risers; two handheld photos.
+- ``wall``: the pillar 1 m in front of a 2.2 m wall (a mesh receiver) at 10:30:
+  the shadow runs along the ground and up the wall's sunlit face; two
+  handheld photos.
 - ``hard-cases``: low sun (5 deg), sun near the zenith, a penumbra narrower
   than a pixel, the shadow partly out of frame, cluttered ground, a photo
   without any time, and a corrupt file. Suns are given per photo.
@@ -90,7 +96,8 @@ class PresetPlan:
     position: tuple[float, float, float] = (0.0, 0.0, 0.0)
     rotation_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
     scale: float = 1.0
-    receiver: str = "plane"  # or "bank" (a height field, written as receiver kind "depth")
+    receiver: str = "plane"  # "bank" (a height field, written as receiver kind "depth"), "steps" or "wall"
+    receiver_azimuth_deg: float = 0.0  # steps / wall: the compass direction they climb or stand across
     board: BoardSpec | None = None
     site: dict | None = None
     write_sun: bool = False
@@ -219,6 +226,43 @@ def _depth_background(seed: int, size) -> PresetPlan:
                       site=dict(IWATE))
 
 
+def _mesh_receiver_scene(name: str, seed: int, size, rho: float, radius_deg: float, bearings,
+                         extra_keys: np.ndarray) -> PresetPlan:
+    """The pillar at 10:30 beside a mesh receiver built along its shadow (``steps`` or ``wall``)."""
+    rng = np.random.default_rng([seed, 6, len(name)])
+    t0 = _time(2026, 4, 20, 10, 30)
+    az0, el0 = _sun_at(t0)
+    along = (az0 + 180.0) % 360.0
+    d = _shadow_dir(az0)
+    side = np.array([-d[1], d[0]])
+    base = np.array([[*(s * 0.35 * side), 0.0] for s in (-1, 1)])
+    # The receiver's key points are given in (across, along, up) of the shadow's direction.
+    keys = np.concatenate([base, np.array([[*(a * side + b * d), z] for a, b, z in extra_keys])])
+    photos = []
+    for k, bearing in enumerate(bearings):
+        t = t0 + _dt.timedelta(seconds=60 * k)
+        az, el = _sun_at(t)
+        view = dataclasses.replace(_handheld(rng, (along + bearing) % 360.0), eye_height_m=1.7,
+                                   min_distance_m=3.0)
+        photos.append(PhotoPlan(f"IMG_{k + 1:04d}", "10:30", SunSky.from_rho(az, el, rho, radius_deg), view, keys,
+                                t, texture="concrete", exposure_gain=float(rng.uniform(0.9, 1.1)),
+                                sensor=_sensor(rng)))
+    return PresetPlan(name, "pillar", (0.55, 0.52, 0.48), tuple(photos), size, receiver=name,
+                      receiver_azimuth_deg=along, site=dict(IWATE))
+
+
+def _steps(seed: int, size) -> PresetPlan:
+    # Steps from 0.6 m to 1.56 m along the shadow (4 x 0.32 m treads, 0.16 m risers), 3 m wide.
+    keys = np.array([[-0.9, 0.6, 0.0], [0.9, 0.6, 0.0], [-0.9, 2.3, 0.64], [0.9, 2.3, 0.64]])
+    return _mesh_receiver_scene("steps", seed, size, 0.25, 0.30, (140.0, -140.0), keys)
+
+
+def _wall(seed: int, size) -> PresetPlan:
+    # The wall's near face 1 m along the shadow, 2.2 m high: the shadow climbs to about 1.4 m.
+    keys = np.array([[-0.9, 1.0, 0.0], [0.9, 1.0, 0.0], [-0.9, 1.0, 2.0], [0.9, 1.0, 2.0]])
+    return _mesh_receiver_scene("wall", seed, size, 0.20, 0.35, (150.0, -150.0), keys)
+
+
 def _hard_cases(seed: int, size) -> PresetPlan:
     rng = np.random.default_rng([seed, 5])
     photos = []
@@ -265,6 +309,8 @@ _BUILDERS = {
     "dragon": lambda seed, size: _single_object("dragon", "dragon", (0.25, 0.45, 0.2), "concrete", 1.3, 2.4,
                                                 seed, size),
     "depth-background": _depth_background,
+    "steps": _steps,
+    "wall": _wall,
     "hard-cases": _hard_cases,
 }
 PRESETS = tuple(_BUILDERS)

@@ -1,10 +1,14 @@
-"""Receivers: the surface the shadow falls on (the ground plane, or a height field).
+"""Receivers: the surface the shadow falls on (the ground plane, a height field, or any mesh).
 
-A receiver answers ``height(xy)`` and ``normal(xy)`` for world points and,
-when it is not the plane z = 0, gives a triangle mesh for ray casting (it can
-hide sky from itself and from the object). The height field stands in for a
-range-sensor background (the seed's figures 19-24): a smooth procedural
-terrain, so its shading uses analytic normals while rays hit its dense mesh.
+Every receiver answers ``surface_normals(points, tri)`` for the points where
+camera rays meet it (``tri``: the hit triangle of its mesh, unused by the
+analytic ones) and, when it is not the plane z = 0, gives a triangle mesh for
+ray casting (it can hide sky and sun from itself and from the object). The
+plane and the height field also answer ``height(xy)`` and ``normal(xy)`` (a
+function of x, y; their sky is tabulated on world grids). The height field
+stands in for a range-sensor background (the seed's figures 19-24): a smooth
+procedural terrain, so its shading uses analytic normals while rays hit its
+dense mesh. ``MeshReceiver`` is any mesh (steps, a kerb, a wall), flat-shaded.
 """
 
 from __future__ import annotations
@@ -15,7 +19,8 @@ from typing import Callable
 import numpy as np
 import trimesh
 
-__all__ = ["PlaneReceiver", "HeightfieldReceiver", "bank_terrain"]
+__all__ = ["PlaneReceiver", "HeightfieldReceiver", "MeshReceiver", "bank_terrain", "steps_receiver",
+           "wall_receiver", "texture_coordinates"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -36,6 +41,9 @@ class PlaneReceiver:
 
     def max_slope(self) -> float:
         return 0.0
+
+    def surface_normals(self, points: np.ndarray, tri: np.ndarray | None = None) -> np.ndarray:
+        return self.normal(np.asarray(points)[:, :2])
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -79,6 +87,10 @@ class HeightfieldReceiver:
         n = np.stack([-fx, -fy, np.ones_like(fx)], -1)
         return n / np.linalg.norm(n, axis=-1, keepdims=True)
 
+    def surface_normals(self, points: np.ndarray, tri: np.ndarray | None = None) -> np.ndarray:
+        """Analytic unit normals (N, 3) at points (N, 3) (the smooth surface the mesh samples)."""
+        return self.normal(np.asarray(points)[:, :2])
+
     def max_slope(self) -> float:
         """Largest |grad f| on the mesh nodes (for the no-self-shadowing check)."""
         v = self.mesh.vertices
@@ -108,3 +120,83 @@ def bank_terrain(bounds=(-4.0, -4.0, 4.0, 8.0), rise_m: float = 0.6, start_y: fl
         return fx, fy
 
     return HeightfieldReceiver(f, grad, tuple(bounds), spacing)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class MeshReceiver:
+    """Any triangle mesh in world metres (steps, a kerb, a wall), shaded with its face normals.
+
+    It may shadow itself and hide sky from itself; the physical renderer casts
+    sun rays against it everywhere and computes its sky per pixel (it is not a
+    function of x, y: a wall has many points over one ground point).
+    """
+
+    mesh: trimesh.Trimesh
+
+    def surface_normals(self, points: np.ndarray, tri: np.ndarray) -> np.ndarray:
+        """Unit face normals (N, 3) of the hit triangles tri (N,)."""
+        return np.asarray(self.mesh.face_normals)[np.asarray(tri, dtype=np.int64)]
+
+
+def texture_coordinates(points: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """Where a receiver point reads the ground texture (N, 2), metres.
+
+    Surfaces closer to horizontal than 60 degrees read it at their (x, y), as the
+    ground does; steeper ones (a wall, a riser) at (position along the surface's
+    horizontal tangent, height), so their texture is not smeared down the face.
+    """
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+    out = p[:, :2].copy()
+    steep = np.abs(n[:, 2]) < 0.5
+    if steep.any():
+        t = np.stack([-n[steep, 1], n[steep, 0]], -1)
+        t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-12)
+        out[steep, 0] = t[:, 0] * p[steep, 0] + t[:, 1] * p[steep, 1]
+        out[steep, 1] = p[steep, 2] + 7.3  # an offset so that the face does not repeat the ground below
+    return out
+
+
+def _ground_square(half_m: float) -> trimesh.Trimesh:
+    """The square [-half, half]^2 of the plane z = 0, facing up."""
+    h = float(half_m)
+    v = np.array([[-h, -h, 0.0], [h, -h, 0.0], [h, h, 0.0], [-h, h, 0.0]])
+    return trimesh.Trimesh(v, np.array([[0, 1, 2], [0, 2, 3]]), process=False)
+
+
+def _placed_box(extents, centre_local, azimuth_deg: float) -> trimesh.Trimesh:
+    """A box with extents (across, along, up) whose local +y points to the compass azimuth."""
+    box = trimesh.creation.box(extents=extents)
+    box.apply_translation(centre_local)
+    a = np.radians(azimuth_deg)
+    # Local +y -> (sin a, cos a, 0); local +x -> (cos a, -sin a, 0): a rotation about z by -a.
+    rot = trimesh.transformations.rotation_matrix(-a, [0, 0, 1])
+    box.apply_transform(rot)
+    return box
+
+
+def steps_receiver(azimuth_deg: float, start_m: float = 0.6, n_steps: int = 4, rise_m: float = 0.16,
+                   tread_m: float = 0.32, width_m: float = 3.0, landing_m: float = 2.5,
+                   ground_half_m: float = 60.0) -> MeshReceiver:
+    """Open ground with a flight of steps climbing towards the compass azimuth.
+
+    The first riser stands start_m from the origin (the object's base) along the
+    azimuth; n_steps steps of rise_m and tread_m, the last one a landing
+    landing_m deep; width_m across. Walking up, each riser faces back towards
+    the origin (towards the sun when the azimuth points along the shadow).
+    """
+    parts = [_ground_square(ground_half_m)]
+    for i in range(n_steps):
+        top = rise_m * (i + 1)
+        near = start_m + tread_m * i
+        far = start_m + tread_m * (n_steps - 1) + landing_m
+        parts.append(_placed_box((width_m, far - near, top), (0.0, (near + far) / 2, top / 2), azimuth_deg))
+    return MeshReceiver(trimesh.util.concatenate(parts))
+
+
+def wall_receiver(azimuth_deg: float, distance_m: float = 1.0, height_m: float = 2.2, thickness_m: float = 0.2,
+                  width_m: float = 4.0, ground_half_m: float = 60.0) -> MeshReceiver:
+    """Open ground with a wall across the compass azimuth, its near face distance_m from the origin."""
+    wall = _placed_box((width_m, thickness_m, height_m), (0.0, distance_m + thickness_m / 2, height_m / 2),
+                       azimuth_deg)
+    return MeshReceiver(trimesh.util.concatenate([_ground_square(ground_half_m), wall]))

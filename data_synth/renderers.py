@@ -21,8 +21,9 @@ import numpy as np
 import trimesh
 
 from .lighting import SunSky
-from .physical import (combined_mesh, irradiance, shadow_reach, sky_visibility, sky_visibility_map,
-                       sun_visibility)
+from .physical import (RAY_OFFSET_M, combined_mesh, irradiance, shadow_reach, sky_visibility,
+                       sky_visibility_map, sun_visibility)
+from .receivers import MeshReceiver, texture_coordinates
 from .textures import GroundAppearance
 from .tracing import KIND_OBJECT, KIND_RECEIVER, ViewRays, pixel_axes, trace
 
@@ -34,8 +35,8 @@ RENDERERS = ("physical", "model")
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class SynthScene:
-    """An object (world-frame mesh, linear RGB albedo) on a receiver (PlaneReceiver or
-    HeightfieldReceiver). The ground's appearance is given per render (it may change
+    """An object (world-frame mesh, linear RGB albedo) on a receiver (PlaneReceiver,
+    HeightfieldReceiver or MeshReceiver). The ground's appearance is given per render (it may change
     between photos: paper laid out anew, another place)."""
 
     object_mesh: trimesh.Trimesh
@@ -72,6 +73,11 @@ class ViewRender:
     stats: dict
 
 
+def _dot_rows(a: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """a (N, 3) . v (3,) -> (N,), elementwise (BLAS threads fight Embree's here)."""
+    return a[:, 0] * v[0] + a[:, 1] * v[1] + a[:, 2] * v[2]
+
+
 SKY_RGB = np.array([0.75, 0.85, 1.0], np.float32)  # what a pixel that sees no surface shows (x lit level)
 
 
@@ -85,7 +91,8 @@ def _assemble(scene: SynthScene, ground: GroundAppearance, rays: ViewRays, hits,
     recv = hits.kind == KIND_RECEIVER
     obj = hits.kind == KIND_OBJECT
     if recv.any():
-        radiance[recv] = ground.reflectance(hits.points[recv]) * e_recv[:, None]
+        radiance[recv] = ground.reflectance(texture_coordinates(hits.points[recv], hits.normals[recv])) \
+            * e_recv[:, None]
         e_all[recv] = e_recv
     if obj.any():
         radiance[obj] = np.asarray(scene.object_albedo, np.float32) * e_obj[:, None]
@@ -106,8 +113,10 @@ class PhysicalRenderer:
         self.seed = seed
         self.occluders = combined_mesh(scene.object_mesh, scene.receiver.mesh)
         self._sky_map = None
+        self._blockers = None
 
     def sky_map(self):
+        """The receiver's sky on world grids (the plane and the height field: a function of x, y)."""
         if self._sky_map is None:
             q = self.quality
             self._sky_map = sky_visibility_map(self.occluders, self.scene.receiver, self.scene.object_mesh.bounds,
@@ -115,7 +124,10 @@ class PhysicalRenderer:
         return self._sky_map
 
     def check_light(self, sun: SunSky) -> None:
-        """The receiver must not shadow itself (its shadows would be missing outside the object's reach)."""
+        """A height field must not shadow itself (its shadows would be missing outside the object's
+        reach); a mesh receiver may (its own shadows are cast everywhere, ``_self_shadow``)."""
+        if isinstance(self.scene.receiver, MeshReceiver):
+            return
         slope = self.scene.receiver.max_slope()
         limit = math.tan(math.radians(sun.elevation_deg) - sun.radius_rad)
         if slope >= limit:
@@ -135,11 +147,15 @@ class PhysicalRenderer:
         reach = shadow_reach(self.scene.object_mesh.vertices, sun, pts, margin_m=0.1)
         t1 = time.perf_counter()
         sun_vis = np.ones(len(pts))
+        mesh_receiver = isinstance(self.scene.receiver, MeshReceiver)
+        if mesh_receiver:
+            sun_vis, near_edge = self._self_shadow(rays, recv, pts, nrm, sun)
+            reach |= near_edge
         if reach.any():
             sun_vis[reach] = self._sun(hits, rays, recv, np.flatnonzero(reach), pts, nrm, sun, rng)
         t_sun = time.perf_counter() - t1
         t1 = time.perf_counter()
-        sky_vis = self.sky_map().at(pts)
+        sky_vis = self._mesh_receiver_sky(hits, rays, recv) if mesh_receiver else self.sky_map().at(pts)
         t_sky = time.perf_counter() - t1
         e_recv = irradiance(sun, nrm, sun_vis, sky_vis)
         obj = np.flatnonzero(hits.kind == KIND_OBJECT)
@@ -183,6 +199,92 @@ class PhysicalRenderer:
                                          rng, pixel_axes=axes[refine])
         self._last_refined = int(refine.sum())
         return vis
+
+    def _self_shadow(self, rays, recv, pts, nrm, sun) -> tuple[np.ndarray, np.ndarray]:
+        """A mesh receiver's own hard shadow: sun visibility (M,) of the receiver pixels recv (M,)
+        from one ray to the sun's centre against the receiver (0 or 1; faces turned away from
+        the sun get 0, their cosine is 0 anyway), and the pixels within 3 of its edge (M,) bool,
+        which the caller samples over the whole disk (their penumbra)."""
+        facing = _dot_rows(nrm, sun.direction) > 0
+        lit = np.zeros(len(pts))
+        if facing.any():
+            s = np.broadcast_to(sun.direction, (int(facing.sum()), 3))
+            origins = pts[facing] + RAY_OFFSET_M * s
+            lit[facing] = ~self.scene.receiver.mesh.ray.intersects_any(origins, s)
+        img = np.zeros(rays.width * rays.height, np.uint8)
+        img[recv] = 1 + lit.astype(np.uint8)  # 0: not the receiver, 1: its shadow, 2: lit
+        img = img.reshape(rays.height, rays.width)
+        kernel = np.ones((7, 7), np.uint8)
+        # Edge: a lit and a shadowed receiver pixel within 3 pixels (not the object's outline).
+        shadowed = cv2.dilate((img == 1).astype(np.uint8), kernel)
+        lit_near = cv2.dilate((img == 2).astype(np.uint8), kernel)
+        near = (shadowed & lit_near).ravel()[recv] > 0
+        return lit, near & facing
+
+    def _sky_blockers(self) -> trimesh.Trimesh:
+        """What can hide sky from a mesh receiver: the object and the receiver's faces that
+        rise above its lowest level (a flat floor there cannot block rays going up from points
+        on or above it; leaving it out lets the bounding-sphere cull work)."""
+        if getattr(self, "_blockers", None) is None:
+            mesh = self.scene.receiver.mesh
+            low = float(mesh.bounds[0, 2])
+            tall = np.asarray(mesh.triangles)[:, :, 2].max(axis=1) > low + 1e-6
+            parts = [self.scene.object_mesh]
+            if tall.any():
+                parts.append(mesh.submesh([np.flatnonzero(tall)], append=True))
+            self._blockers = combined_mesh(*parts)
+        return self._blockers
+
+    def _mesh_receiver_sky(self, hits, rays, recv, step: int = 4) -> np.ndarray:
+        """Open sky (M,) of a mesh receiver's pixels recv: cast on a lattice of every step-th
+        pixel and interpolated bilinearly between the four lattice pixels around a pixel when
+        they lie on its own plane (the sky is smooth along a face); computed directly at the
+        others (creases, the object's outline), so no value is blended across a crease. Each
+        plane's points share one set of directions (its normal's), so the estimate is coherent."""
+        h, w = rays.height, rays.width
+        q = self.quality
+        pts, nrm = hits.points, hits.normals
+        plane = np.full(h * w, -1, np.int64)
+        key = np.round(np.column_stack([nrm[recv], _dot_rows(nrm[recv] * pts[recv], np.ones(3))]) * 200.0)
+        key = key.astype(np.int64) + 4096  # four small integers -> one (1-D unique is fast)
+        flat = ((key[:, 0] * 8192 + key[:, 1]) * 8192 + key[:, 2]) * 8192 + key[:, 3]
+        ids, first, inverse = np.unique(flat, return_index=True, return_inverse=True)
+        plane[recv] = inverse
+        normal_of = nrm[recv][first]  # one normal per plane
+        blockers = self._sky_blockers()
+        n_dirs = q.sky_samples // 4  # per pixel here, per grid node (4x denser) for the height field
+
+        def sky(index):
+            out = np.zeros(len(index))
+            pid = plane[index]
+            for p in np.unique(pid):
+                sel = pid == p
+                out[sel] = sky_visibility(blockers, pts[index[sel]],
+                                          np.broadcast_to(normal_of[p], (int(sel.sum()), 3)), n_dirs, self.seed)
+            return out
+
+        ar = np.unique(np.r_[np.arange(0, h, step), h - 1])
+        ac = np.unique(np.r_[np.arange(0, w, step), w - 1])
+        anchors = (ar[:, None] * w + ac[None, :]).ravel()
+        anchors = anchors[plane[anchors] >= 0]
+        value = np.zeros(h * w)
+        value[anchors] = sky(anchors)
+        row, col = np.divmod(recv, w)
+        i0 = np.clip(np.searchsorted(ar, row, "right") - 1, 0, max(len(ar) - 2, 0))
+        j0 = np.clip(np.searchsorted(ac, col, "right") - 1, 0, max(len(ac) - 2, 0))
+        i1, j1 = np.minimum(i0 + 1, len(ar) - 1), np.minimum(j0 + 1, len(ac) - 1)
+        corners = [ar[i] * w + ac[j] for i in (i0, i1) for j in (j0, j1)]
+        same = np.all([plane[c] == plane[recv] for c in corners], axis=0)
+        fr = np.where(ar[i1] > ar[i0], (row - ar[i0]) / np.maximum(ar[i1] - ar[i0], 1), 0.0)
+        fc = np.where(ac[j1] > ac[j0], (col - ac[j0]) / np.maximum(ac[j1] - ac[j0], 1), 0.0)
+        weights = [(1 - fr) * (1 - fc), (1 - fr) * fc, fr * (1 - fc), fr * fc]
+        out = np.zeros(len(recv))
+        for c, wgt in zip(corners, weights):
+            out += wgt * value[c]
+        direct = np.flatnonzero(~same)
+        if len(direct):
+            out[direct] = sky(recv[direct])
+        return out
 
     def _object_sky(self, hits, obj: np.ndarray, width: int) -> np.ndarray:
         """Open sky of the object's pixels: computed on every other row and column (it is

@@ -20,12 +20,12 @@ import numpy as np
 import trimesh
 
 from scene import CameraSpec, ObjectSpec, PhotoSpec, ReceiverSpec, SceneSpec, SiteSpec, dump_scene
-from softshadow import GroundGrid, PinholeCamera, brightness_to_paper, builtin_mesh, pose_matrix
+from softshadow import GroundGrid, PinholeCamera, brightness_to_paper, builtin_mesh, one_blas_thread, pose_matrix
 
 from .camera_pipeline import camera_pipeline, fit_handheld_camera, topdown_grid
 from .image_io import EXTENSIONS, FORMATS, PhotoMetadata, write_corrupt_jpeg, write_photo
 from .presets import PresetPlan, PhotoPlan, build_preset
-from .receivers import PlaneReceiver, bank_terrain
+from .receivers import MeshReceiver, PlaneReceiver, bank_terrain, steps_receiver, wall_receiver
 from .renderers import RENDERERS, RenderQuality, SynthScene, make_renderer
 from .textures import GroundAppearance, procedural_texture
 from .tracing import pinhole_rays, topdown_rays
@@ -44,6 +44,20 @@ def posed_mesh(name: str, position, rotation_deg, scale: float) -> trimesh.Trime
     R = pose_matrix(rotation_deg)
     v = (float(scale) * np.asarray(mesh.vertices)) @ R.T + np.asarray(position, dtype=np.float64)
     return trimesh.Trimesh(v, np.asarray(mesh.faces), process=False)
+
+
+RECEIVER_MESH_FILE = "receiver.ply"
+
+
+def _receiver(plan: PresetPlan):
+    """The preset's receiver: the plane, the bank (a height field) or a mesh (steps, wall)."""
+    if plan.receiver == "bank":
+        return bank_terrain()
+    if plan.receiver == "steps":
+        return steps_receiver(plan.receiver_azimuth_deg)
+    if plan.receiver == "wall":
+        return wall_receiver(plan.receiver_azimuth_deg)
+    return PlaneReceiver()
 
 
 def _prepare_out_dir(out_dir: Path, force: bool) -> None:
@@ -136,6 +150,13 @@ def synthesize(out_dir, preset: str = "table2", seed: int = 0, renderer: str = "
     cameras: 'explicit' writes K, R, t per photo; 'markers' leaves registration to the
     printed board ([camera] kind = "markers"). noise: sensor noise on/off.
     """
+    with one_blas_thread():  # an entry point (softshadow.one_blas_thread)
+        return _synthesize(out_dir, preset, seed, renderer, size, fmt, quality, progress, force, write_sun,
+                           cameras, render_quality, noise)
+
+
+def _synthesize(out_dir, preset, seed, renderer, size, fmt, quality, progress, force, write_sun, cameras,
+                render_quality, noise) -> Path:
     t_start = time.perf_counter()
     if renderer not in RENDERERS:
         raise ValueError(f"unknown renderer {renderer!r}; choose one of {RENDERERS}")
@@ -152,7 +173,7 @@ def synthesize(out_dir, preset: str = "table2", seed: int = 0, renderer: str = "
     write_sun = plan.write_sun if write_sun is None else bool(write_sun)
 
     mesh = posed_mesh(plan.mesh, plan.position, plan.rotation_deg, plan.scale)
-    receiver = bank_terrain() if plan.receiver == "bank" else PlaneReceiver()
+    receiver = _receiver(plan)
     scene = SynthScene(mesh, plan.object_albedo, receiver)
     quality_settings = render_quality or RenderQuality()
     rend = make_renderer(renderer, scene, quality_settings, seed)
@@ -163,6 +184,13 @@ def synthesize(out_dir, preset: str = "table2", seed: int = 0, renderer: str = "
         spec.site = SiteSpec(plan.site["latitude"], plan.site["longitude"], plan.site.get("timezone"))
     if plan.receiver == "bank":
         spec.receiver = ReceiverSpec(kind="depth")
+    files: list[str] = []
+    if isinstance(receiver, MeshReceiver):
+        # The receiver's mesh goes into the folder (world metres, placed as is).
+        mesh_name = RECEIVER_MESH_FILE
+        receiver.mesh.export(out / mesh_name)
+        files.append(mesh_name)
+        spec.receiver = ReceiverSpec(kind="mesh", mesh=mesh_name)
     if plan.board is not None:
         b = plan.board
         spec.camera = CameraSpec(kind="markers", dictionary=b.dictionary, squares=tuple(b.squares),
@@ -177,7 +205,6 @@ def synthesize(out_dir, preset: str = "table2", seed: int = 0, renderer: str = "
         groups[label] = _group_truth(label, ps)
 
     details: dict[str, dict] = {}
-    files: list[str] = []
     skipped: list[dict] = []
     iterator = plan.photos
     if progress:
@@ -217,9 +244,9 @@ def synthesize(out_dir, preset: str = "table2", seed: int = 0, renderer: str = "
             entry.sun_azimuth_deg = float(photo.light.azimuth_deg)
             entry.sun_elevation_deg = float(photo.light.elevation_deg)
         if plan.receiver == "bank" and isinstance(camera, PinholeCamera):
-            import tifffile
-            depth_name = photo.name + ".depth.tiff"
-            tifffile.imwrite(out / depth_name, _depth_image(camera, render))
+            # The range-image format of scene.toml: float32 metres along the optical axis, NaN = none.
+            depth_name = photo.name + ".depth.npy"
+            np.save(out / depth_name, _depth_image(camera, render))
             entry.depth = depth_name
             files.append(depth_name)
         spec.photos[name] = entry
@@ -249,6 +276,7 @@ def synthesize(out_dir, preset: str = "table2", seed: int = 0, renderer: str = "
                             if renderer == "physical" else "softshadow.render.SoftShadowModel, rule edge, "
                             "profile linear, k = tan(sun radius)"),
         "preset": preset,
+        "receiver": spec.receiver.to_toml(),
         "seed": int(seed),
         "size": list(plan.size),
         "format": fmt,

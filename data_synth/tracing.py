@@ -1,4 +1,4 @@
-"""Camera rays and what they hit: the receiver (plane or height field) or the object.
+"""Camera rays and what they hit: the receiver (plane, height field or mesh) or the object.
 
 Pinhole cameras follow softshadow.camera (OpenCV convention); a top-down map
 (``GroundGrid``) is an orthographic camera looking straight down, north up.
@@ -33,14 +33,7 @@ class ViewRays:
 
 def pinhole_rays(camera: PinholeCamera) -> ViewRays:
     rows, cols = np.mgrid[0:camera.height, 0:camera.width]
-    if camera.dist is not None and np.any(camera.dist):
-        d = camera.pixel_rays(cols, rows)
-    else:  # the same as camera.pixel_rays, elementwise (BLAS threads fight Embree's here)
-        Kinv = np.linalg.inv(camera.K)
-        x = (Kinv[0, 0] * cols + Kinv[0, 1] * rows + Kinv[0, 2]).ravel()
-        y = (Kinv[1, 1] * rows + Kinv[1, 2]).ravel()
-        R = camera.R
-        d = np.stack([R[0, j] * x + R[1, j] * y + R[2, j] for j in range(3)], -1)
+    d = camera.pixel_rays(cols, rows)
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     o = np.broadcast_to(camera.centre, d.shape)
     return ViewRays(o, d, camera.width, camera.height, camera)
@@ -129,20 +122,22 @@ def trace(rays: ViewRays, object_mesh: trimesh.Trimesh | None, receiver) -> Surf
     points = np.zeros((n, 3))
     normals = np.zeros((n, 3))
     t_recv = np.full(n, np.inf)
+    tri = np.zeros(n, np.int64)
     if receiver.mesh is None:  # the plane z = 0, analytically
         with np.errstate(divide="ignore", invalid="ignore"):
             t = -o[:, 2] / d[:, 2]
         ok = np.isfinite(t) & (t > 0)
         t_recv[ok] = t[ok]
     else:
-        iray, loc, _ = _first_hits(receiver.mesh, o, d)
+        iray, loc, itri = _first_hits(receiver.mesh, o, d)
         t_recv[iray] = np.einsum("nj,nj->n", loc - o[iray], d[iray])
+        tri[iray] = itri
     recv_valid = np.isfinite(t_recv)
     recv_pts = o + np.where(recv_valid, t_recv, 0.0)[:, None] * d
     kind[recv_valid] = KIND_RECEIVER
     points[recv_valid] = recv_pts[recv_valid]
     if recv_valid.any():
-        normals[recv_valid] = receiver.normal(recv_pts[recv_valid, :2])
+        normals[recv_valid] = receiver.surface_normals(recv_pts[recv_valid], tri[recv_valid])
     if object_mesh is not None:
         cand = _object_candidates(rays, object_mesh.bounds)
         if len(cand):

@@ -20,13 +20,14 @@ from typing import Callable
 import cv2
 import jax
 import numpy as np
-from threadpoolctl import threadpool_limits
 
 from scene import CameraSpec, SceneError, SceneSpec, load_scene, photo_sun
-from softshadow import MeshError, Pose, SoftShadowModel, SunBelowHorizonError, check_sun_above_horizon
+from softshadow import (MeshError, Pose, SoftShadowModel, SunBelowHorizonError, check_sun_above_horizon,
+                        one_blas_thread)
 
-from .exif import intrinsics_from_exif
+from .files import atomic_writer, software_versions
 from .grouping import PhotoGroup, group_photos, photo_time
+from .ignore_masks import IgnoreMaskError, ignore_mask_path, read_ignore_mask
 from .photos import Photo, PhotoError, list_photos, read_photo
 from .results import FitResults, GroupResult
 from .solve import FitOptions, fit_group
@@ -43,17 +44,6 @@ def _safe_label(label: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", label).strip("_") or "group"
 
 
-def _software() -> dict:
-    from importlib.metadata import PackageNotFoundError, version
-    out = {}
-    for name in ("softshadow", "jax", "optimistix", "numpy", "opencv-contrib-python-headless"):
-        try:
-            out[name] = version(name)
-        except PackageNotFoundError:
-            pass
-    return out
-
-
 def _camera_view(photo: Photo, spec: CameraSpec | None, view: PhotoView) -> None:
     """Fill the view's camera or grid from the scene; markers are registered here."""
     h, w = photo.gray.shape
@@ -66,8 +56,8 @@ def _camera_view(photo: Photo, spec: CameraSpec | None, view: PhotoView) -> None
         view.camera = cam
     else:
         from .markers import board_outline_world, register_board
-        K = np.asarray(spec.K) if spec.K is not None else intrinsics_from_exif(photo.exif, w, h)
-        reg = register_board(photo.gray, spec, K=K, exif=photo.exif)
+        # Intrinsics: scene.toml's K with its distortion, else EXIF, else fitted (register_board).
+        reg = register_board(photo.gray, spec, exif=photo.exif)
         view.camera = reg.camera
         view.reprojection_error_px = reg.reprojection_error_px
         outline = board_outline_world(spec)
@@ -119,7 +109,7 @@ def _measure_without_scene(photo: Photo, when, scene: SceneSpec | None) -> Group
     pixel_m = None
     if scene is not None and scene.camera is not None and scene.camera.kind == "topdown":
         pixel_m = scene.camera.pixel_m
-    m = measure_shadow_edges(photo.gray, mask=photo.saturated, pixel_m=pixel_m, linear_rgb=photo.linear)
+    m = measure_shadow_edges(photo.gray, mask=photo.excluded, pixel_m=pixel_m, linear_rgb=photo.linear)
     result.seconds = _time.perf_counter() - start
     if not m.edges_found:
         result.error = m.reason or "no shadow edge found"
@@ -130,6 +120,7 @@ def _measure_without_scene(photo: Photo, when, scene: SceneSpec | None) -> Group
     result.n_profiles = int(m.n_profiles)
     result.converged = True
     result.identifiable = True
+    result.warnings, result.reliable = list(m.warnings), bool(m.reliable)
     return result
 
 
@@ -145,14 +136,14 @@ def fit_photos(photos: list[Photo], scene: SceneSpec | None = None, options: Fit
     jobs: groups fitted at once (threads).
     """
     # Fits run in float64 (LM in float32 stalls short of its tolerances), scoped to this call so
-    # that a caller's own JAX code keeps its precision; one BLAS thread, see softshadow_cli.main.
-    with jax.enable_x64(True), threadpool_limits(limits=1, user_api="blas"):
+    # that a caller's own JAX code keeps its precision; one BLAS thread (softshadow.one_blas_thread).
+    with jax.enable_x64(True), one_blas_thread():
         return _fit_photos(photos, scene, options, progress, done, on_group, jobs)
 
 
 def _in_float64(fn, *args):
     """fn(*args) in float64 and one BLAS thread: JAX's precision switch is per thread."""
-    with jax.enable_x64(True), threadpool_limits(limits=1, user_api="blas"):
+    with jax.enable_x64(True), one_blas_thread():
         return fn(*args)
 
 
@@ -175,7 +166,7 @@ def _fit_photos(photos, scene, options, progress, done, on_group, jobs) -> FitRe
             groups_out.append(result)
             if on_group:
                 on_group(result)
-        return FitResults(groups_out, skipped, _software())
+        return FitResults(groups_out, skipped, software_versions())
     if scene.receiver.kind != "plane":
         # Never fitted silently as flat ground: the fitter models the plane z = 0 only (so far).
         raise FolderError(f"[receiver] kind {scene.receiver.kind!r} cannot be fitted yet: the fitter "
@@ -194,7 +185,7 @@ def _fit_photos(photos, scene, options, progress, done, on_group, jobs) -> FitRe
         views, group_skipped = [], []
         for name in group.photos:
             photo = by_name[name]
-            view = PhotoView(name, photo.gray, photo.saturated, time=times.get(name))
+            view = PhotoView(name, photo.gray, photo.excluded, time=times.get(name))
             try:
                 _camera_view(photo, scene.camera_for(name), view)
                 _sun_view(name, times.get(name), scene, view)
@@ -240,7 +231,7 @@ def _fit_photos(photos, scene, options, progress, done, on_group, jobs) -> FitRe
     if bar is not None:
         bar.close()
     groups_out += [ordered[i] for i in range(len(groups))]
-    return FitResults(groups_out, skipped, _software())
+    return FitResults(groups_out, skipped, software_versions())
 
 
 def fit_folder(path, scene: SceneSpec | str | Path | None = None, options: FitOptions | None = None,
@@ -270,9 +261,15 @@ def fit_folder(path, scene: SceneSpec | str | Path | None = None, options: FitOp
     photos = []
     for f in files:
         try:
-            photos.append(read_photo(f, half_size=half_size))
+            photo = read_photo(f, half_size=half_size)
+            mask_path = ignore_mask_path(f, scene)
+            if mask_path is not None:
+                photo.ignore = read_ignore_mask(mask_path, photo.gray.shape)
+            photos.append(photo)
         except PhotoError as exc:
             skipped.append({"photo": f.name, "reason": exc.reason})
+        except IgnoreMaskError as exc:
+            skipped.append({"photo": f.name, "reason": str(exc)})
     if not photos:
         reasons = "; ".join(f"{s['photo']}: {s['reason']}" for s in skipped) or "no image files"
         raise FolderError(f"no readable photo in {folder} ({reasons})")
@@ -291,10 +288,8 @@ def fit_folder(path, scene: SceneSpec | str | Path | None = None, options: FitOp
 
     def keep(result: GroupResult):
         if groups_dir is not None:
-            target = groups_dir / f"{_safe_label(result.label)}.json"
-            tmp = target.with_suffix(".json.tmp")
-            tmp.write_text(json.dumps(result.to_json(), indent=1))
-            tmp.replace(target)
+            with atomic_writer(groups_dir / f"{_safe_label(result.label)}.json") as fh:
+                fh.write(json.dumps(result.to_json(), indent=1))
         if on_group is not None:
             on_group(result)
 

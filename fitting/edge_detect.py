@@ -17,9 +17,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 from skimage import feature, measure
+from skimage.measure import block_reduce
 
-__all__ = ["EdgeCandidates", "LogImage", "ProfileSamples", "log_image", "detect_edge_candidates",
-           "sample_profiles", "sample_strips", "high_pass_log", "max_half_span_inside"]
+__all__ = ["EdgeCandidates", "LogImage", "ProfileSamples", "WorkImage", "log_image", "detect_edge_candidates",
+           "sample_profiles", "sample_strips", "high_pass_log", "max_half_span_inside", "to_work_scale"]
 
 # Gaussian scales (px) of the two Canny passes. Detection only has to find
 # edges (each profile fit then locates the ramp to a fraction of a pixel), so
@@ -51,6 +52,51 @@ class LogImage:
 
     log: np.ndarray
     valid: np.ndarray
+
+
+@dataclass(frozen=True)
+class WorkImage:
+    """A photo reduced by an integer factor for edge measurement.
+
+    gray: (H // f, W // f) linear; rgb: (H // f, W // f, 3) linear or None.
+    bad: (H // f, W // f) bool, True where half or more of the block's pixels were bad.
+    factor: f, full-resolution pixels per working pixel along each axis.
+    A working pixel (u, v) covers full-resolution pixels centred at
+    f u + (f - 1) / 2, f v + (f - 1) / 2 (CONVENTIONS pixel centres).
+    """
+
+    gray: np.ndarray
+    rgb: np.ndarray | None
+    bad: np.ndarray
+    factor: int
+
+    def to_full_uv(self, uv: np.ndarray) -> np.ndarray:
+        """Working pixel coordinates (..., 2) to full-resolution ones."""
+        return np.asarray(uv, float) * self.factor + 0.5 * (self.factor - 1)
+
+
+def to_work_scale(gray: np.ndarray, rgb: np.ndarray | None, bad: np.ndarray, max_side_px: int) -> WorkImage:
+    """Box-average a photo by the smallest integer factor that brings its longer side to max_side_px or less.
+
+    Averaging is done in linear units over the good pixels of each block only
+    (a clipped pebble does not darken its block), so plateau ratios, and hence
+    rho, are unchanged; a ramp of w px becomes one of w / f working pixels.
+    Rows and columns beyond a multiple of f are dropped.
+    """
+    f = max(1, int(np.ceil(max(gray.shape) / float(max_side_px))))
+    if f == 1:
+        return WorkImage(gray, rgb, bad, 1)
+    h, w = gray.shape[0] // f * f, gray.shape[1] // f * f
+    good = (~bad[:h, :w]).astype(np.float64)
+    n_good = block_reduce(good, (f, f), np.sum)
+
+    def mean(x):
+        x = np.where(good > 0, x[:h, :w], 0.0)
+        return block_reduce(x, (f, f), np.sum) / np.maximum(n_good, 1.0)
+
+    g = mean(gray)
+    c = None if rgb is None else np.stack([mean(rgb[..., i]) for i in range(rgb.shape[2])], axis=-1)
+    return WorkImage(g, c, n_good * 2 <= f * f, f)
 
 
 @dataclass(frozen=True)
@@ -112,10 +158,11 @@ def log_image(linear: np.ndarray, ignore: np.ndarray | None = None) -> LogImage:
 
 
 def detect_edge_candidates(img: LogImage, max_points: int, rng: np.random.Generator,
-                           sigmas_px: tuple[float, ...] = DETECTION_SIGMAS_PX) -> EdgeCandidates:
+                           sigmas_px: tuple[float, ...] = DETECTION_SIGMAS_PX,
+                           min_chain_px: float = MIN_CHAIN_PX) -> EdgeCandidates:
     """Points on long Canny edges of the log image, spread evenly over the edges.
 
-    Canny runs at each scale in ``sigmas_px``; chains shorter than ``MIN_CHAIN_PX``
+    Canny runs at each scale in ``sigmas_px``; chains shorter than ``min_chain_px``
     are dropped. At most ``max_points`` points are returned, one per cell of a
     square grid sized so that the edges fill about that many cells (so long edges
     get many points and every part of them gets some); the point within a cell
@@ -143,7 +190,7 @@ def detect_edge_candidates(img: LogImage, max_points: int, rng: np.random.Genera
         if labels.max() == 0:
             continue
         sizes = np.bincount(labels.ravel())
-        long_chain = sizes >= MIN_CHAIN_PX
+        long_chain = sizes >= min_chain_px
         long_chain[0] = False
         rows, cols = np.nonzero(long_chain[labels])
         g = np.stack([gx[rows, cols], gy[rows, cols]], axis=1)

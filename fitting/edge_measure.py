@@ -19,13 +19,16 @@ the dominant log-rho mode). See docs/edge_measure.md.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import optimize, special
+from scipy import optimize, special, stats
 
-from fitting.edge_detect import (detect_edge_candidates, high_pass_log, log_image, max_half_span_inside,
-                                 sample_profiles, sample_strips)
+from fitting.edge_detect import (MIN_CHAIN_PX, LogImage, detect_edge_candidates, high_pass_log, log_image, max_half_span_inside,
+                                 sample_profiles, sample_strips, to_work_scale)
+from fitting.ground_region import ground_region
+from fitting.shadow_cues import MODE_WINDOW_LOG, bluer_umbrae, mode_of_log_rho, reliability
 
 __all__ = ["EdgeMeasurement", "EdgeProfile", "RampFit", "measure_shadow_edges", "fit_edge_profile", "ramp_alpha",
            "ramp_log_model"]
@@ -59,9 +62,22 @@ NORMAL_SHIFT_MAX_PX = 4.0  # search range of a strip line's ramp shift when stra
 # strip mixes two edge directions (widths within 4 px of a vertex read 20-50 %
 # high). 35 deg keeps circles down to a radius of about 16 px.
 MAX_TURN_DEG = 35.0
-MODE_BANDWIDTH_LOG = 0.05  # kernel density bandwidth for the dominant log-rho mode
-MODE_WINDOW_LOG = 0.25     # profiles farther than this (log) from the mode are other edges
 MIN_PROFILES = 5           # fewer shadow-like profiles than this is not a measurement
+# Edges are measured on the photo box-averaged to at most this longer side.
+# Why: on a 4000x3000 photo a long shadow's penumbra spans 30-100 px, so its
+# log gradient (log(1/rho) / w, about 0.02-0.05 per px) falls under Canny's
+# thresholds while gravel at the detection scales clears them, and the first
+# profile pass (3 sigma + 6 px) is narrower than the ramp: the shadow's
+# profiles came out as "ramp not inside the profile" or "no darker side" and
+# cloud edges and facades won. Averaging by f makes the ramp w / f px wide
+# and averages the pebbles away; plateau ratios (rho) do not change.
+WORK_MAX_SIDE_PX = 1024
+# Canny chains shorter than this fraction of the working image's longer side
+# are left out (and never shorter than edge_detect's MIN_CHAIN_PX): on gravel
+# the pebbles' chains (20-60 px) took most of the profile budget, spread evenly
+# over all chains, and left the shadow outline a few percent of it.
+MIN_CHAIN_PER_SIDE = 0.05
+NOT_GROUND_REASON = "not on the ground (sky, or above the horizon)"
 BOOTSTRAP_RESAMPLES = 400
 # Gaussian prior (log units per px) on the shading slope b. Free, b trades
 # against rho whenever the plateaus are short (a texture tilt reads as a
@@ -90,6 +106,8 @@ class EdgeProfile:
     offsets_px: (S,) sample positions s along the normal, relative to position_uv.
     observed_log: (S,) log of the observed linear values (strip means).
     fitted_log: (S,) the fitted model at offsets_px.
+    blue_shift_log: log step of blue minus log step of red across the edge
+        (positive: the dark side is bluer, as a skylit umbra is); NaN without colour.
     """
 
     position_uv: np.ndarray
@@ -102,6 +120,7 @@ class EdgeProfile:
     offsets_px: np.ndarray
     observed_log: np.ndarray
     fitted_log: np.ndarray
+    blue_shift_log: float = float("nan")
 
 
 @dataclass(frozen=True)
@@ -122,6 +141,10 @@ class EdgeMeasurement:
     edges_found: False when no shadow edge could be measured.
     profiles: every fitted profile, kept or not (EdgeProfile).
     reason: why nothing was measured (None when edges_found).
+    warnings: one-line reasons to doubt the result (``fitting.shadow_cues``):
+        edges that disagree, too few profiles, profiles scattered over
+        unrelated structures.
+    reliable: False when there is any warning (the value is still given).
     """
 
     rho: float
@@ -133,6 +156,8 @@ class EdgeMeasurement:
     edges_found: bool
     profiles: list[EdgeProfile]
     reason: str | None
+    warnings: tuple[str, ...] = ()
+    reliable: bool = True
 
 
 def ramp_alpha(s: np.ndarray, s0: float, w: float, blur_px: float = 0.0) -> np.ndarray:
@@ -199,7 +224,7 @@ def fit_edge_profile(s: np.ndarray, y: np.ndarray, max_width_px: float,
     w0 = float(np.clip(mid.sum() * ds / 0.6, 1.0, max_width_px * 0.9))
     s00 = float(np.median(s[mid])) if mid.any() else 0.0
     s00 = float(np.clip(s00, s[0] + 0.3 * span, s[-1] - 0.3 * span))
-    noise = max(1.4826 * float(np.median(np.abs(np.diff(y) - np.median(np.diff(y))))) / np.sqrt(2.0), 1e-3)
+    noise = max(_robust_std(np.diff(y)) / np.sqrt(2.0), 1e-3)
 
     prior = 0.0 if slope_sigma_per_px is None else noise / slope_sigma_per_px
     blur = max(blur_px, 1e-3)      # the closed form needs blur > 0; 1e-3 px is a sharp ramp
@@ -277,17 +302,27 @@ def measure_shadow_edges(linear_gray: np.ndarray, mask: np.ndarray | None = None
         bad |= gray >= saturation_level
         if rgb is not None:
             bad |= (rgb >= saturation_level).any(axis=2)
-    ignore = bad
-    img = log_image(gray, ignore)
+    work = to_work_scale(gray, rgb, bad, WORK_MAX_SIDE_PX)
+    img = log_image(work.gray, work.bad)
     if not img.valid.any():
         return _nothing("every pixel is masked, clipped or not finite", [])
-    candidates = detect_edge_candidates(img, int(max_profiles), rng)
+    ground = ground_region(work.rgb, work.gray)
+    # Candidates only where ground may be; profiles may still reach across (the
+    # horizon margin keeps them off the sky).
+    min_chain = max(MIN_CHAIN_PX, MIN_CHAIN_PER_SIDE * max(work.gray.shape))
+    candidates = detect_edge_candidates(LogImage(img.log, img.valid & ground.ground), int(max_profiles), rng,
+                                        min_chain_px=min_chain)
     if len(candidates) == 0:
         return _nothing(NO_EDGE_REASON, [])
 
-    images = _Images(gray=gray, valid=img.valid, texture=high_pass_log(img, TEXTURE_SIGMA_PX), rgb=rgb)
+    images = _Images(gray=work.gray, valid=img.valid, texture=high_pass_log(img, TEXTURE_SIGMA_PX), rgb=work.rgb)
     profiles = _fit_candidates(images, candidates)
+    profiles = [p if not p.kept or ground.contains(p.position_uv)[0] else _with_reason(p, NOT_GROUND_REASON)
+                for p in profiles]
+    profiles = _prefer_bluer_umbrae(profiles)
+    shadow_like_log_rho = np.log([p.rho for p in profiles if p.kept])
     profiles = _keep_dominant_mode(profiles)
+    profiles = [_to_full_scale(p, work) for p in profiles]
     kept = [p for p in profiles if p.kept]
     if len(kept) < MIN_PROFILES:
         return _nothing(NO_EDGE_REASON, profiles)
@@ -298,9 +333,11 @@ def measure_shadow_edges(linear_gray: np.ndarray, mask: np.ndarray | None = None
     rho = float(np.exp(np.median(log_rho)))
     rho_stderr = _block_bootstrap_median_stderr(np.exp(log_rho), positions, rng)
     q25, q50, q75 = np.percentile(widths, [25, 50, 75])
+    warnings, reliable = reliability(shadow_like_log_rho, positions, gray.shape, np.log(RHO_MIN))
     return EdgeMeasurement(rho=rho, rho_stderr=rho_stderr, penumbra_px=float(q50), penumbra_px_iqr=float(q75 - q25),
                            penumbra_m=None if pixel_m is None else float(q50 * pixel_m), n_profiles=len(kept),
-                           edges_found=True, profiles=profiles, reason=None)
+                           edges_found=True, profiles=profiles, reason=None, warnings=tuple(warnings),
+                           reliable=reliable)
 
 
 @dataclass(frozen=True)
@@ -340,11 +377,11 @@ def _fit_candidates(images: _Images, candidates) -> list[EdgeProfile]:
             continue
         fit, s, y = second
         half2 = float(s[-1])
-        reason = _shadow_edge_test(images, centre, normal, half2, fit, s, y)
+        reason, blue = _shadow_edge_test(images, centre, normal, half2, fit, s, y)
         profiles.append(EdgeProfile(position_uv=centre + fit.s0 * normal, normal_uv=normal, rho=fit.rho,
                                     width_px=fit.w, residual=fit.residual_rms, kept=reason is None,
                                     reject_reason=reason, offsets_px=s - fit.s0, observed_log=y,
-                                    fitted_log=fit.fitted))
+                                    fitted_log=fit.fitted, blue_shift_log=blue))
     return profiles
 
 
@@ -413,27 +450,31 @@ def _plateaus(s: np.ndarray, fit: RampFit, extra_px: float = 0.0) -> tuple[np.nd
 
 
 def _shadow_edge_test(images: _Images, centre, normal, half_span_px: float, fit: RampFit, s: np.ndarray,
-                      y: np.ndarray) -> str | None:
-    """Why this fitted profile is not a shadow edge on one surface, or None if it looks like one."""
+                      y: np.ndarray) -> tuple[str | None, float]:
+    """(why this fitted profile is not a shadow edge on one surface or None, its blue shift (NaN: no colour))."""
+    nan = float("nan")
     if fit.rho > RHO_MAX:
-        return f"step too shallow (rho {fit.rho:.2f} > {RHO_MAX})"
+        return f"step too shallow (rho {fit.rho:.2f} > {RHO_MAX})", nan
     step = -np.log(fit.rho)
     dark, lit = _plateaus(s, fit)
     need = max(MIN_PLATEAU_PX, PLATEAU_PER_WIDTH * fit.w) / STEP_PX
     if dark.sum() < need or lit.sum() < need:
-        return "ramp not inside the profile (too little plateau on one side)"
+        return "ramp not inside the profile (too little plateau on one side)", nan
     if fit.residual_rms > MAX_RESIDUAL_PER_STEP * step:
-        return f"poor fit (residual {fit.residual_rms:.3f} > {MAX_RESIDUAL_PER_STEP} x step): texture or another edge"
+        return (f"poor fit (residual {fit.residual_rms:.3f} > {MAX_RESIDUAL_PER_STEP} x step): texture or another "
+                "edge", nan)
     if abs(fit.b) * (s[-1] - s[0]) > MAX_SLOPE_STEP_FRACTION * step:
-        return "shading slope comparable to the step: not a clean edge"
+        return "shading slope comparable to the step: not a clean edge", nan
     ratio = _texture_ratio(images, centre, normal, half_span_px, fit, s)
     if ratio is not None and not TEXTURE_RATIO_LOW <= ratio <= TEXTURE_RATIO_HIGH / np.sqrt(fit.rho):
-        return f"texture differs across the edge (dark/lit {ratio:.2f}): two surfaces, not a shadow"
-    if images.rgb is not None:
-        colour = _colour_step_logs(images, centre, normal, half_span_px, fit, s)
-        if np.max(np.abs(colour)) > COLOUR_TOL_LOG:
-            return f"colour changes across the edge (channel log ratios differ by {np.max(np.abs(colour)):.2f})"
-    return None
+        return f"texture differs across the edge (dark/lit {ratio:.2f}): two surfaces, not a shadow", nan
+    if images.rgb is None:
+        return None, nan
+    colour = _colour_step_logs(images, centre, normal, half_span_px, fit, s)
+    blue = float(colour[2] - colour[0])
+    if np.max(np.abs(colour)) > COLOUR_TOL_LOG:
+        return f"colour changes across the edge (channel log ratios differ by {np.max(np.abs(colour)):.2f})", blue
+    return None, blue
 
 
 def _texture_ratio(images: _Images, centre, normal, half_span_px, fit, s) -> float | None:
@@ -466,7 +507,21 @@ def _colour_step_logs(images: _Images, centre, normal, half_span_px, fit, s) -> 
 
 
 def _robust_std(x: np.ndarray) -> float:
-    return float(1.4826 * np.median(np.abs(x - np.median(x)))) if x.size else 0.0
+    return float(stats.median_abs_deviation(x, scale="normal")) if x.size else 0.0
+
+
+def _prefer_bluer_umbrae(profiles: list[EdgeProfile]) -> list[EdgeProfile]:
+    """Drop the shadow-like profiles whose dark side is not bluer, when enough others' are (blue sky)."""
+    idx = [i for i, p in enumerate(profiles) if p.kept]
+    bluer = bluer_umbrae(np.array([profiles[i].blue_shift_log for i in idx]))
+    if bluer is None:
+        return profiles
+    out = list(profiles)
+    for j, i in enumerate(idx):
+        if not bluer[j]:
+            out[i] = _with_reason(profiles[i], "dark side not bluer than the lit side while other edges' are: "
+                                               "paint, a kerb or a material border, not a skylit umbra")
+    return out
 
 
 def _keep_dominant_mode(profiles: list[EdgeProfile]) -> list[EdgeProfile]:
@@ -480,22 +535,32 @@ def _keep_dominant_mode(profiles: list[EdgeProfile]) -> list[EdgeProfile]:
     if not idx:
         return profiles
     log_rho = np.log([profiles[i].rho for i in idx])
-    grid = np.arange(np.log(RHO_MIN), 0.0, 0.005)
-    density = np.exp(-0.5 * ((grid[:, None] - log_rho[None, :]) / MODE_BANDWIDTH_LOG) ** 2).sum(axis=1)
-    mode = grid[int(np.argmax(density))]
+    mode = mode_of_log_rho(log_rho, np.log(RHO_MIN))
     near = np.abs(log_rho - mode) <= MODE_WINDOW_LOG
     # Trim what is far from the median of the mode's members in units of their robust spread.
     centre = np.median(log_rho[near])
-    spread = max(1.4826 * np.median(np.abs(log_rho[near] - centre)), 0.02)
+    spread = max(_robust_std(log_rho[near]), 0.02)
     inlier = near & (np.abs(log_rho - centre) <= 3.0 * spread)
     out = list(profiles)
     for j, i in enumerate(idx):
         if not inlier[j]:
-            p = profiles[i]
-            out[i] = EdgeProfile(p.position_uv, p.normal_uv, p.rho, p.width_px, p.residual, False,
-                                 f"rho {p.rho:.3f} far from the dominant mode {np.exp(centre):.3f}",
-                                 p.offsets_px, p.observed_log, p.fitted_log)
+            out[i] = _with_reason(profiles[i], f"rho {profiles[i].rho:.3f} far from the dominant mode "
+                                               f"{np.exp(centre):.3f}")
     return out
+
+
+def _with_reason(p: EdgeProfile, reason: str) -> EdgeProfile:
+    """The profile, no longer kept, for this reason."""
+    return dataclasses.replace(p, kept=False, reject_reason=reason)
+
+
+def _to_full_scale(p: EdgeProfile, work) -> EdgeProfile:
+    """A profile measured on the working image, in full-resolution pixels (positions, widths, offsets)."""
+    if work.factor == 1:
+        return p
+    f = float(work.factor)
+    return dataclasses.replace(p, position_uv=work.to_full_uv(p.position_uv), width_px=p.width_px * f,
+                               offsets_px=p.offsets_px * f)
 
 
 def _block_bootstrap_median_stderr(rho: np.ndarray, positions_uv: np.ndarray, rng: np.random.Generator) -> float:

@@ -1,6 +1,6 @@
 """EXIF tags of a photo: capture time and focal length.
 
-``read_exif`` returns a flat dict keyed by EXIF tag name (as in piexif/Pillow:
+``read_exif`` (Pillow) returns a flat dict keyed by EXIF tag name (the standard's:
 "DateTimeOriginal", "OffsetTimeOriginal", "FocalLength",
 "FocalLengthIn35mmFilm", "Make", "Model", "Orientation", ...). Text comes as
 str (trailing NULs and blanks stripped), rationals as float, short arrays as
@@ -13,7 +13,6 @@ from __future__ import annotations
 import datetime as _dt
 import re
 import warnings
-from pathlib import Path
 
 import numpy as np
 
@@ -32,99 +31,62 @@ _SKIP_TAGS = frozenset({"MakerNote", "UserComment", "PrintImageMatching", "Strip
 _MAX_ITEMS = 64  # longer arrays are data, not tags worth keeping
 
 
-def _text(value: bytes) -> str | None:
-    text = value.rstrip(b"\x00").decode("utf-8", "replace").strip().rstrip("\x00").strip()
-    if "\ufffd" in text or not all(ch.isprintable() for ch in text):
-        return None
-    return text
+# Pillow's names for three tags differ from the EXIF standard's (CIPA DC-008), which we keep.
+_STANDARD_NAMES = {"ExifImageWidth": "PixelXDimension", "ExifImageHeight": "PixelYDimension",
+                   "SubsecTimeOriginal": "SubSecTimeOriginal"}
 
 
-def _rational(pair) -> float | None:
-    num, den = pair
-    return float(num) / float(den) if den else None
-
-
-def _convert(value, tag_type: int | None):
-    """A piexif/Pillow tag value as a plain Python value, or None to leave it out."""
+def _plain(value):
+    """A Pillow tag value as a plain Python value (str, int, float or a tuple of them), or
+    None to leave it out (binary blobs, long arrays, unprintable text)."""
     if isinstance(value, bytes):
-        return _text(value) if len(value) <= 256 else None
+        value = value.rstrip(b"\x00").decode("utf-8", "replace") if len(value) <= 256 else None
     if isinstance(value, str):
-        return value.rstrip("\x00").strip()
-    if tag_type in (5, 10):  # RATIONAL / SRATIONAL: (num, den) or a tuple of them
-        if len(value) == 2 and all(isinstance(v, int) for v in value):
-            return _rational(value)
-        if len(value) > _MAX_ITEMS:
-            return None
-        items = [_rational(v) for v in value]
-        return None if any(v is None for v in items) else tuple(items)
+        text = value.strip().rstrip("\x00").strip()
+        return text if "\ufffd" not in text and all(ch.isprintable() for ch in text) else None
     if isinstance(value, tuple):
-        if len(value) > _MAX_ITEMS:
-            return None
-        items = [_convert(v, None) for v in value]
+        items = [_plain(v) for v in value] if len(value) <= _MAX_ITEMS else [None]
         return None if any(v is None for v in items) else tuple(items)
     if isinstance(value, (int, float)):
         return value
-    try:  # Pillow's IFDRational and friends
-        return float(value)
-    except (TypeError, ValueError):
+    try:  # Pillow's IFDRational (a zero denominator reads as NaN: left out)
+        number = float(value)
+    except (TypeError, ValueError, ZeroDivisionError):
         return None
-
-
-def _from_piexif(path: Path) -> dict:
-    import piexif
-    data = piexif.load(str(path))
-    out: dict = {}
-    for ifd in ("0th", "GPS", "Interop", "Exif"):  # Exif last: it wins on shared names
-        for tag, value in (data.get(ifd) or {}).items():
-            info = piexif.TAGS.get(ifd, {}).get(tag)
-            if info is None or info["name"] in _SKIP_TAGS:
-                continue
-            converted = _convert(value, info["type"])
-            if converted is not None and converted != "":
-                out[info["name"]] = converted
-    return out
-
-
-def _from_pillow(path: Path) -> dict:
-    from PIL import ExifTags, Image
-    out: dict = {}
-    with Image.open(path) as im:
-        exif = im.getexif()
-        sources = [(dict(exif), ExifTags.TAGS)]
-        for ifd, names in ((ExifTags.IFD.GPSInfo, ExifTags.GPSTAGS), (ExifTags.IFD.Exif, ExifTags.TAGS)):
-            try:
-                sources.append((dict(exif.get_ifd(ifd)), names))
-            except Exception:  # a damaged sub-IFD: keep what IFD0 gave
-                continue
-    for tags, names in sources:
-        for tag, value in tags.items():
-            name = names.get(tag)
-            if name is None or name in _SKIP_TAGS:
-                continue
-            converted = _convert(value, None)
-            if converted is not None and converted != "":
-                out[name] = converted
-    return out
+    return number if np.isfinite(number) else None
 
 
 def read_exif(path) -> dict:
     """EXIF tags by name (see the module docstring); an empty dict when the file has none.
 
-    piexif reads JPEG and TIFF (including TIFF-based RAW such as DNG, NEF, CR2, KDC);
-    Pillow is the fallback (PNG eXIf chunks and anything piexif refuses). Never raises
-    on a damaged or non-image file: EXIF is optional, the image reader reports damage.
+    Read with Pillow: JPEG, TIFF (including TIFF-based RAW such as DNG, NEF, CR2, KDC), PNG
+    eXIf chunks, WebP. Never raises on a damaged or non-image file: EXIF is optional, the
+    image reader reports damage.
     """
-    path = Path(path)
-    for reader in (_from_piexif, _from_pillow):
-        try:
-            with warnings.catch_warnings():  # Pillow warns on damaged EXIF; damage is not fatal here
-                warnings.simplefilter("ignore")
-                tags = reader(path)
-        except Exception:  # not an EXIF container for this reader, or damaged
-            continue
-        if tags:
-            return tags
-    return {}
+    from PIL import ExifTags, Image
+    out: dict = {}
+    try:
+        with warnings.catch_warnings():  # Pillow warns on damaged EXIF; damage is not fatal here
+            warnings.simplefilter("ignore")
+            with Image.open(path) as im:
+                exif = im.getexif()
+                sources = [(dict(exif), ExifTags.TAGS)]
+                for ifd, names in ((ExifTags.IFD.GPSInfo, ExifTags.GPSTAGS), (ExifTags.IFD.Exif, ExifTags.TAGS)):
+                    try:  # the Exif IFD last: it wins on names shared with IFD0
+                        sources.append((dict(exif.get_ifd(ifd)), names))
+                    except Exception:  # a damaged sub-IFD: keep the rest
+                        continue
+    except Exception:  # not an image Pillow knows, or damaged
+        return {}
+    for tags, names in sources:
+        for tag, value in tags.items():
+            name = names.get(tag)
+            if name is None or name in _SKIP_TAGS:
+                continue
+            value = _plain(value)
+            if value is not None and value != "":
+                out[_STANDARD_NAMES.get(name, name)] = value
+    return out
 
 
 _EXIF_TIME = re.compile(r"^\s*(\d{4})[:\-](\d{2})[:\-](\d{2})[ T](\d{2}):(\d{2}):(\d{2})")

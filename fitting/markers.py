@@ -12,8 +12,8 @@ CONVENTIONS. Planar poses have a two-fold ambiguity: both IPPE solutions are
 refined and the one with the camera above the ground and the lower error is
 kept. Without K (scene.toml) or an EXIF focal length, the focal length is
 fitted from the single view (square pixels, principal point at the image
-centre, no distortion) by minimising the reprojection error over f; a board
-seen nearly face-on does not constrain f and is refused.
+centre, no distortion) by OpenCV's calibrateCameraExtended with every other
+intrinsic fixed; a board seen nearly face-on does not constrain f and is refused.
 """
 
 from __future__ import annotations
@@ -51,7 +51,8 @@ class Registration:
     camera: world-to-camera pinhole camera for the image's full size.
     reprojection_error_px: RMS distance (pixels) between detected and reprojected points.
     n_points: number of point correspondences used.
-    intrinsics_source: "scene" (K given), "exif" (focal length from EXIF) or "fitted".
+    intrinsics_source: "given" (K passed by the caller), "scene" (K in scene.toml), "exif"
+        (focal length from EXIF) or "fitted".
     detection: "charuco" (chessboard corners) or "markers" (ArUco marker corners, the fallback).
     """
 
@@ -224,67 +225,63 @@ def _k(f: float, width: int, height: int) -> np.ndarray:
 
 
 def _fit_focal(world: np.ndarray, image: np.ndarray, width: int, height: int) -> np.ndarray:
-    """K with the focal length minimising the reprojection error (square pixels, centred
-    principal point, no distortion). Raises RegistrationError when f is not constrained."""
-    from scipy.optimize import minimize_scalar
-
+    """K with the focal length that minimises the reprojection error (square pixels, centred
+    principal point, no distortion): OpenCV's closed-form start (``initCameraMatrix2D``) refined
+    by ``calibrateCameraExtended`` with everything but f fixed, which also gives f's standard
+    deviation. Raises RegistrationError when f is not constrained (a board seen nearly face-on)."""
+    obj = [np.asarray(world, np.float32)]  # the board's world points lie on z = 0, as OpenCV wants
+    img = [np.asarray(image, np.float32).reshape(-1, 1, 2)]
+    flags = (cv2.CALIB_USE_INTRINSIC_GUESS | cv2.CALIB_FIX_PRINCIPAL_POINT | cv2.CALIB_FIX_ASPECT_RATIO
+             | cv2.CALIB_ZERO_TANGENT_DIST | cv2.CALIB_FIX_K1 | cv2.CALIB_FIX_K2 | cv2.CALIB_FIX_K3)
+    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
+    try:
+        start = cv2.initCameraMatrix2D(obj, img, (width, height), aspectRatio=1.0)
+        rms, K, _, _, _, std, _, _ = cv2.calibrateCameraExtended(
+            obj, img, (width, height), _k(float(start[1, 1]), width, height), np.zeros(5),
+            flags=flags, criteria=criteria)
+    except cv2.error:
+        raise RegistrationError("pose not found for any focal length") from None
+    f = float(K[1, 1])
+    # With the aspect ratio fixed, fy is the free parameter: its std is the second entry. OpenCV
+    # takes the noise from the residuals; a floor (_NOISE_FLOOR_PX) keeps it honest on clean images.
+    n = len(world)
+    sigma = float(rms) * np.sqrt(2 * n / max(2 * n - 7, 1))
+    std_f = float(np.ravel(std)[1]) * max(1.0, _NOISE_FLOOR_PX / max(sigma, 1e-12))
+    rel_std = std_f / f if f > 0 and std_f > 0 else np.inf
     size = float(max(width, height))
-
-    def sse(log_f: float) -> float:
-        try:
-            _, _, rms = _pose(world, image, _k(size * np.exp(log_f), width, height), None)
-        except (RegistrationError, cv2.error):
-            return np.inf
-        return rms ** 2 * len(world)
-
-    # Fields of view from about 160 to 1 degrees.
-    lo, hi = np.log(0.1), np.log(60.0)
-    grid = np.linspace(lo, hi, 49)
-    values = np.array([sse(g) for g in grid])
-    if not np.isfinite(values).any():
-        raise RegistrationError("pose not found for any focal length")
-    i = int(np.argmin(values))
-    a, b = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
-    res = minimize_scalar(sse, bounds=(a, b), method="bounded", options={"xatol": 1e-6})
-    log_f = float(res.x)
-    # One-sigma uncertainty of log f from the curvature of the sum of squares:
-    # var = 2 sigma^2 / SSE''; sigma^2 from the residuals, with a floor (see _NOISE_FLOOR_PX).
-    h = 0.01
-    s0, sp, sm = sse(log_f), sse(log_f + h), sse(log_f - h)
-    curvature = (sp - 2 * s0 + sm) / h ** 2
-    dof = max(2 * len(world) - 7, 1)
-    sigma2 = max(s0 / dof, _NOISE_FLOOR_PX ** 2)
-    rel_std = np.sqrt(2 * sigma2 / curvature) if curvature > 0 else np.inf
-    at_bound = log_f - lo < 0.05 or hi - log_f < 0.05
-    if at_bound or not rel_std <= MAX_FOCAL_REL_STD:
-        spread = "unbounded" if not np.isfinite(rel_std) else f"+-{100 * rel_std:.0f}%"
+    in_range = 0.1 * size < f < 60.0 * size  # fields of view from about 160 to 1 degrees
+    if not (in_range and np.isfinite(rel_std) and rel_std <= MAX_FOCAL_REL_STD):
+        spread = "unbounded" if not (in_range and np.isfinite(rel_std)) else f"+-{100 * rel_std:.0f}%"
         raise RegistrationError(f"focal length not constrained by this view of the board ({spread}; "
                                 "seen nearly face-on?): give K in scene.toml or EXIF focal length")
-    return _k(size * np.exp(log_f), width, height)
+    return _k(f, width, height)
 
 
-def register_board(gray_or_rgb_image, camera_spec: CameraSpec, K=None, exif: dict | None = None) -> Registration:
+def register_board(gray_or_rgb_image, camera_spec: CameraSpec, K=None, exif: dict | None = None,
+                   dist=None) -> Registration:
     """Find the camera from a ChArUco board on the ground.
 
     gray_or_rgb_image: (H, W) or (H, W, 3); uint8 display-encoded, or float/uint16 linear
         (``Photo.gray`` works directly).
     camera_spec: the [camera] kind="markers" table (board layout and ``origin_m``).
-    K: (3, 3) intrinsics in pixels from scene.toml; when None, ``camera_spec.K`` is used if
-        set (with ``camera_spec.dist``), else EXIF (``fitting.exif.intrinsics_from_exif``),
-        else the focal length is fitted.
+    K, dist: (3, 3) intrinsics in pixels and OpenCV distortion coefficients given by the
+        caller (source "given"); when K is None, ``camera_spec.K`` with ``camera_spec.dist``
+        ("scene"), else EXIF (``fitting.exif.intrinsics_from_exif``, no distortion: "exif"),
+        else the focal length is fitted ("fitted").
     Raises RegistrationError ("board not found ...", "too few corners (n; ...)", "focal length
     not constrained ...") with a one-line reason.
     """
     gray8 = _to_gray8(gray_or_rgb_image)
     height, width = gray8.shape
     world, image, detection = _correspondences(gray8, camera_spec)
-    dist = None
-    if K is None and camera_spec.K is not None:
-        K, dist = camera_spec.K, camera_spec.dist
+    if K is not None:
+        source = "given"
+    elif camera_spec.K is not None:
+        K, dist, source = camera_spec.K, camera_spec.dist, "scene"
     if K is not None:
         K = np.asarray(K, dtype=np.float64).reshape(3, 3)
-        source = "scene"
     else:
+        dist = None
         K = intrinsics_from_exif(exif or {}, width, height)
         source = "exif"
         if K is None:

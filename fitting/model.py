@@ -17,6 +17,8 @@ pixel's 1/12).
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -25,7 +27,7 @@ from jaxtyping import Array, Float, Int
 
 from softshadow import PROFILES, PointPlan, Pose, blurred_profile_alpha, light_direction, plan_coordinate_light
 
-__all__ = ["GroupArrays", "FitConfig", "K_SCALE", "k_from_raw", "raw_from_k", "rho_from_raw",
+__all__ = ["GroupArrays", "FitConfig", "FitParams", "Prediction", "K_SCALE", "k_from_raw", "raw_from_k", "rho_from_raw",
            "raw_from_rho", "predict", "angular_pixel_gradient", "residuals", "pseudo_huber",
            "sample_light", "edge_terms", "shadow_alpha"]
 
@@ -73,6 +75,56 @@ class GroupArrays(eqx.Module):
     scale: Float[Array, " P"]
     grad_t_pixel: Float[Array, " n"]
     sky_hidden: Float[Array, " n"]
+
+
+class FitParams(eqx.Module):
+    """The fit's parameters (float64 scalars and arrays), bounds kept by reparameterisation.
+
+    raw_k: k = K_SCALE softplus(raw_k). raw_rho: rho = sigmoid(raw_rho).
+    raw_blur: the camera blur's variance (pixels^2, added to the pixel's own 1/12; free in
+    sign). sun_delta_deg (2,): azimuth and elevation corrections (degrees) to every photo's
+    sun. log_level (P, 2): each photo's log lit level of the ground (0) and paper (1) classes.
+    gradient (P, 2): each photo's linear brightness gradient over the normalised image
+    coordinates (exposure, vignetting).
+
+    ``vector`` and ``from_vector`` lay the parameters out in one explicit order (``layout``),
+    which the covariance and its named entries use.
+    """
+
+    raw_k: Float[Array, ""]
+    raw_rho: Float[Array, ""]
+    raw_blur: Float[Array, ""]
+    sun_delta_deg: Float[Array, "2"]
+    log_level: Float[Array, "P 2"]
+    gradient: Float[Array, "P 2"]
+
+    @staticmethod
+    def layout(n_photos: int) -> dict[str, slice]:
+        """Where each parameter sits in ``vector`` (p = 5 + 4 n_photos entries)."""
+        sizes = {"raw_k": 1, "raw_rho": 1, "raw_blur": 1, "sun_delta_deg": 2,
+                 "log_level": 2 * n_photos, "gradient": 2 * n_photos}
+        out, start = {}, 0
+        for name, size in sizes.items():
+            out[name] = slice(start, start + size)
+            start += size
+        return out
+
+    @property
+    def n_photos(self) -> int:
+        return int(self.log_level.shape[0])
+
+    def vector(self):
+        """All parameters as one vector (p,), in ``layout`` order."""
+        return jnp.concatenate([jnp.reshape(getattr(self, name), -1)
+                                for name in self.layout(self.n_photos)])
+
+    @classmethod
+    def from_vector(cls, x, n_photos: int) -> "FitParams":
+        """Inverse of ``vector`` (x (p,), JAX or NumPy)."""
+        lay = cls.layout(n_photos)
+        shapes = {"raw_k": (), "raw_rho": (), "raw_blur": (), "sun_delta_deg": (2,),
+                  "log_level": (n_photos, 2), "gradient": (n_photos, 2)}
+        return cls(**{name: x[lay[name]].reshape(shapes[name]) for name in lay})
 
 
 class FitConfig(eqx.Module):
@@ -131,11 +183,11 @@ def angular_pixel_gradient(group: GroupArrays, pose: Pose, k, rule: str = "edge"
     return jnp.where(ok, slope / jnp.where(ok, dudt, 1.0), 0.0)
 
 
-def _shape_vector(params: dict) -> Float[Array, "4"]:
+def _shape_vector(params: FitParams) -> Float[Array, "4"]:
     """The parameters the shadow's shape depends on: raw_k, sun azimuth and elevation
     corrections (degrees) and raw_blur. The rest (levels, gradients, rho) enter linearly."""
-    return jnp.stack([params["raw_k"], params["sun_delta_deg"][0], params["sun_delta_deg"][1],
-                      params["raw_blur"]])
+    return jnp.stack([params.raw_k, params.sun_delta_deg[0], params.sun_delta_deg[1],
+                      params.raw_blur])
 
 
 def edge_terms(shape: Float[Array, "4"], group: GroupArrays, pose: Pose, config: FitConfig):
@@ -172,23 +224,33 @@ def _shadow_alpha_jvp(primals, tangents):
     return alpha, jac @ tangents[0]
 
 
-def _shaded(params: dict, group: GroupArrays, alpha):
+def _shaded(params: FitParams, group: GroupArrays, alpha):
     """Linear values (n,): each photo's open-ground lit level and gradient times the shadow
     factor, less the sky the object hides (rho is the sky's share on open ground)."""
-    rho = rho_from_raw(params["raw_rho"])
-    level = jnp.exp(params["log_level"][group.photo, group.albedo_class])
-    level = level * (1.0 + jnp.sum(group.uv_norm * params["gradient"][group.photo], -1))
+    rho = rho_from_raw(params.raw_rho)
+    level = jnp.exp(params.log_level[group.photo, group.albedo_class])
+    level = level * (1.0 + jnp.sum(group.uv_norm * params.gradient[group.photo], -1))
     return level * (1.0 - alpha * (1.0 - rho) - rho * group.sky_hidden)
 
 
-def predict(params: dict, group: GroupArrays, pose: Pose, config: FitConfig):
-    """Predicted linear values (n,), alpha (n,), u (n,) and |du/dpixel| (n,) at every sample."""
+class Prediction(NamedTuple):
+    """The model at every sample: linear values (n,), alpha (n,), penumbra coordinate u (n,)
+    and |du/dpixel| (n,)."""
+
+    values: Float[Array, " n"]
+    alpha: Float[Array, " n"]
+    u: Float[Array, " n"]
+    slope: Float[Array, " n"]
+
+
+def predict(params: FitParams, group: GroupArrays, pose: Pose, config: FitConfig) -> Prediction:
+    """The model's values and edge terms at every sample (``Prediction``)."""
     alpha, u, slope = edge_terms(_shape_vector(params), group, pose, config)
-    return _shaded(params, group, alpha), alpha, u, slope
+    return Prediction(_shaded(params, group, alpha), alpha, u, slope)
 
 
 
-def residuals(params: dict, args):
+def residuals(params: FitParams, args):
     """Weighted residuals relative to each photo's lit level (robust-transformed if asked)."""
     group, pose, config = args
     pred = _shaded(params, group, shadow_alpha(_shape_vector(params), group, pose, config))

@@ -17,14 +17,6 @@ __all__ = ["fitted_alpha_image"]
 CHUNK = 16384  # band points per compiled evaluation
 
 
-def _footprint_m(ground: np.ndarray, use: np.ndarray) -> float:
-    """A fine ground size (m) of the image's pixels where the receiver is seen: the 5th
-    percentile of the distance between horizontally neighbouring ground points."""
-    step = np.linalg.norm(np.diff(ground, axis=1), axis=-1)
-    ok = use[:, 1:] & use[:, :-1] & np.isfinite(step)
-    return float(np.percentile(step[ok], 5)) if ok.any() else 0.01
-
-
 def fitted_alpha_image(model: SoftShadowModel, pose: Pose, sun: Sun, range_k: float,
                        view: PinholeCamera | GroundGrid) -> np.ndarray:
     """Alpha (H, W) of the model with ``range_k`` seen by ``view`` (a camera or a top-down
@@ -40,7 +32,8 @@ def fitted_alpha_image(model: SoftShadowModel, pose: Pose, sun: Sun, range_k: fl
     if not use.any():
         return alpha.reshape(h, w)
     points = ground[use]
-    pixel_m = max(_footprint_m(ground.reshape(h, w, 3), use.reshape(h, w)), 1e-4)
+    fine = view.pixel_m if isinstance(view, GroundGrid) else view.fine_footprint_m(ground, valid, use)
+    pixel_m = max(fine, 1e-4)
     plan = model.plan_points(sun, pose, points, range_k_max=max(range_k, 1e-4), pixel_m=pixel_m)
     # Outside the penumbra bands alpha is the hard shadow; only band points go to JAX.
     values = np.asarray(plan.hard)[:len(points)].astype(np.float64)

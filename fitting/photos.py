@@ -21,7 +21,10 @@ from pathlib import Path
 
 import numpy as np
 
+from softshadow import linear_to_srgb, srgb_to_linear
+
 from .exif import read_exif
+from .ignore_masks import is_auxiliary
 
 __all__ = ["IMAGE_EXTENSIONS", "RAW_EXTENSIONS", "ALL_PHOTO_EXTENSIONS", "IGNORED_NAMES",
            "IGNORED_EXTENSIONS", "PhotoError", "Photo", "read_photo", "list_photos",
@@ -64,6 +67,7 @@ class Photo:
     bit_depth: bits per sample in the file (8 or 16; RAW: 16, LibRaw's output depth).
     exif: EXIF tags by name (see ``fitting.exif.read_exif``), empty when there are none.
     saturated: (H, W) bool, any channel at the encoding's maximum code value.
+    ignore: (H, W) bool from the user's ignore mask (``fitting.ignore_masks``), or None.
     """
 
     name: str
@@ -74,6 +78,12 @@ class Photo:
     bit_depth: int
     exif: dict
     saturated: np.ndarray
+    ignore: np.ndarray | None = None
+
+    @property
+    def excluded(self) -> np.ndarray:
+        """(H, W) bool: pixels never to measure (clipped, or in the ignore mask)."""
+        return self.saturated if self.ignore is None else self.saturated | self.ignore
 
     @property
     def height(self) -> int:
@@ -82,18 +92,6 @@ class Photo:
     @property
     def width(self) -> int:
         return int(self.linear.shape[1])
-
-
-def srgb_to_linear(encoded) -> np.ndarray:
-    """Exact piecewise sRGB EOTF (IEC 61966-2-1): encoded values in [0, 1] -> linear [0, 1]."""
-    c = np.asarray(encoded, dtype=np.float64)
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
-
-
-def linear_to_srgb(linear) -> np.ndarray:
-    """Inverse of ``srgb_to_linear``: linear [0, 1] -> sRGB-encoded [0, 1] (input clipped to [0, 1])."""
-    x = np.clip(np.asarray(linear, dtype=np.float64), 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
 
 
 # Look-up tables: each code value linearised once, exactly.
@@ -351,7 +349,8 @@ def read_photo(path, half_size: bool = False, assume_16bit: str = "linear") -> P
 def list_photos(folder) -> tuple[list[Path], list[tuple[str, str]]]:
     """Photo files of a folder, sorted by name, and the other files skipped as (name, reason).
 
-    Hidden files, sub-folders, scene.toml, truth.json, *.json, *.md, *.npy and mesh
+    Hidden files, sub-folders, scene.toml, truth.json, *.json, *.md, *.npy, ignore masks
+    and range images (*.ignore.png, *.depth.png, *.depth.npy) and mesh
     files (.obj .mtl .ply .stl .glb .gltf .off .dae .3mf) belong in a photo folder and
     are ignored silently; any other file is skipped as "not an image (extension .xyz)".
     Raises PhotoError when the folder does not exist.
@@ -366,7 +365,7 @@ def list_photos(folder) -> tuple[list[Path], list[tuple[str, str]]]:
         if name.startswith(".") or not entry.is_file():
             continue
         ext = entry.suffix.lower()
-        if name.lower() in IGNORED_NAMES or ext in IGNORED_EXTENSIONS:
+        if name.lower() in IGNORED_NAMES or ext in IGNORED_EXTENSIONS or is_auxiliary(name):
             continue
         if ext in ALL_PHOTO_EXTENSIONS:
             photos.append(entry)

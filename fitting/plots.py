@@ -26,6 +26,7 @@ from matplotlib.transforms import offset_copy
 from .comparison import (brightness_stderr, groups_in_time_order, minutes_of_day, range_stderr_paper,
                          reference_for_group, truth_for_group)
 from softshadow import brightness_to_paper, range_to_paper
+from .files import atomic_path
 from .results import FitResults, GroupResult, OverlayPlotData, ProfilePlotData
 
 __all__ = ["safe_name", "plot_group", "plot_profiles", "plot_overlay", "plot_range_vs_time",
@@ -61,13 +62,9 @@ def _fixed_margins(fig: Figure, left: float, right: float, bottom: float, top: f
 
 def _save(fig: Figure, path: Path) -> Path:
     """Save atomically (temporary name in the same folder, then replace)."""
-    tmp = path.with_name(f".{path.name}.tmp.png")
-    try:
+    with atomic_path(path) as tmp:
         # Light PNG compression: several times faster to write, files somewhat larger.
         fig.savefig(tmp, dpi=_DPI, pil_kwargs={"compress_level": 1})
-        tmp.replace(path)
-    finally:
-        tmp.unlink(missing_ok=True)
     return path
 
 

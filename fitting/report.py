@@ -13,7 +13,6 @@ to first order (d range = 100 dk, d brightness = 255/2.2 rho^(1/2.2 - 1) d rho).
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import dataclasses
 import io
@@ -21,10 +20,8 @@ import json
 import logging
 import math
 import os
-import tempfile
-from importlib import metadata
 from pathlib import Path
-from typing import Iterator, Sequence
+from typing import Sequence
 
 import numpy as np
 
@@ -33,6 +30,7 @@ from softshadow import brightness_to_paper, range_to_paper
 from .comparison import (PAPER_TABLE2, PAPER_TIME_TOLERANCE_MIN, brightness_stderr, finite_or_none,
                          groups_in_time_order,
                          nearest_paper_time, range_stderr_paper, reference_for_group, truth_for_group)
+from .files import atomic_writer, software_versions
 from .results import FitResults, GroupResult
 
 __all__ = [
@@ -47,60 +45,6 @@ UPPER_BOUND = "≤"
 MISSING = "—"
 RANGE_NAME = "Range of the soft shadow"
 BRIGHTNESS_NAME = "Brightness of the shadow"
-
-_OPENCV_DISTRIBUTIONS = ("opencv-contrib-python-headless", "opencv-python-headless",
-                         "opencv-contrib-python", "opencv-python")
-
-
-# --------------------------------------------------------------------------- versions
-
-def software_versions() -> dict[str, str | None]:
-    """Installed versions of the packages a result depends on (None when not installed).
-
-    Keys: softshadow, jax, optimistix, numpy, opencv (whichever OpenCV wheel is
-    installed; they all provide ``cv2``).
-    """
-    def version(name: str) -> str | None:
-        try:
-            return metadata.version(name)
-        except metadata.PackageNotFoundError:
-            return None
-
-    opencv = next((v for v in map(version, _OPENCV_DISTRIBUTIONS) if v is not None), None)
-    return {"softshadow": version("softshadow"), "jax": version("jax"),
-            "optimistix": version("optimistix"), "numpy": version("numpy"), "opencv": opencv}
-
-
-# --------------------------------------------------------------------------- atomic files
-
-@contextlib.contextmanager
-def _atomic_writer(path: Path, newline: str | None = None) -> Iterator[io.TextIOBase]:
-    """Open a temporary file beside ``path`` for writing text; on success it replaces
-    ``path`` (os.replace is atomic within one file system), on error it is removed and
-    ``path`` is left as it was."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        # mkstemp makes the file private (0600); give it the mode open() would have.
-        os.chmod(tmp, 0o666 & ~_umask())
-        with os.fdopen(fd, "w", encoding="utf-8", newline=newline) as fh:
-            yield fh
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        raise
-
-
-def _umask() -> int:
-    """The process umask (read by setting and restoring it; there is no getter)."""
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
-
 
 def _json_default(obj):
     """numpy scalars/arrays and paths in ``skipped`` or ``software`` -> JSON types."""
@@ -130,7 +74,7 @@ def write_results_json(results: FitResults, out_dir) -> Path:
     """
     path = Path(out_dir) / "results.json"
     doc = results_document(results)
-    with _atomic_writer(path) as fh:
+    with atomic_writer(path) as fh:
         json.dump(doc, fh, indent=2, ensure_ascii=False, allow_nan=False, default=_json_default)
         fh.write("\n")
     return path
@@ -160,6 +104,9 @@ def _group_notes(g: GroupResult) -> list[str]:
         notes.append(f"{g.label}: not fitted: {g.error}")
     elif g.fitted and not g.converged:
         notes.append(f"{g.label}: the solver did not converge; values are its last iterate")
+    if g.error is None and (g.warnings or not g.reliable):
+        head = "NOT RELIABLE" if not g.reliable else "warning"
+        notes.append(f"{g.label}: {head}: " + ("; ".join(g.warnings) or "a consistency check failed"))
     return notes
 
 
@@ -377,6 +324,8 @@ def table2_csv(results: FitResults, reference=None, truth=None) -> str:
                  for c in cells), []))
     out.append(["converged"] + sum(([("true" if g.converged else "false") if g.error is None else "", ""]
                                     for g in groups), []))
+    out.append(["reliable"] + sum(([("true" if g.reliable else "false") if g.error is None else "", ""]
+                                   for g in groups), []))
     out.append(["error"] + sum(([g.error or "", ""] for g in groups), []))
     buf = io.StringIO()
     csv.writer(buf, lineterminator="\n").writerows(out)
@@ -391,9 +340,9 @@ def write_table2(results: FitResults, out_dir, reference=None, truth=None) -> tu
     """
     out_dir = Path(out_dir)
     md_path, csv_path = out_dir / "table2.md", out_dir / "table2.csv"
-    with _atomic_writer(md_path) as fh:
+    with atomic_writer(md_path) as fh:
         fh.write(table2_markdown(results, reference, truth))
-    with _atomic_writer(csv_path, newline="") as fh:
+    with atomic_writer(csv_path, newline="") as fh:
         fh.write(table2_csv(results, reference, truth))
     return md_path, csv_path
 

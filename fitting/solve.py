@@ -18,23 +18,29 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
+from jaxtyping import Array, Bool, Float, Int
+from scipy.stats import median_abs_deviation
 
 from softshadow import GroundGrid, Pose, SoftShadowModel, Sun, bucket_size, concatenate_plans
 
-from .model import (K_SCALE, FitConfig, GroupArrays, angular_pixel_gradient, predict, raw_from_k,
-                    raw_from_rho, residuals)
+from .model import (K_SCALE, FitConfig, FitParams, GroupArrays, Prediction, angular_pixel_gradient, predict,
+                    raw_from_k, raw_from_rho, residuals)
 from .overlay import fitted_alpha_image
 from .results import GroupResult, OverlayPlotData, ProfilePlotData
 from .samples import NoShadowInView, PhotoSamples, select_samples
 from .views import PhotoView
 
-__all__ = ["FitOptions", "fit_group"]
+__all__ = ["FitOptions", "fit_group", "Solution", "Trial", "KRho", "Identifiability", "sample_views",
+           "initial_params", "plain_start", "choose_model", "covariance", "k_rho_with_errors",
+           "penumbra_width_px", "identifiability", "profile_plot_data"]
 
 #: Levenberg-Marquardt tolerances (relative, absolute) on the parameters and on each residual
 #: (residuals are relative to the lit level, whose noise is ~1e-2: 1e-4 is 1 % of it).
 LM_RTOL, LM_ATOL = 1e-4, 1e-4
-
-
+#: Singular values of J below this fraction of the largest count as zero (switched-off terms).
+COV_RCOND = 1e-6
+#: Not identifiable below this penumbra width (pixels) or above this relative error of k.
+MIN_PENUMBRA_PX, MAX_K_REL_STDERR = 0.8, 0.5
 
 @dataclasses.dataclass
 class FitOptions:
@@ -89,7 +95,25 @@ def _group_arrays(samples: list[PhotoSamples], views: list[PhotoView]) -> GroupA
                                         else np.zeros(len(s.observed)) for s in samples]))))
 
 
-def _initial_params(samples: list[PhotoSamples], fit_sun: bool) -> tuple[dict, float]:
+def sample_views(model: SoftShadowModel, pose: Pose, views: list[PhotoView], options: FitOptions
+                 ) -> tuple[list[PhotoSamples], list[PhotoView], list[str]]:
+    """Step 1: each photo's samples (``select_samples``). Returns the samples, the views they
+    come from, and a one-line warning for each photo with no shadow in view."""
+    samples, used, warnings = [], [], []
+    for i, view in enumerate(views):
+        try:
+            samples.append(select_samples(model, pose, view, options.range_k_max,
+                                          max_samples=options.max_samples_per_photo, seed=options.seed + i,
+                                          sky_occlusion=options.sky_occlusion))
+            used.append(view)
+        except NoShadowInView as exc:
+            warnings.append(f"{view.name}: {exc}")
+    return samples, used, warnings
+
+
+def initial_params(samples: list[PhotoSamples]) -> tuple[FitParams, float]:
+    """Step 2a: the start (k is set later from a grid, ``_prepare``): each photo's lit levels
+    from the 75th percentile of its lit samples, rho from the median dark/lit ratio; also rho."""
     log_level = np.zeros((len(samples), 2))
     ratios = []
     for i, s in enumerate(samples):
@@ -107,24 +131,37 @@ def _initial_params(samples: list[PhotoSamples], fit_sun: bool) -> tuple[dict, f
                 log_level[i, c] = np.log(max(np.percentile(other, 75) if len(other) else 1.0, 1e-9))
     rho0 = float(np.clip(np.median(ratios) if ratios else 0.3, 0.02, 0.98))
     f64 = lambda x: jnp.asarray(x, dtype=jnp.float64)  # not weakly typed: one compiled solver
-    params = {"raw_k": f64(0.0), "raw_rho": f64(raw_from_rho(rho0)), "log_level": f64(log_level),
-              "gradient": f64(np.zeros((len(samples), 2))), "raw_blur": f64(0.0),
-              "sun_delta_deg": f64(np.zeros(2))}
+    params = FitParams(raw_k=f64(0.0), raw_rho=f64(raw_from_rho(rho0)), raw_blur=f64(0.0),
+                       sun_delta_deg=f64(np.zeros(2)), log_level=f64(log_level),
+                       gradient=f64(np.zeros((len(samples), 2))))
     return params, rho0
 
 
+class Solution(eqx.Module):
+    """One Levenberg-Marquardt solve, everything at its solution.
+
+    params: the solution; converged, steps: the solver's outcome; residuals (n,); jacobian
+    (n, p): d residuals / d ``params.vector()``, columns in ``FitParams.layout`` order;
+    prediction: ``predict`` there; grad_t_pixel (n,): the samples' |dT/dpixel| used.
+    """
+
+    params: FitParams
+    converged: Bool[Array, ""]
+    steps: Int[Array, ""]
+    residuals: Float[Array, " n"]
+    jacobian: Float[Array, "n p"]
+    prediction: Prediction
+    grad_t_pixel: Float[Array, " n"]
+
+
 class Trial(NamedTuple):
-    """One solve: its BIC, solution, convergence, configuration, residual sum of squares,
-    residuals (n,), Jacobian (n, p) and ``predict``'s outputs at the solution."""
+    """One solve of one configuration: its BIC and residual sum of squares, and the solution
+    with NumPy residuals, Jacobian and prediction (``params`` stay JAX: they start the next solve)."""
 
     bic: float
-    value: dict
-    converged: bool
-    config: FitConfig
     rss: float
-    residuals: np.ndarray
-    jac: np.ndarray
-    diagnostics: tuple
+    config: FitConfig
+    solution: Solution
 
 
 def _bic(rss: float, n: int, n_free: int) -> float:
@@ -145,65 +182,222 @@ def _rho_np(raw) -> float:
     return float(1.0 / (1.0 + np.exp(-float(raw))))
 
 
-def _prepare(params: dict, raw_ks, group: GroupArrays, pose: Pose, config: FitConfig):
+def _prepare(params: FitParams, raw_ks, group: GroupArrays, pose: Pose, config: FitConfig):
     """The samples' |dT/dpixel| (n,) and the raw_k (of the grid raw_ks) with the least plain
     sum of squares, blur and sun switched off and the other parameters fixed: the start."""
     grad_t_pixel = angular_pixel_gradient(group, pose, 0.01, config.rule)
     zero = jnp.zeros_like(config.fit_blur)
     coarse = (dataclasses.replace(group, grad_t_pixel=grad_t_pixel), pose,
               dataclasses.replace(config, fit_blur=zero, fit_sun=zero, huber_delta=zero))
-    losses = jax.vmap(lambda rk: jnp.sum(residuals(dict(params, raw_k=rk), coarse) ** 2))(raw_ks)
+    losses = jax.vmap(lambda rk: jnp.sum(residuals(dataclasses.replace(params, raw_k=rk), coarse) ** 2))(raw_ks)
     return grad_t_pixel, raw_ks[jnp.argmin(losses)]
 
 
 @eqx.filter_jit
-def _solve(params: dict, args, max_steps: int, start_raw_ks, prepare):
-    """Levenberg-Marquardt from ``params``. Returns the solution, whether it converged, the
-    number of steps, and at the solution the residuals (n,), their Jacobian (n, p) (flattened
-    parameters, see ``_flat_index``), ``predict``'s outputs, and the samples' |dT/dpixel|.
+def _solve(params: FitParams, args, max_steps: int, start_raw_ks, prepare) -> Solution:
+    """Levenberg-Marquardt from ``params``; the ``Solution`` with the residuals' Jacobian
+    computed at the solution (forward mode: n rows, few columns).
 
     With ``prepare`` true (a traced switch, so one compiled program serves every call), the
     group's first solve: |dT/dpixel| is computed and raw_k starts at the best value of the
-    grid ``start_raw_ks`` (m,) (``_prepare``). The Jacobian is the solver's own
-    linearisation at its last accepted point, so the covariance costs no second pass."""
+    grid ``start_raw_ks`` (m,) (``_prepare``)."""
     group, pose, config = args
     grad_t_pixel, raw_k = jax.lax.cond(
         prepare, lambda: _prepare(params, start_raw_ks, group, pose, config),
-        lambda: (group.grad_t_pixel, params["raw_k"]))
+        lambda: (group.grad_t_pixel, params.raw_k))
     group = dataclasses.replace(group, grad_t_pixel=grad_t_pixel)
-    params = dict(params, raw_k=raw_k)
+    params = dataclasses.replace(params, raw_k=raw_k)
     args = (group, pose, config)
     solver = optx.LevenbergMarquardt(rtol=LM_RTOL, atol=LM_ATOL)
     sol = optx.least_squares(residuals, solver, params, args=args, max_steps=max_steps, throw=False)
-    f_info = sol.state.f_info
-    return (sol.value, sol.result == optx.RESULTS.successful, sol.stats["num_steps"],
-            f_info.residual, f_info.jac.as_matrix(), predict(sol.value, group, pose, config),
-            group.grad_t_pixel)
+    n_photos = params.n_photos
+    of_vector = lambda x: residuals(FitParams.from_vector(x, n_photos), args)
+    x = sol.value.vector()
+    return Solution(sol.value, sol.result == optx.RESULTS.successful, sol.stats["num_steps"],
+                    of_vector(x), jax.jacfwd(of_vector)(x), predict(sol.value, group, pose, config),
+                    group.grad_t_pixel)
 
 
-def _covariance(r: np.ndarray, jac: np.ndarray, n_eff: int):
-    """Parameter covariance (p, p): (J^T J)^+ scaled by the residual variance s2; also s2."""
+def _to_numpy(sol: Solution) -> Solution:
+    """The solution's arrays as NumPy (post-processing runs no eager JAX), params kept as they are."""
+    as_np = lambda x: np.asarray(x)
+    return dataclasses.replace(sol, converged=bool(sol.converged), steps=int(sol.steps),
+                               residuals=as_np(sol.residuals), jacobian=as_np(sol.jacobian),
+                               prediction=Prediction(*map(as_np, sol.prediction)),
+                               grad_t_pixel=as_np(sol.grad_t_pixel))
+
+
+def robust_delta(r: np.ndarray, robust: bool) -> float:
+    """The pseudo-Huber scale: 3 sigma of the plain fit's residuals (r (n,), padding rows
+    exactly 0 are left out), sigma from their median absolute deviation; 0 when not robust."""
+    r = np.asarray(r)
+    r = r[r != 0]
+    sigma = float(median_abs_deviation(r, scale="normal")) if len(r) else 1e-3
+    return float(max(3.0 * sigma, 1e-6)) if robust else 0.0
+
+
+def plain_start(arrays: GroupArrays, pose: Pose, base: FitParams, options: FitOptions, fit_sun: bool
+                ) -> tuple[Solution, GroupArrays, float]:
+    """Step 2b: a plain least-squares pass (blur free) from the best k of a coarse log grid
+    (the loss is flat where the band misses the penumbra). Returns its solution, the arrays
+    with their |dT/dpixel|, and the robust loss's scale it sets (``robust_delta``)."""
+    plain = FitConfig.make(options.profiles[0], True in options.blur, fit_sun, 0.0, options.rule)
+    grid = jnp.asarray(raw_from_k(np.geomspace(5e-4, options.range_k_max, 9)))
+    sol = _to_numpy(_solve(base, (arrays, pose, plain), options.max_steps, grid, jnp.asarray(True)))
+    arrays = dataclasses.replace(arrays, grad_t_pixel=jnp.asarray(sol.grad_t_pixel))
+    return sol, arrays, robust_delta(sol.residuals, options.robust)
+
+
+def covariance(r: np.ndarray, jac: np.ndarray, n_eff: int) -> tuple[np.ndarray, float]:
+    """Parameter covariance (p, p) from the SVD of J (n, p): V S^-2 V^T times the residual
+    variance s2 (singular values below COV_RCOND of the largest, such as switched-off
+    terms' zero columns, count as zero); also s2. Unlike pinv(J^T J), this does not square
+    J's condition number."""
     dof = max(n_eff - jac.shape[1], 1)
     s2 = float(r @ r) / dof
-    return np.linalg.pinv(jac.T @ jac, rcond=1e-12) * s2, s2
+    _, sv, vt = np.linalg.svd(jac, full_matrices=False)
+    keep = sv > COV_RCOND * (sv[0] if len(sv) else 0.0)
+    inv_sq = np.where(keep, 1.0 / np.where(keep, sv, 1.0) ** 2, 0.0)
+    return (vt.T * inv_sq) @ vt * s2, s2
 
 
-def _flat_index(params: dict) -> dict[str, int]:
-    """Offset of each parameter in the flattened vector (ravel_pytree sorts a dict's keys)."""
-    names = sorted(params)
-    offsets = np.cumsum([0] + [np.size(params[k]) for k in names])
-    return {k: int(offsets[i]) for i, k in enumerate(names)}
+def choose_model(arrays: GroupArrays, pose: Pose, start: FitParams, options: FitOptions, fit_sun: bool,
+                 delta: float, n_eff: int, log=None) -> tuple[Trial, np.ndarray, float]:
+    """Step 3: the robust fit of each candidate profile (blur free), the lowest BIC kept;
+    then blur kept or dropped by BIC. Returns the best trial, its covariance and s2.
+
+    log: called with a line per solve when given."""
+    n_photos = start.n_photos
+    grid = jnp.zeros(9)  # not used after the first solve (``prepare`` off)
+
+    def run(profile, blur, init):
+        cfg = FitConfig.make(profile, blur, fit_sun, delta, options.rule)
+        sol = _to_numpy(_solve(init, (arrays, pose, cfg), options.max_steps, grid, jnp.asarray(False)))
+        rss = float(sol.residuals @ sol.residuals)
+        bic = _bic(rss, n_eff, _n_free(cfg, n_photos))
+        if log:
+            log(f"profile {profile} blur {blur}: {sol.steps} steps, ok {sol.converged}, BIC {bic:.1f}")
+        return Trial(bic, rss, cfg, sol)
+
+    blur_first = True in options.blur
+    # Profiles are compared with blur free, each solve starting from the previous solution.
+    best = None
+    for profile in options.profiles:
+        trial = run(profile, blur_first, start if best is None else best.solution.params)
+        if best is None or trial.bic < best.bic:
+            best = trial
+    cov, s2 = covariance(best.solution.residuals, best.solution.jacobian, n_eff)
+    if blur_first and False in options.blur:
+        # BIC without blur, from the fit with it: the nested model's residual sum of squares is
+        # RSS + b^2 / [(J^T J)^-1]_bb to second order (exact for a linear model), so a solve
+        # without blur is needed only when BIC prefers it.
+        i_blur = FitParams.layout(n_photos)["raw_blur"].start
+        inv_jtj = cov[i_blur, i_blur] / max(s2, 1e-300)
+        raw_blur = float(best.solution.params.raw_blur)
+        rss_no_blur = best.rss + raw_blur ** 2 / max(inv_jtj, 1e-300)
+        no_blur_cfg = FitConfig.make(best.config.profile, False, fit_sun, delta, options.rule)
+        bic_no_blur = _bic(rss_no_blur, n_eff, _n_free(no_blur_cfg, n_photos))
+        if log:
+            log(f"BIC without blur, to second order: {bic_no_blur:.1f}")
+        # Worth a solve only when the estimate wins by more than 2 (a BIC difference under 2
+        # is not evidence either way; the blur fit contains no blur as blur ~ 0); the solve is
+        # kept only if its real BIC is lower too.
+        if bic_no_blur < best.bic - 2.0:
+            params = best.solution.params
+            trial = run(best.config.profile, False,
+                        dataclasses.replace(params, raw_blur=jnp.zeros_like(params.raw_blur)))
+            if trial.bic < best.bic:
+                best = trial
+                cov, s2 = covariance(best.solution.residuals, best.solution.jacobian, n_eff)
+    return best, cov, s2
 
 
-def _overlay(model: SoftShadowModel, pose: Pose, view: PhotoView, value: dict, cfg: FitConfig,
+class KRho(NamedTuple):
+    """k and rho with their one-sigma errors (physical units)."""
+
+    range_k: float
+    rho: float
+    range_stderr: float
+    rho_stderr: float
+
+
+def k_rho_with_errors(params: FitParams, cov: np.ndarray) -> KRho:
+    """Step 4: k, rho and their standard errors through the reparameterisation (first order:
+    dk/draw_k = K_SCALE sigmoid(raw_k), drho/draw_rho = rho (1 - rho)); cov (p, p) in
+    ``FitParams.layout`` order."""
+    lay = FitParams.layout(params.n_photos)
+    ik, ir = lay["raw_k"].start, lay["raw_rho"].start
+    k, rho = _k_np(params.raw_k), _rho_np(params.raw_rho)
+    dk = K_SCALE * _rho_np(params.raw_k)  # d softplus = sigmoid
+    drho = rho * (1 - rho)
+    var_k, var_rho = cov[ik, ik] * dk ** 2, cov[ir, ir] * drho ** 2
+    return KRho(k, rho, float(np.sqrt(max(var_k, 0.0))), float(np.sqrt(max(var_rho, 0.0))))
+
+
+def _photo_slices(samples: list[PhotoSamples]) -> list[slice]:
+    ends = np.cumsum([0] + [len(s.observed) for s in samples])
+    return [slice(int(a), int(b)) for a, b in zip(ends[:-1], ends[1:])]
+
+
+def penumbra_width_px(samples: list[PhotoSamples], prediction: Prediction) -> tuple[float | None, float | None]:
+    """Step 5a: median and interquartile range of the penumbra's width in image pixels
+    (2 / |du/dpixel|) over the samples inside it (|u| < 1); (None, None) when none is."""
+    widths = []
+    for sl in _photo_slices(samples):
+        inside = np.abs(prediction.u[sl]) < 1
+        if inside.any():
+            widths.append(2.0 / np.maximum(prediction.slope[sl][inside], 1e-12))
+    if not widths:
+        return None, None
+    w = np.concatenate(widths)
+    q75, q25 = np.percentile(w, [75, 25])
+    return float(np.median(w)), float(q75 - q25)
+
+
+class Identifiability(NamedTuple):
+    """Whether k was measured; when not, range_k is an upper bound and ``warning`` says so."""
+
+    identifiable: bool
+    range_k: float
+    warning: str | None
+
+
+def identifiability(k: float, k_stderr: float, penumbra_px: float | None) -> Identifiability:
+    """Step 5b: k is not identifiable when the penumbra is narrower than MIN_PENUMBRA_PX
+    (or not seen) or k is lost in its own noise (error above MAX_K_REL_STDERR of k). Then
+    the reported range_k is an upper bound: k + 2 sigma, and at least the k whose penumbra
+    would be one pixel wide (k / penumbra_px, the width scaling with k)."""
+    if penumbra_px is not None and penumbra_px >= MIN_PENUMBRA_PX and k_stderr <= MAX_K_REL_STDERR * max(k, 1e-12):
+        return Identifiability(True, float(k), None)
+    upper = k + 2.0 * k_stderr
+    if penumbra_px:
+        upper = max(upper, k / max(penumbra_px, 1e-9))
+    return Identifiability(False, float(upper), "range not identifiable: the penumbra is narrower than "
+                           "the resolution; range_k is an upper bound")
+
+
+def profile_plot_data(samples: list[PhotoSamples], prediction: Prediction, rho: float,
+                      sky_hidden: np.ndarray) -> list[ProfilePlotData]:
+    """Step 6a: observed and fitted values across the edge for each photo, normalised by the
+    fitted lit level, against the signed distance (pixels) from the hard-shadow boundary."""
+    out = []
+    pred, alpha, u, slope = prediction.values, prediction.alpha, prediction.u, prediction.slope
+    for s, sl in zip(samples, _photo_slices(samples)):
+        lvl = pred[sl] / np.maximum(1 - alpha[sl] * (1 - rho) - rho * sky_hidden[sl], 1e-9)
+        dist = np.where(slope[sl] > 0, u[sl] / np.maximum(slope[sl], 1e-12), np.nan)
+        out.append(ProfilePlotData(s.name, dist, s.observed / lvl, pred[sl] / lvl, s.profile_id))
+    return out
+
+
+def _overlay(model: SoftShadowModel, pose: Pose, view: PhotoView, params: FitParams, cfg: FitConfig,
              s: PhotoSamples, max_side: int = 480) -> OverlayPlotData:
-    """The fitted alpha over a downsampled copy of the photo, for the overlay plot."""
+    """Step 6b: the fitted alpha over a downsampled copy of the photo, for the overlay plot."""
     import cv2
     h, w = view.shape
     f = min(1.0, max_side / max(h, w))
     sw, sh = max(int(round(w * f)), 1), max(int(round(h * f)), 1)
     small = cv2.resize(view.gray.astype(np.float32), (sw, sh), interpolation=cv2.INTER_AREA)
-    d = np.asarray(value["sun_delta_deg"]) * float(cfg.fit_sun)
+    d = np.asarray(params.sun_delta_deg) * float(cfg.fit_sun)
     sun = Sun(view.sun_azimuth_deg + d[0], view.sun_elevation_deg + d[1])
     if view.grid is not None:
         g = view.grid
@@ -213,7 +407,7 @@ def _overlay(model: SoftShadowModel, pose: Pose, view: PhotoView, value: dict, c
     else:
         small_view = view.camera.with_size(sw, sh)
     alpha = fitted_alpha_image(model.with_options(profile=cfg.profile), pose, sun,
-                               _k_np(value["raw_k"]), small_view)
+                               _k_np(params.raw_k), small_view)
     return OverlayPlotData(view.name, small, alpha, s.uv * f)
 
 
@@ -224,15 +418,7 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
     options = options or FitOptions()
     start = _time.perf_counter()
     result = GroupResult(label=label, time=time_label, photos=[v.name for v in views])
-    samples, used = [], []
-    for i, view in enumerate(views):
-        try:
-            samples.append(select_samples(model, pose, view, options.range_k_max,
-                                          max_samples=options.max_samples_per_photo, seed=options.seed + i,
-                                          sky_occlusion=options.sky_occlusion))
-            used.append(view)
-        except NoShadowInView as exc:
-            result.warnings.append(f"{view.name}: {exc}")
+    samples, used, result.warnings = sample_views(model, pose, views, options)
     if not samples:
         result.error = "no shadow in view: " + "; ".join(result.warnings)
         result.seconds = _time.perf_counter() - start
@@ -241,121 +427,37 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
     solve_start = _time.perf_counter()
     arrays = _group_arrays(samples, used)
     n_eff = sum(len(s.observed) for s in samples)
-    base, rho0 = _initial_params(samples, fit_sun)
-    # A plain least-squares pass, from the best k of a coarse log grid (the loss is flat where
-    # the band misses the penumbra), sets the noise scale of the robust loss used after it.
-    blur_first = True in options.blur
-    plain = FitConfig.make(options.profiles[0], blur_first, fit_sun, 0.0, options.rule)
-    grid = jnp.asarray(raw_from_k(np.geomspace(5e-4, options.range_k_max, 9)))
-    start_value, _, _, r, _, _, grad_t_pixel = _solve(base, (arrays, pose, plain), options.max_steps,
-                                                      grid, jnp.asarray(True))
-    arrays = dataclasses.replace(arrays, grad_t_pixel=grad_t_pixel)
-    r = np.asarray(r)
-    sigma = 1.4826 * np.median(np.abs(r[np.abs(r) > 0])) if np.any(r) else 1e-3
-    delta = float(max(3.0 * sigma, 1e-6)) if options.robust else 0.0
-
-    def run(profile, blur, init):
-        cfg = FitConfig.make(profile, blur, fit_sun, delta, options.rule)
-        value, ok, steps, r, jac, diag, _ = _solve(init, (arrays, pose, cfg), options.max_steps,
-                                                   grid, jnp.asarray(False))
-        r, jac = np.asarray(r), np.asarray(jac)
-        rss = float(r @ r)
-        bic = _bic(rss, n_eff, _n_free(cfg, len(samples)))
-        if options.verbose:
-            print(f"  {label}: profile {profile} blur {blur}: {int(steps)} steps, ok {bool(ok)}, "
-                  f"BIC {bic:.1f}")
-        return Trial(bic, value, bool(ok), cfg, rss, r, jac, diag)
-
-    # Profiles are compared with blur free, each solve starting from the previous solution.
-    best = None
-    for profile in options.profiles:
-        trial = run(profile, blur_first, start_value if best is None else best.value)
-        if best is None or trial.bic < best.bic:
-            best = trial
-    cov, s2 = _covariance(best.residuals, best.jac, n_eff)
-    if blur_first and False in options.blur:
-        # BIC without blur, from the fit with it: the nested model's residual sum of squares is
-        # RSS + b^2 / [(J^T J)^-1]_bb to second order (exact for a linear model), so a solve
-        # without blur is needed only when BIC prefers it.
-        i_blur = _flat_index(best.value)["raw_blur"]
-        inv_jtj = cov[i_blur, i_blur] / max(s2, 1e-300)
-        rss_no_blur = best.rss + float(best.value["raw_blur"]) ** 2 / max(inv_jtj, 1e-300)
-        no_blur_cfg = FitConfig.make(best.config.profile, False, fit_sun, delta, options.rule)
-        bic_no_blur = _bic(rss_no_blur, n_eff, _n_free(no_blur_cfg, len(samples)))
-        if options.verbose:
-            print(f"  {label}: BIC without blur, to second order: {bic_no_blur:.1f}")
-        # Worth a solve only when the estimate wins by more than 2 (a BIC difference under 2
-        # is not evidence either way; the blur fit contains no blur as blur ~ 0); the solve is
-        # kept only if its real BIC is lower too.
-        if bic_no_blur < best.bic - 2.0:
-            trial = run(best.config.profile, False,
-                        dict(best.value, raw_blur=jnp.zeros_like(best.value["raw_blur"])))
-            if trial.bic < best.bic:
-                best = trial
-                cov, s2 = _covariance(best.residuals, best.jac, n_eff)
-    value, ok, cfg, rss = best.value, best.converged, best.config, best.rss
+    base, _ = initial_params(samples)
+    plain, arrays, delta = plain_start(arrays, pose, base, options, fit_sun)
+    log = (lambda line: print(f"  {label}: {line}")) if options.verbose else None
+    best, cov, _ = choose_model(arrays, pose, plain.params, options, fit_sun, delta, n_eff, log)
+    sol, cfg = best.solution, best.config
     result.solve_seconds = _time.perf_counter() - solve_start
-    # Standard errors through the reparameterisation.
-    idx = _flat_index(value)
-    k = _k_np(value["raw_k"])
-    rho = _rho_np(value["raw_rho"])
-    dk = K_SCALE * _rho_np(value["raw_k"])  # d softplus = sigmoid
-    drho = rho * (1 - rho)
-    var_k = cov[idx["raw_k"], idx["raw_k"]] * dk**2
-    var_rho = cov[idx["raw_rho"], idx["raw_rho"]] * drho**2
-    result.range_k = k
-    result.rho = rho
-    result.range_stderr = float(np.sqrt(max(var_k, 0)))
-    result.rho_stderr = float(np.sqrt(max(var_rho, 0)))
+    est = k_rho_with_errors(sol.params, cov)
+    result.rho, result.range_stderr, result.rho_stderr = est.rho, est.range_stderr, est.rho_stderr
     result.profile = cfg.profile
-    result.blur_px = float(np.sqrt(max(float(value["raw_blur"]), 0.0))) if float(cfg.fit_blur) else None
-    result.rmse = float(np.sqrt(rss / n_eff))
-    result.converged = bool(ok)
+    raw_blur = float(sol.params.raw_blur)
+    result.blur_px = float(np.sqrt(max(raw_blur, 0.0))) if float(cfg.fit_blur) else None
+    result.rmse = float(np.sqrt(best.rss / n_eff))
+    result.converged = sol.converged
     result.n_samples = n_eff
     result.n_profiles = int(sum(s.n_profiles for s in samples))
-    result.reprojection_error_px = (max(v.reprojection_error_px for v in used
-                                        if v.reprojection_error_px is not None)
-                                    if any(v.reprojection_error_px is not None for v in used) else None)
-    az0, el0 = float(used[0].sun_azimuth_deg), float(used[0].sun_elevation_deg)
-    if float(cfg.fit_sun):
-        d = np.asarray(value["sun_delta_deg"])
-        az0, el0 = az0 + d[0], el0 + d[1]
-    result.sun_azimuth_deg, result.sun_elevation_deg = az0, el0
+    errors = [v.reprojection_error_px for v in used if v.reprojection_error_px is not None]
+    result.reprojection_error_px = max(errors) if errors else None
+    d = np.asarray(sol.params.sun_delta_deg) * float(cfg.fit_sun)
+    result.sun_azimuth_deg = float(used[0].sun_azimuth_deg) + float(d[0])
+    result.sun_elevation_deg = float(used[0].sun_elevation_deg) + float(d[1])
     result.sun_source = used[0].sun_source
-    # Penumbra width in pixels at the solution; identifiability.
-    pred, alpha, u, slope = (np.asarray(x) for x in best.diagnostics)
-    sky_hidden = np.asarray(arrays.sky_hidden)
-    widths = []
-    start_i = 0
-    for i, s in enumerate(samples):
-        sl = slice(start_i, start_i + len(s.observed))
-        start_i += len(s.observed)
-        in_pen = np.abs(u[sl]) < 1
-        if in_pen.any():
-            widths.append(2.0 / np.maximum(slope[sl][in_pen], 1e-12))
-        if options.plots:
-            lvl = pred[sl] / np.maximum(1 - alpha[sl] * (1 - rho) - rho * sky_hidden[sl], 1e-9)
-            dist = np.where(slope[sl] > 0, u[sl] / np.maximum(slope[sl], 1e-12), np.nan)
-            result.plot_profiles.append(ProfilePlotData(
-                s.name, dist, s.observed / lvl, pred[sl] / lvl, s.profile_id))
-            if options.overlays == "all" or i == 0:
-                result.plot_overlays.append(_overlay(model, pose, used[i], value, cfg, s))
-    if widths:
-        w = np.concatenate(widths)
-        result.penumbra_px = float(np.median(w))
-        q75, q25 = np.percentile(w, [75, 25])
-        result.penumbra_px_iqr = float(q75 - q25)
-    # Not identifiable: the penumbra is well below a pixel, or k is lost in its own noise.
-    if (result.penumbra_px is None or result.penumbra_px < 0.8
-            or result.range_stderr > 0.5 * max(k, 1e-12)):
-        result.identifiable = False
-        upper = k + 2.0 * result.range_stderr
-        if result.penumbra_px:
-            upper = max(upper, k * 1.0 / max(result.penumbra_px, 1e-9))
-        result.range_k = float(upper)
-        result.warnings.append("range not identifiable: the penumbra is narrower than the "
-                               "resolution; range_k is an upper bound")
-    if not ok:
+    result.penumbra_px, result.penumbra_px_iqr = penumbra_width_px(samples, sol.prediction)
+    ident = identifiability(est.range_k, est.range_stderr, result.penumbra_px)
+    result.identifiable, result.range_k = ident.identifiable, ident.range_k
+    if ident.warning:
+        result.warnings.append(ident.warning)
+    if options.plots:
+        result.plot_profiles = profile_plot_data(samples, sol.prediction, est.rho, np.asarray(arrays.sky_hidden))
+        result.plot_overlays = [_overlay(model, pose, used[i], sol.params, cfg, samples[i])
+                                for i in range(len(samples)) if options.overlays == "all" or i == 0]
+    if not sol.converged:
         result.warnings.append("the solver stopped before converging")
     result.seconds = _time.perf_counter() - start
     return result

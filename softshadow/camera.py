@@ -64,10 +64,28 @@ class PinholeCamera:
         else:
             Kinv = np.linalg.inv(self.K)
             norm = (uv @ Kinv[:2, :2].T) + Kinv[:2, 2]
-        # R^T d for each row, written elementwise: a BLAS matmul on tall arrays contends with
-        # XLA's threads for the cores and ran 10-50x slower here.
-        R = self.R
-        return (norm[:, 0:1] * R[0] + norm[:, 1:2] * R[1] + R[2]).astype(np.float64)
+        # R^T (x, y, 1) for each row (BLAS threads: see softshadow.one_blas_thread).
+        return norm @ self.R[:2] + self.R[2]
+
+    def fine_footprint_m(self, ground: np.ndarray, valid: np.ndarray, use: np.ndarray) -> float:
+        """The finest ground size (m) of the pixels in ``use`` (a raster resolution): the 5th
+        percentile of each pixel's footprint, the larger of its distances to the ground points
+        of its right and lower neighbours; 0.01 when no pixel is used.
+
+        ground (H*W, 3) the pixels' ground points (``ground_points`` of every pixel in row
+        order), valid (H*W,) where they exist, use (H*W,) the pixels that matter.
+        """
+        h, w = self.height, self.width
+        g = np.asarray(ground).reshape(h, w, 3)
+        dx = np.zeros((h, w))
+        dx[:, :-1] = np.linalg.norm(np.diff(g, axis=1), axis=-1)
+        dx[:, -1] = dx[:, -2] if w > 1 else 0.0
+        dy = np.zeros_like(dx)
+        dy[:-1] = np.linalg.norm(np.diff(g, axis=0), axis=-1)
+        dy[-1] = dy[-2] if h > 1 else 0.0
+        fp = np.maximum(dx, dy).ravel()
+        fp = np.where(valid & np.isfinite(fp), fp, np.inf)
+        return float(np.percentile(fp[use], 5)) if np.any(use) else 0.01
 
     def ground_points(self, u: np.ndarray, v: np.ndarray, plane_z: float = 0.0):
         """Where pixel rays meet the plane z = plane_z.

@@ -169,7 +169,7 @@ def silhouette(occ: Occluder, world_vertices: np.ndarray, rotation: np.ndarray,
     rotation = np.asarray(rotation, dtype=np.float64)
     light_local = rotation.T @ light
     normals = occ.face_normals
-    ndotl = normals[:, 0] * light_local[0] + normals[:, 1] * light_local[1] + normals[:, 2] * light_local[2]
+    ndotl = normals @ light_local
     lit = ndotl < -PARALLEL_TOL
     ef = occ.edge_faces
     if occ.two_faced:

@@ -167,9 +167,7 @@ class SoftShadowModel:
         mask = object_mask(self.occluder, pose, camera)
         use = valid & ~mask.ravel()
         pts = ground[use]
-        # Raster resolution: the finest ground footprint of a pixel where the shadow can be.
-        footprint = _pixel_footprint(camera, ground, valid)
-        pixel_m = float(np.percentile(footprint[use], 5)) if use.any() else 0.01
+        pixel_m = camera.fine_footprint_m(ground, valid, use)
         shading = jnp.full(camera.height * camera.width, jnp.nan)
         if len(pts):
             plan = self.plan_points(sun, pose, pts, _band_k(params, range_k_max), pixel_m=max(pixel_m, 1e-4))
@@ -178,16 +176,3 @@ class SoftShadowModel:
         return CameraRender(shading.reshape(camera.height, camera.width), mask,
                             valid.reshape(camera.height, camera.width),
                             ground.reshape(camera.height, camera.width, 3))
-
-
-def _pixel_footprint(camera: PinholeCamera, ground: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    """Approximate ground size (m) of each pixel, from neighbouring ground points."""
-    g = ground.reshape(camera.height, camera.width, 3)
-    dx = np.zeros((camera.height, camera.width))
-    dx[:, :-1] = np.linalg.norm(np.diff(g, axis=1), axis=-1)
-    dx[:, -1] = dx[:, -2] if camera.width > 1 else 0.0
-    dy = np.zeros_like(dx)
-    dy[:-1] = np.linalg.norm(np.diff(g, axis=0), axis=-1)
-    dy[-1] = dy[-2] if camera.height > 1 else 0.0
-    fp = np.maximum(dx, dy).ravel()
-    return np.where(valid & np.isfinite(fp), fp, np.inf)

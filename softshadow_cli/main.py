@@ -123,7 +123,13 @@ def _add_bench(sub):
                        description="Benchmarks: speed against error, as JSON.")
     p.add_argument("--json", dest="json_path", help="also write the JSON here")
     p.add_argument("--quick", action="store_true", help="fewer repeats and sizes")
-    p.add_argument("--what", default="render", choices=("render", "fit", "all"))
+    p.add_argument("--what", default="render", choices=("render", "fit", "all", "sweep"),
+                   help="render / fit benchmarks, both (all), or the speed-against-error sweep with its "
+                        "image and parameter errors against a known truth (sweep)")
+    p.add_argument("--report", help="with --what sweep: also write the Markdown report here (and its plot "
+                                    "in img/ beside it), e.g. docs/speed_vs_error.md")
+    p.add_argument("--no-fit", dest="fit", action="store_false",
+                   help="with --what sweep: leave out the fits (images only)")
     p.set_defaults(func=_run_bench)
 
 
@@ -144,11 +150,8 @@ def main(argv=None) -> int:
     _add_bench(sub)
     args = parser.parse_args(argv)
     _use_compilation_cache()
-    # NumPy's BLAS threads spin after each call and starve XLA's threads on a small machine
-    # (renders and solves ran 10-20x slower after a matrix product); the arrays BLAS sees
-    # here are small, so one thread costs nothing.
-    from threadpoolctl import threadpool_limits
-    with threadpool_limits(limits=1, user_api="blas"):
+    from softshadow import one_blas_thread
+    with one_blas_thread():
         return int(args.func(args) or 0)
 
 

@@ -6,7 +6,7 @@ import numpy as np
 
 from scene import load_scene, parse_time, photo_sun
 from softshadow import (GroundGrid, PinholeCamera, Pose, PosedOccluder, ShadowParams, SoftShadowModel, Sun,
-                        load_mesh, paper_to_range_k, paper_to_rho)
+                        linear_to_srgb, load_mesh, paper_to_range_k, paper_to_rho)
 
 __all__ = ["render_scene_file", "shading_to_srgb8", "draw_outlines"]
 
@@ -17,8 +17,7 @@ DEFAULT_SIZE = "512x512"  # a top-down map's size when --size is not given
 def shading_to_srgb8(shading: np.ndarray, albedo: float = PAPER_ALBEDO) -> np.ndarray:
     """Linear shading (H, W) to an 8-bit sRGB grey image (H, W, 3); NaN shows as black."""
     lin = np.nan_to_num(np.clip(shading * albedo, 0, 1), nan=0.0)
-    srgb = np.where(lin <= 0.0031308, 12.92 * lin, 1.055 * lin ** (1 / 2.4) - 0.055)
-    g = np.rint(srgb * 255).astype(np.uint8)
+    g = np.rint(linear_to_srgb(lin) * 255).astype(np.uint8)
     return np.repeat(g[..., None], 3, axis=-1)
 
 

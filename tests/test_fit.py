@@ -12,40 +12,16 @@ import numpy as np
 import pytest
 
 from datapaths import MITSUBA
-from softshadow import GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun
-from scene import CameraSpec, ObjectSpec, PhotoSpec, SceneSpec, dump_scene
 
 
 TRUE_K, TRUE_RHO = 0.012, 0.25
 SUN = (150.0, 40.0)
 
 
-def _shadow_photo(folder: Path, name: str, k: float, rho: float, sun=SUN, centre=(-0.9, 1.6), extent=2.6,
-                  noise=0.004, seed=0, size=192, group="10:30", time="2026-04-20T10:30:00+09:00") -> PhotoSpec:
-    """Write a top-down 16-bit linear PNG of the pillar's soft shadow (disk profile) into folder;
-    return its scene.toml entry. The map is extent (m) wide around centre (x, y).
-
-    Each pixel averages 4 x 4 point samples, as a sensor pixel integrates over its area.
-    """
-    import cv2
-    folder.mkdir(parents=True, exist_ok=True)
-    model = SoftShadowModel.from_mesh("pillar", profile="disk")
-    grid = GroundGrid.around(centre, extent, size)
-    fine = GroundGrid.around(centre, extent, 4 * size)
-    shading = np.asarray(model.ground_map(ShadowParams(k, rho), Sun(*sun), Pose(), fine))
-    shading = shading.reshape(size, 4, size, 4).mean(axis=(1, 3))
-    rng = np.random.default_rng(seed)
-    img = np.clip(0.6 * shading + rng.normal(0, noise, shading.shape), 0, 1)
-    cv2.imwrite(str(folder / name), np.rint(img * 65535).astype(np.uint16))
-    return PhotoSpec(time=time, group=group, sun_azimuth_deg=sun[0], sun_elevation_deg=sun[1],
-                     camera=CameraSpec("topdown", pixel_m=grid.pixel_m, origin_m=grid.origin_m))
-
-
 def _render_folder(folder: Path, k=TRUE_K, rho=TRUE_RHO, noise=0.004, seed=0, size=192):
-    """A photo folder with one top-down photo of the pillar's soft shadow (_shadow_photo)."""
-    photo = _shadow_photo(folder, "top.png", k, rho, noise=noise, seed=seed, size=size)
-    dump_scene(SceneSpec(object=ObjectSpec("pillar"), photos={"top.png": photo}), folder / "scene.toml")
-    return folder
+    """A top-down 16-bit linear PNG of the pillar's soft shadow (disk profile), with scene.toml."""
+    from data_synth import model_topdown_folder
+    return model_topdown_folder(folder, k, rho, noise, seed, size, SUN)
 
 
 @pytest.fixture(scope="module")
@@ -119,18 +95,26 @@ def hard_fit(tmp_path_factory):
     """One folder, one group per hard case (each with its own sun), fitted once."""
     from fitting.api import fit_folder
     from fitting.solve import FitOptions
-    folder = tmp_path_factory.mktemp("hard_fit")
+    import shutil
+
+    from data_synth import model_topdown_folder
+    from scene import ObjectSpec, SceneSpec, dump_scene, load_scene
+    root = tmp_path_factory.mktemp("hard_fit")
+    folder = root / "all"
+    folder.mkdir()
     low_sun = (150.0, 8.0)  # a 21 m shadow: map its middle 6 m
     cases = {  # name: (k, rho, sun, centre, extent)
         "low-sun": (TRUE_K, TRUE_RHO, low_sun, _shadow_centre(low_sun), 6.0),
-        "k-near-zero": (2e-4, TRUE_RHO, SUN, (-0.9, 1.6), 2.6),
-        "rho-dark": (TRUE_K, 0.03, SUN, (-0.9, 1.6), 2.6),
-        "rho-pale": (TRUE_K, 0.97, SUN, (-0.9, 1.6), 2.6),
+        "k-near-zero": (2e-4, TRUE_RHO, SUN, _shadow_centre(SUN), 2.6),
+        "rho-dark": (TRUE_K, 0.03, SUN, _shadow_centre(SUN), 2.6),
+        "rho-pale": (TRUE_K, 0.97, SUN, _shadow_centre(SUN), 2.6),
     }
     photos = {}
     for hour, (name, (k, rho, sun, centre, extent)) in enumerate(cases.items()):
-        photos[f"{name}.png"] = _shadow_photo(folder, f"{name}.png", k, rho, sun, centre, extent, seed=hour,
-                                              group=name, time=f"2026-04-20T{8 + 2 * hour:02d}:00:00+09:00")
+        one = model_topdown_folder(root / name, k, rho, seed=hour, sun=sun, centre=centre, extent_m=extent,
+                                   time=f"2026-04-20T{8 + 2 * hour:02d}:00:00+09:00", group=name)
+        shutil.copy(one / "top.png", folder / f"{name}.png")
+        photos[f"{name}.png"] = load_scene(one / "scene.toml").photos["top.png"]
     dump_scene(SceneSpec(object=ObjectSpec("pillar"), photos=photos), folder / "scene.toml")
     results = fit_folder(folder, options=FitOptions(sky_occlusion=False, plots=False))
     return cases, {g.label: g for g in results.groups}
@@ -187,6 +171,23 @@ def test_no_shadow_in_view_is_a_group_error_not_a_crash(tmp_path):
     (g,) = results.groups
     assert g.error is not None and "shadow" in g.error
     assert results.n_fitted == 0
+
+
+def test_a_penumbra_under_a_pixel_is_reported_as_an_upper_bound(tmp_path):
+    """k = 0.0005 throws a penumbra of about 0.2 px here: k is not identifiable, range_k is an
+    upper bound above the truth, and the group says so."""
+    from fitting.api import fit_folder
+    from fitting.solve import FitOptions
+    folder = _render_folder(tmp_path / "sharp", k=0.0005)
+    (g,) = fit_folder(folder, options=FitOptions(sky_occlusion=False, plots=False)).groups
+    assert g.error is None
+    assert not g.identifiable
+    assert g.range_k >= 0.0005
+    assert g.penumbra_px is None or g.penumbra_px < 0.8
+    assert any("upper bound" in w for w in g.warnings)
+    assert abs(g.rho - TRUE_RHO) < 0.01  # rho is still measured
+    data = g.to_json()
+    assert data["identifiable"] is False
 
 
 @pytest.mark.parametrize("name", ["pillar-yaw30-topdown", "ball-topdown", "pillar-sun1deg-photo"])

@@ -64,23 +64,22 @@ def test_residual_jacobian_matches_finite_differences():
     """The solver's Jacobian (custom JVPs for the shadow's shape and the blurred profile)
     against central differences of the residuals, at a generic point with blur and robust
     loss switched on."""
-    from jax.flatten_util import ravel_pytree
-
-    from fitting.model import FitConfig, raw_from_k, residuals
-    from fitting.samples import select_samples
-    from fitting.solve import _group_arrays, _initial_params, _prepare
     import dataclasses
+
+    from fitting.model import FitConfig, FitParams, raw_from_k, residuals
+    from fitting.samples import select_samples
+    from fitting.solve import _group_arrays, _prepare, initial_params
     model, sun, view = _oblique_view()
     samples = select_samples(model, Pose(), view, range_k_max=0.03, max_samples=400, seed=0)
     group = _group_arrays([samples], [view])
-    params, _ = _initial_params([samples], fit_sun=True)
+    params, _ = initial_params([samples])
     config = FitConfig.make("disk", True, True, 0.05, "edge")
     grad_t, _ = _prepare(params, jnp.asarray(raw_from_k(np.array([K]))), group, Pose(), config)
     group = dataclasses.replace(group, grad_t_pixel=grad_t)
-    params = dict(params, raw_k=jnp.asarray(float(raw_from_k(0.008))), raw_blur=jnp.asarray(0.4),
-                  sun_delta_deg=jnp.asarray([0.1, -0.05]))
-    flat, unravel = ravel_pytree(params)
-    fn = lambda x: residuals(unravel(x), (group, Pose(), config))
+    params = dataclasses.replace(params, raw_k=jnp.asarray(float(raw_from_k(0.008))), raw_blur=jnp.asarray(0.4),
+                                 sun_delta_deg=jnp.asarray([0.1, -0.05]))
+    flat = params.vector()
+    fn = lambda x: residuals(FitParams.from_vector(x, 1), (group, Pose(), config))
     jac = np.asarray(jax.jacfwd(fn)(flat))
     h = 1e-6
     for i in range(len(flat)):

@@ -29,7 +29,7 @@ ALLOWED = {
     "softshadow_cli": set(PACKAGES),
 }
 PUBLIC_ONLY = ("softshadow", "scene")  # imported from above by their public names only
-DISCRETE_RENDERER_MODULES = ("meshes", "camera", "occluder", "raster", "posed", "plan")
+DISCRETE_RENDERER_MODULES = ("meshes", "camera", "occluder", "raster", "posed", "plan", "colour", "threads")
 
 
 def _imports(path: Path):

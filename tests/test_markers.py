@@ -8,6 +8,8 @@ homography K [r1 r2 t] maps that ground point into the camera image.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import cv2
 import numpy as np
 import pytest
@@ -108,7 +110,7 @@ def test_top_down_view_shows_the_board_as_printed():
 @pytest.mark.parametrize("camera", [OBLIQUE, FROM_NORTH_WEST], ids=["oblique", "north-west"])
 def test_register_with_known_K(camera):
     reg = register_board(render_view(camera, board_image()), SPEC, K=camera.K)
-    assert isinstance(reg, Registration) and reg.intrinsics_source == "scene"
+    assert isinstance(reg, Registration) and reg.intrinsics_source == "given"
     assert reg.detection == "charuco" and reg.n_points == 24
     assert rotation_error_deg(reg.camera.R, camera.R) < 0.5
     assert np.linalg.norm(reg.camera.t - camera.t) < 0.01
@@ -149,6 +151,45 @@ def test_K_from_camera_spec_is_used():
     reg = register_board(render_view(cam, board_image()), spec)
     assert reg.intrinsics_source == "scene"
     np.testing.assert_array_equal(reg.camera.K, cam.K)
+
+
+def _distorted(image: np.ndarray, K: np.ndarray, dist: np.ndarray) -> np.ndarray:
+    """What a lens with distortion ``dist`` shows of an ideal pinhole view ``image``."""
+    h, w = image.shape[:2]
+    rows, cols = np.mgrid[0:h, 0:w].astype(np.float32)
+    pts = np.stack([cols.ravel(), rows.ravel()], -1)[:, None, :]
+    ideal = cv2.undistortPoints(pts, K, dist, P=K).reshape(h, w, 2)
+    return cv2.remap(image, ideal[..., 0], ideal[..., 1], cv2.INTER_LINEAR, borderValue=110)
+
+
+def test_scene_distortion_is_used_for_marker_cameras():
+    """[camera] K and dist in scene.toml: the registered camera keeps the distortion, and the
+    pose is as good as without a lens error (dropping dist, as before, costs pixels)."""
+    from fitting.api import _camera_view
+    from fitting.photos import Photo
+    from fitting.views import PhotoView
+    cam = OBLIQUE
+    dist = np.array([-0.25, 0.08, 0.0, 0.0, 0.0])
+    view = _distorted(render_view(cam, board_image()), cam.K, dist)
+    spec = CameraSpec(kind="markers", origin_m=SPEC.origin_m, K=cam.K.tolist(), dist=dist.tolist())
+    reg = register_board(view, spec)
+    assert reg.intrinsics_source == "scene"
+    np.testing.assert_allclose(reg.camera.dist, dist)
+    assert reg.reprojection_error_px < 0.5
+    assert rotation_error_deg(reg.camera.R, cam.R) < 0.5
+    error = np.linalg.norm(reg.camera.centre - cam.centre)
+    assert error < 0.003
+    without = register_board(view, SPEC, K=cam.K)  # the lens ignored, as before: ~8 mm off
+    assert np.linalg.norm(without.camera.centre - cam.centre) > 4 * error
+    # The folder path (fitting.api) registers with the scene's distortion too, and EXIF does
+    # not override the scene's K.
+    gray = srgb_to_linear(view / 255.0).astype(np.float32)
+    photo = Photo("p.png", Path("p.png"), gray[..., None].repeat(3, -1), gray, "srgb8", 8,
+                  {"FocalLengthIn35mmFilm": 10.0}, np.zeros(gray.shape, bool))
+    pv = PhotoView("p.png", gray, np.zeros(gray.shape, bool))
+    _camera_view(photo, spec, pv)
+    np.testing.assert_allclose(pv.camera.dist, dist)
+    np.testing.assert_array_equal(pv.camera.K, cam.K)
 
 
 def test_marker_fallback_when_chessboard_corners_are_missing():

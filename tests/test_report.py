@@ -367,3 +367,18 @@ def test_written_files_have_ordinary_permissions(tmp_path):
     os.umask(mask)
     for path in write_report(_results(), tmp_path, plots=False).values():
         assert path.stat().st_mode & 0o777 == 0o666 & ~mask
+
+
+def test_an_unreliable_group_says_so_in_the_table_and_csv(tmp_path):
+    results = _results()
+    g = results.groups[3]
+    g.reliable, g.warnings = False, ["edges disagree: rho 0.200 (30 profiles) and 0.550 (20 profiles)"]
+    md_path, csv_path = write_table2(results, tmp_path)
+    md = md_path.read_text()
+    assert f"{g.label}: NOT RELIABLE: edges disagree: rho 0.200 (30 profiles)" in md
+    assert "NOT RELIABLE" in format_table(results)
+    with open(csv_path, newline="", encoding="utf-8") as fh:
+        rows = list(csv.reader(fh))
+    reliable = dict(zip(rows[0][1:], next(r for r in rows if r[0] == "reliable")[1:]))
+    assert reliable[g.label] == "false"
+    assert all(reliable[o.label] in ("true", "") for o in results.groups if o is not g)

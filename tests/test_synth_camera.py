@@ -10,8 +10,8 @@ import cv2
 import numpy as np
 import pytest
 
-from data_synth.camera_pipeline import (SensorSettings, apply_optics, apply_sensor_noise, fit_handheld_camera,
-                                        srgb_decode, srgb_encode)
+from data_synth.camera_pipeline import SensorSettings, apply_optics, apply_sensor_noise, fit_handheld_camera
+from softshadow import linear_to_srgb, srgb_to_linear
 from data_synth.image_io import PhotoMetadata, bayer_mosaic, dng_available, write_corrupt_jpeg, write_photo
 from data_synth.receivers import PlaneReceiver
 from data_synth.textures import BoardSpec, GroundAppearance, board_object_to_world, procedural_texture
@@ -19,10 +19,10 @@ from data_synth.tracing import pinhole_rays, trace
 
 
 def test_srgb_transfer_matches_the_standard_and_inverts():
-    assert srgb_encode(np.array(0.5)) == pytest.approx(0.735357, abs=1e-5)
-    assert srgb_encode(np.array(0.002)) == pytest.approx(0.02584, abs=1e-5)  # linear toe
+    assert linear_to_srgb(np.array(0.5)) == pytest.approx(0.735357, abs=1e-5)
+    assert linear_to_srgb(np.array(0.002)) == pytest.approx(0.02584, abs=1e-5)  # linear toe
     x = np.linspace(0, 1, 1001)
-    assert np.allclose(srgb_decode(srgb_encode(x)), x, atol=1e-9)
+    assert np.allclose(srgb_to_linear(linear_to_srgb(x)), x, atol=1e-9)
 
 
 def test_jpeg_exif_time_offset_and_gps_read_back(tmp_path):
@@ -40,7 +40,7 @@ def test_jpeg_exif_time_offset_and_gps_read_back(tmp_path):
     assert gps[piexif.GPSIFD.GPSLatitudeRef] == b"N" and gps[piexif.GPSIFD.GPSLongitudeRef] == b"E"
     assert deg(gps[piexif.GPSIFD.GPSLatitude]) == pytest.approx(39.70, abs=1e-5)
     assert deg(gps[piexif.GPSIFD.GPSLongitude]) == pytest.approx(141.13, abs=1e-5)
-    decoded = srgb_decode(cv2.imread(str(path))[..., ::-1] / 255.0)
+    decoded = srgb_to_linear(cv2.imread(str(path))[..., ::-1] / 255.0)
     assert np.allclose(decoded, 0.3, atol=0.01)  # 8-bit sRGB of linear 0.3
 
 
@@ -125,7 +125,7 @@ def test_printed_board_follows_the_project_convention():
     img = np.zeros((len(hits.kind), 3), np.float32)
     ok = hits.kind == 1
     img[ok] = ground.reflectance(hits.points[ok])
-    img8 = np.round(srgb_encode(img.reshape(480, 640, 3)) * 255).astype(np.uint8)
+    img8 = np.round(linear_to_srgb(img.reshape(480, 640, 3)) * 255).astype(np.uint8)
     det = cv2.aruco.CharucoDetector(board.cv_board())
     corners, ids, marker_corners, marker_ids = det.detectBoard(img8)
     assert ids is not None and len(ids) >= 20

@@ -157,20 +157,42 @@ def test_hard_cases(tmp_path):
 
 
 def test_depth_background_writes_range_images(tmp_path):
-    import tifffile
+    from data_synth import bank_terrain
     out = synthesize(tmp_path / "d", "depth-background", size=SMALL, progress=False, render_quality=FAST)
     scene = load_scene(out / "scene.toml")
     assert scene.receiver.kind == "depth"
     for name, spec in scene.photos.items():
-        depth = tifffile.imread(out / spec.depth)
+        assert spec.depth.endswith(".depth.npy")
+        depth = np.load(out / spec.depth)
         assert depth.shape == SMALL[::-1] and depth.dtype == np.float32
         finite = np.isfinite(depth)
         assert finite.mean() > 0.5 and np.all(depth[finite] > 0)
         # the bank rises away from the camera: further rows up the image are deeper
         col = depth[:, SMALL[0] // 2]
         assert np.nanmedian(col[: SMALL[1] // 3]) > np.nanmedian(col[-SMALL[1] // 3:])
+        # each value is z_cam: back-projected through the photo's camera it lies on the bank
+        cam = spec.camera.pinhole(*SMALL)
+        rows, cols = np.nonzero(finite)
+        x_cam = depth[rows, cols, None] * (np.column_stack([cols, rows, np.ones(len(rows))])
+                                            @ np.linalg.inv(cam.K).T)
+        world = (x_cam - cam.t) @ cam.R
+        assert np.max(np.abs(world[:, 2] - bank_terrain().height(world[:, :2]))) < 2e-3
     with pytest.raises(ValueError, match="plane"):
         synthesize(tmp_path / "d2", "depth-background", size=SMALL, progress=False, renderer="model")
+
+
+@pytest.mark.parametrize("preset", ["steps", "wall"])
+def test_mesh_receiver_presets_write_their_mesh(tmp_path, preset):
+    import trimesh
+    out = synthesize(tmp_path / preset, preset, size=(96, 72), progress=False, render_quality=FAST)
+    scene = load_scene(out / "scene.toml")
+    assert scene.receiver.kind == "mesh"
+    mesh = trimesh.load(out / scene.receiver.mesh, force="mesh")
+    assert mesh.bounds[1, 2] > (0.6 if preset == "steps" else 2.0)  # the steps / the wall stand up
+    truth = json.loads((out / "truth.json").read_text())
+    assert truth["receiver"]["kind"] == "mesh" and scene.receiver.mesh in truth["files"]
+    g = truth["groups"][0]
+    assert len(g["photos"]) == 2 and 0 < g["rho"] < 1 and g["range_k"] > 0
 
 
 @pytest.mark.parametrize("preset", ["ball", "dragon"])
@@ -201,4 +223,4 @@ def test_cli_runs_and_refuses_to_overwrite(tmp_path, capsys):
     assert run(args) == 0
     with pytest.raises(SystemExit):
         parser.parse_args([str(out), "--size", "64by48"])
-    assert set(PRESETS) == {"table2", "pillar", "ball", "dragon", "depth-background", "hard-cases"}
+    assert set(PRESETS) == {"table2", "pillar", "ball", "dragon", "depth-background", "steps", "wall", "hard-cases"}

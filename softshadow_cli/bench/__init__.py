@@ -3,8 +3,24 @@
 from __future__ import annotations
 
 import json
+import sys
+from pathlib import Path
 
 __all__ = ["run_bench"]
+
+
+def _sweep(args, result: dict) -> dict:
+    """The speed-against-error sweep (top-level keys per mesh, each with its ``error``), and the
+    report made from it when asked."""
+    from .environment import environment
+    from .sweep import SweepSettings, run_sweep
+    result = {"environment": environment(), **result}
+    result.update(run_sweep(SweepSettings(quick=args.quick), fit=getattr(args, "fit", True),
+                            progress=lambda msg: print(msg, file=sys.stderr, flush=True)))
+    if getattr(args, "report", None):
+        from .speed_report import write_report
+        write_report(result, Path(args.report), Path(args.json_path).name if args.json_path else None)
+    return result
 
 
 def run_bench(args) -> int:
@@ -20,6 +36,8 @@ def run_bench(args) -> int:
     if args.what in ("fit", "all"):
         from .fit import bench_fit
         result["fit"] = bench_fit(quick=args.quick)
+    if args.what == "sweep":
+        result = _sweep(args, result)
     text = json.dumps(result, indent=1)
     print(text)
     if args.json_path:

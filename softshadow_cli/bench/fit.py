@@ -10,6 +10,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import subprocess
@@ -23,35 +24,18 @@ import numpy as np
 __all__ = ["bench_same_model", "bench_table2", "bench_fit"]
 
 
-def _model_folder(folder: Path, k: float, rho: float, noise: float, seed: int, size: int = 192):
-    import cv2
-
-    from scene import CameraSpec, ObjectSpec, PhotoSpec, SceneSpec, dump_scene
-    from softshadow import GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun
-    folder.mkdir(parents=True, exist_ok=True)
-    model = SoftShadowModel.from_mesh("pillar", profile="disk")
-    grid = GroundGrid.around((-0.9, 1.6), 2.6, size)
-    fine = GroundGrid.around((-0.9, 1.6), 2.6, 4 * size)
-    shading = np.asarray(model.ground_map(ShadowParams(k, rho), Sun(150.0, 40.0), Pose(), fine))
-    shading = shading.reshape(size, 4, size, 4).mean(axis=(1, 3))
-    rng = np.random.default_rng(seed)
-    img = np.clip(0.6 * shading + rng.normal(0, noise, shading.shape), 0, 1)
-    cv2.imwrite(str(folder / "top.png"), np.rint(img * 65535).astype(np.uint16))
-    dump_scene(SceneSpec(object=ObjectSpec("pillar"), photos={"top.png": PhotoSpec(
-        group="g", sun_azimuth_deg=150.0, sun_elevation_deg=40.0,
-        camera=CameraSpec("topdown", pixel_m=grid.pixel_m, origin_m=grid.origin_m))}),
-        folder / "scene.toml")
-
-
-def bench_same_model(seeds: int = 20, k: float = 0.012, rho: float = 0.25, noise: float = 0.01) -> dict:
+def bench_same_model(seeds: int = 20, k: float = 0.012, rho: float = 0.25, noise: float = 0.01,
+                     max_samples_per_photo: int | None = None) -> dict:
+    from data_synth import model_topdown_folder
     from fitting import FitOptions, fit_folder
     options = FitOptions(profiles=("disk",), blur=(False,), robust=False, sky_occlusion=False,
                          plots=False)  # the data were rendered without the sky term
-    ks, rhos, k_se, rho_se, secs, solve_secs = [], [], [], [], [], []
+    if max_samples_per_photo is not None:
+        options = dataclasses.replace(options, max_samples_per_photo=int(max_samples_per_photo))
+    ks, rhos, k_se, rho_se, secs, solve_secs, used = [], [], [], [], [], [], []
     with tempfile.TemporaryDirectory() as tmp:
         for seed in range(seeds):
-            folder = Path(tmp) / f"s{seed}"
-            _model_folder(folder, k, rho, noise, seed)
+            folder = model_topdown_folder(Path(tmp) / f"s{seed}", k, rho, noise, seed, group="g", time=None)
             (g,) = fit_folder(folder, options=options).groups
             ks.append(g.range_k)
             rhos.append(g.rho)
@@ -59,9 +43,11 @@ def bench_same_model(seeds: int = 20, k: float = 0.012, rho: float = 0.25, noise
             rho_se.append(g.rho_stderr)
             secs.append(g.seconds)
             solve_secs.append(g.solve_seconds)
+            used.append(g.n_samples)
     ks, rhos = np.array(ks), np.array(rhos)
     return {
         "truth": {"range_k": k, "rho": rho, "noise_sigma": noise, "seeds": seeds},
+        "samples_used": int(np.median(used)),
         "range_k": {"mean": float(ks.mean()), "std": float(ks.std(ddof=1)),
                     "crb": float(np.mean(k_se)), "std_over_crb": float(ks.std(ddof=1) / np.mean(k_se)),
                     "bias_over_crb": float((ks.mean() - k) / np.mean(k_se))},

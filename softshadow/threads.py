@@ -1,0 +1,21 @@
+"""The process's BLAS threads, fixed once at each entry point (NumPy only, no JAX)."""
+
+from __future__ import annotations
+
+from threadpoolctl import threadpool_limits
+
+__all__ = ["one_blas_thread"]
+
+
+def one_blas_thread():
+    """A context manager that limits NumPy's BLAS to one thread (``threadpoolctl``).
+
+    The entry points (the ``softshadow`` command, ``fitting.fit_photos``,
+    ``data_synth.synthesize``) run inside it, and the code below them writes its products
+    plainly (``@``, einsum). Why: OpenBLAS threads keep spinning after each call and starve
+    XLA's and Embree's threads on a small machine; renders and solves ran 10-20x slower after
+    one tall matrix product, and a (1.9M, 2) @ (2, 3) product took 3x longer with two BLAS
+    threads than with one (2 cores). The arrays BLAS sees here are small or tall and thin, so
+    one thread costs nothing.
+    """
+    return threadpool_limits(limits=1, user_api="blas")

@@ -1,0 +1,54 @@
+"""The benchmark's meshes: the built-in ones, the real MIT dragon, and decimated levels of detail.
+
+Names: ``pillar`` (176 faces) and ``ball`` (1,472) are the built-ins; ``dragon`` is the real
+Stanford dragon (an MIT-licensed remesh, decimated to the paper's 26,584 faces, vendored in
+``data/`` with its licence); ``knot`` is the built-in procedural stand-in called ``dragon`` in
+``softshadow.builtin_mesh`` (a rough trefoil tube, 26,600 faces).
+"""
+
+from __future__ import annotations
+
+import functools
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from softshadow import builtin_mesh
+
+__all__ = ["BENCH_MESHES", "MIT_DRAGON_PATH", "bench_mesh", "decimated", "mit_dragon"]
+
+MIT_DRAGON_PATH = Path(__file__).parent / "data" / "mit_dragon_26584.ply"
+BENCH_MESHES = ("pillar", "ball", "dragon", "knot")
+
+
+@functools.lru_cache(maxsize=None)
+def mit_dragon(length_m: float = 1.6) -> trimesh.Trimesh:
+    """The vendored dragon posed on the ground: its y-up frame turned z-up, scaled to
+    ``length_m`` along x (the built-in knot's size), standing on z = 0."""
+    mesh = trimesh.load(MIT_DRAGON_PATH, force="mesh", process=False)
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    v = np.stack([v[:, 0], -v[:, 2], v[:, 1]], axis=1)  # +90 deg about x: y up -> z up
+    v *= length_m / float(np.ptp(v[:, 0]))
+    v[:, 2] -= v[:, 2].min()
+    return trimesh.Trimesh(v, np.asarray(mesh.faces), process=False)
+
+
+def bench_mesh(name: str) -> trimesh.Trimesh:
+    """One of BENCH_MESHES as a trimesh (world metres, z up, on the ground)."""
+    if name == "dragon":
+        return mit_dragon()
+    if name == "knot":
+        return builtin_mesh("dragon")
+    if name in ("pillar", "ball"):
+        return builtin_mesh(name)
+    raise ValueError(f"unknown bench mesh {name!r}; choose one of {BENCH_MESHES}")
+
+
+def decimated(mesh: trimesh.Trimesh, faces: int) -> trimesh.Trimesh:
+    """A level of detail of ``mesh`` with about ``faces`` faces (quadric decimation,
+    fast-simplification); the mesh itself when it has no more faces than that."""
+    if faces >= len(mesh.faces):
+        return mesh
+    out = mesh.simplify_quadric_decimation(face_count=int(faces))
+    return trimesh.Trimesh(np.asarray(out.vertices), np.asarray(out.faces), process=False)

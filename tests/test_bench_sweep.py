@@ -1,0 +1,80 @@
+"""The speed-against-error harness: it runs on tiny sizes and writes its keys and files.
+
+Timings are not checked (the machine is shared); the error arithmetic is, on cases with a
+known answer.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from softshadow import GroundGrid
+from softshadow_cli.bench.meshes import bench_mesh, decimated, mit_dragon
+from softshadow_cli.bench.reference import PhysicalReference, block_mean
+from softshadow_cli.bench.speed_report import pareto_front
+from softshadow_cli.bench.sweep import image_error, linear_equivalent_k
+from softshadow_cli.main import main
+
+
+def test_pareto_front_keeps_only_undominated_points():
+    pts = [(10.0, 0.5), (1.0, 1.0), (5.0, 0.2), (20.0, 0.3), (2.0, 1.5)]
+    assert pareto_front(pts) == [1, 2]
+
+
+def test_block_mean_of_a_nested_grid_is_the_coarse_pixel():
+    fine = GroundGrid.around((0.3, -0.2), 2.0, 8)
+    coarse = GroundGrid.around((0.3, -0.2), 2.0, 4)
+    x = fine.pixel_centres()[..., 0]
+    np.testing.assert_allclose(block_mean(x, 2), coarse.pixel_centres()[..., 0], atol=1e-12)
+
+
+def test_image_error_is_zero_for_the_truth_and_sees_a_band_offset():
+    grid = GroundGrid.around((0.0, 0.0), 1.0, 8)
+    shading = np.linspace(0.2, 1.0, 64).reshape(8, 8)
+    vis = np.zeros((8, 8))
+    vis[2:4] = 0.5  # two rows of penumbra
+    ref = PhysicalReference(shading, vis, 0.0, 0.0)
+    none = lambda g: np.zeros((g.height, g.width), bool)
+    assert image_error(shading, grid, ref, grid, none)["rms"] == 0.0
+    off = shading.copy()
+    off[2:4] += 0.1
+    e = image_error(off, grid, ref, grid, none)
+    assert e["rms_band"] == pytest.approx(0.1) and e["rms"] == pytest.approx(0.1 * np.sqrt(16 / 64))
+    # A render twice as fine, block-averaged, compares equal.
+    fine = np.kron(shading, np.ones((2, 2)))
+    assert image_error(fine, GroundGrid.around((0.0, 0.0), 1.0, 16), ref, grid, none)["rms"] < 1e-12
+
+
+def test_linear_ramp_closest_to_the_disk_profile():
+    # CONVENTIONS: the best-fitting linear ramp to a real disk is about 0.854 tan r.
+    assert linear_equivalent_k(0.01) == pytest.approx(0.00854, abs=3e-5)
+
+
+def test_vendored_dragon_has_the_papers_face_count_and_stands_on_the_ground():
+    m = mit_dragon()
+    assert len(m.faces) == 26584 and m.is_watertight
+    assert m.bounds[0, 2] == pytest.approx(0.0) and np.ptp(m.vertices[:, 0]) == pytest.approx(1.6)
+    assert bench_mesh("dragon") is m
+    assert abs(len(decimated(m, 1000).faces) - 1000) <= 10
+
+
+def test_sweep_quick_writes_json_report_and_plot(tmp_path, monkeypatch, capsys):
+    monkeypatch.setenv("SOFTSHADOW_BENCH_CACHE", str(tmp_path / "cache"))
+    out, md = tmp_path / "bench.json", tmp_path / "docs" / "speed.md"
+    assert main(["bench", "--what", "sweep", "--quick", "--no-fit", "--json", str(out), "--report", str(md)]) == 0
+    result = json.loads(out.read_text())
+    for key in ("pillar", "ball", "dragon"):
+        case = result[key]
+        assert case["median_ms"] > 0 and case["error"]["rms"] >= 0 and case["error"]["band_pixels"] > 0
+    for sweep in ("resolution", "profile", "dtype", "lod"):
+        assert result[sweep] and all("error" in c for c in result[sweep])
+    assert [c["dtype"] for c in result["dtype"]] == ["float32", "float64"]
+    assert "fit_samples" not in result  # --no-fit (the fit sweep reuses fit.bench_same_model)
+    assert result["environment"]["versions"]["jax"]
+    assert list((tmp_path / "cache").glob("reference-*.npz"))  # the truth is cached
+    text = md.read_text()
+    assert "img/speed_vs_error_pareto.png" in text and result["environment"]["date_utc"] in text
+    assert (md.parent / "img" / "speed_vs_error_pareto.png").stat().st_size > 1000

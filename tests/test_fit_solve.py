@@ -1,0 +1,142 @@
+"""The fit's steps one by one (``fitting.solve``): parameter layout, covariance, the k/rho
+transform, penumbra widths, identifiability and the robust scale."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from fitting.model import FitParams, Prediction, k_from_raw, rho_from_raw
+from fitting.solve import (MAX_K_REL_STDERR, MIN_PENUMBRA_PX, covariance, identifiability, k_rho_with_errors,
+                           penumbra_width_px, robust_delta)
+
+
+def _params(n_photos=3, seed=0):
+    rng = np.random.default_rng(seed)
+    f = lambda *shape: jnp.asarray(rng.normal(size=shape))
+    return FitParams(raw_k=f(), raw_rho=f(), raw_blur=f(), sun_delta_deg=f(2), log_level=f(n_photos, 2),
+                     gradient=f(n_photos, 2))
+
+
+def test_parameter_vector_layout_names_every_entry_and_round_trips():
+    params = _params(3)
+    x = np.asarray(params.vector())
+    lay = FitParams.layout(3)
+    assert x.shape == (5 + 4 * 3,)
+    for name, where in lay.items():
+        np.testing.assert_array_equal(x[where], np.ravel(getattr(params, name)), err_msg=name)
+    back = FitParams.from_vector(jnp.asarray(x), 3)
+    for name in lay:
+        np.testing.assert_array_equal(getattr(back, name), getattr(params, name))
+
+
+def _jac_with_singular_values(s, n=200, seed=1):
+    """J (n, p) = U diag(s) V^T with known singular values; also V."""
+    rng = np.random.default_rng(seed)
+    u, _ = np.linalg.qr(rng.normal(size=(n, len(s))))
+    v, _ = np.linalg.qr(rng.normal(size=(len(s), len(s))))
+    return (u * s) @ v.T, v
+
+
+def test_covariance_matches_the_normal_equations_when_well_conditioned():
+    rng = np.random.default_rng(0)
+    jac = rng.normal(size=(300, 6))
+    r = rng.normal(size=300)
+    cov, s2 = covariance(r, jac, 300)
+    assert s2 == pytest.approx(float(r @ r) / (300 - 6))
+    np.testing.assert_allclose(cov, np.linalg.inv(jac.T @ jac) * s2, rtol=1e-10, atol=1e-14)
+
+
+def test_covariance_keeps_a_badly_conditioned_direction_that_normal_equations_lose():
+    """cond(J) = 1e5: the normal equations (condition 1e10) lose about six digits, the SVD
+    of J about one."""
+    s = np.array([1.0, 0.3, 1e-3, 1e-5])
+    jac, v = _jac_with_singular_values(s)
+    r = np.full(200, np.sqrt((200 - 4) / 200))  # s2 = 1
+    cov, s2 = covariance(r, jac, 200)
+    exact = (v / s**2) @ v.T * s2
+    error = lambda c: np.abs(c - exact).max() / np.abs(exact).max()
+    assert error(cov) < 1e-10
+    assert error(np.linalg.pinv(jac.T @ jac, rcond=1e-12) * s2) > 1e-7  # what the SVD avoids
+
+
+def test_covariance_gives_switched_off_parameters_zero_variance():
+    rng = np.random.default_rng(2)
+    jac = rng.normal(size=(100, 5))
+    jac[:, 2] = 0.0  # a term switched off (e.g. blur when not fitted)
+    cov, s2 = covariance(rng.normal(size=100), jac, 100)
+    assert np.abs(cov[2]).max() < 1e-15 and np.abs(cov[:, 2]).max() < 1e-15
+    keep = [0, 1, 3, 4]
+    sub = jac[:, keep]
+    np.testing.assert_allclose(cov[np.ix_(keep, keep)], np.linalg.inv(sub.T @ sub) * s2, rtol=1e-10)
+
+
+@pytest.mark.parametrize("raw_k, raw_rho", [(-1.3, -0.8), (0.4, 1.7), (2.5, 0.0)])
+def test_k_rho_errors_follow_the_reparameterisation(raw_k, raw_rho):
+    """sigma_k = |dk/draw_k| sigma_raw (finite differences of k_from_raw), same for rho."""
+    params = dataclasses.replace(_params(2), raw_k=jnp.asarray(raw_k), raw_rho=jnp.asarray(raw_rho))
+    p = len(np.asarray(params.vector()))
+    lay = FitParams.layout(2)
+    cov = np.diag(np.linspace(0.5, 2.0, p))
+    est = k_rho_with_errors(params, cov)
+    h = 1e-6
+    dk = (float(k_from_raw(raw_k + h)) - float(k_from_raw(raw_k - h))) / (2 * h)
+    drho = (float(rho_from_raw(raw_rho + h)) - float(rho_from_raw(raw_rho - h))) / (2 * h)
+    assert est.range_k == pytest.approx(float(k_from_raw(raw_k)), rel=1e-12)
+    assert est.rho == pytest.approx(float(rho_from_raw(raw_rho)), rel=1e-12)
+    assert est.range_stderr == pytest.approx(abs(dk) * np.sqrt(cov[lay["raw_k"], lay["raw_k"]][0, 0]), rel=1e-6)
+    assert est.rho_stderr == pytest.approx(abs(drho) * np.sqrt(cov[lay["raw_rho"], lay["raw_rho"]][0, 0]), rel=1e-6)
+
+
+class _Samples:
+    def __init__(self, n):
+        self.observed = np.zeros(n)
+
+
+def test_penumbra_width_is_two_over_the_pixel_slope_inside_the_penumbra():
+    u = np.array([-2.0, -0.5, 0.0, 0.5, 3.0, 0.2])
+    slope = np.array([9.0, 0.5, 0.25, 1.0, 9.0, 0.5])  # widths 4, 8, 2, 4 px inside |u| < 1
+    pred = Prediction(np.zeros(6), np.zeros(6), u, slope)
+    median, iqr = penumbra_width_px([_Samples(4), _Samples(2)], pred)
+    assert median == pytest.approx(4.0)
+    assert iqr == pytest.approx(np.subtract(*np.percentile([4.0, 8.0, 2.0, 4.0], [75, 25])))
+    none = Prediction(np.zeros(2), np.zeros(2), np.array([2.0, -3.0]), np.ones(2))
+    assert penumbra_width_px([_Samples(2)], none) == (None, None)
+
+
+def test_identifiable_when_the_penumbra_is_resolved_and_k_is_measured():
+    ident = identifiability(0.01, 0.001, 3.0)
+    assert ident.identifiable and ident.range_k == 0.01 and ident.warning is None
+
+
+@pytest.mark.parametrize("k, se, pen, upper", [
+    (0.01, 0.001, 0.5, 0.01 / 0.5),            # penumbra under a pixel: k at one pixel's width
+    (0.01, 0.004, 0.4, max(0.018, 0.01 / 0.4)),
+    (0.01, 0.006, 3.0, 0.01 + 2 * 0.006),      # k lost in its own noise: k + 2 sigma
+    (0.002, 0.0005, None, 0.002 + 2 * 0.0005),  # no sample inside the penumbra
+])
+def test_not_identifiable_gives_an_upper_bound_and_a_warning(k, se, pen, upper):
+    ident = identifiability(k, se, pen)
+    assert not ident.identifiable
+    assert ident.range_k == pytest.approx(upper)
+    assert ident.range_k >= k
+    assert "upper bound" in ident.warning
+
+
+def test_identifiability_thresholds():
+    k = 0.01
+    assert identifiability(k, 0.001, MIN_PENUMBRA_PX).identifiable
+    assert not identifiability(k, 0.001, MIN_PENUMBRA_PX * 0.99).identifiable
+    assert identifiability(k, MAX_K_REL_STDERR * k, 2.0).identifiable
+    assert not identifiability(k, MAX_K_REL_STDERR * k * 1.01, 2.0).identifiable
+
+
+def test_robust_scale_is_three_normal_sigmas_and_ignores_padding():
+    rng = np.random.default_rng(0)
+    r = np.concatenate([rng.normal(0, 0.02, 20000), np.zeros(5000), rng.normal(0, 5.0, 500)])
+    assert robust_delta(r, True) == pytest.approx(3 * 0.02, rel=0.05)
+    assert robust_delta(r, False) == 0.0
+    assert robust_delta(np.zeros(10), True) == pytest.approx(3e-3)
