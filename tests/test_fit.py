@@ -148,6 +148,59 @@ def test_hard_fit_with_k_near_zero_is_an_upper_bound(hard_fit):
     assert abs(g.rho - rho) < 0.005
 
 
+@pytest.fixture(scope="module")
+def hard_cases_preset(tmp_path_factory):
+    """The hard-cases preset at 320 x 240, rendered by data_synth's model renderer, fitted once."""
+    from data_synth import synthesize
+    from data_synth.renderers import RenderQuality
+    from fitting.api import fit_folder
+    from fitting.solve import FitOptions
+    quality = RenderQuality(sun_samples=16, sky_samples=256, sky_fine_nodes=48, object_sky_samples=16)
+    folder = synthesize(tmp_path_factory.mktemp("hard_cases") / "h", "hard-cases", size=(320, 240),
+                        renderer="model", progress=False, render_quality=quality)
+    truth = json.loads((folder / "truth.json").read_text())
+    return truth, fit_folder(folder, options=FitOptions(plots=False))
+
+
+def test_hard_cases_preset_reports_its_bad_photos(hard_cases_preset):
+    truth, results = hard_cases_preset
+    reasons = {s["photo"]: s["reason"] for s in results.skipped}
+    for expected in truth["expected_skipped"]:
+        assert expected["photo"] in reasons
+    notime = [name for name, d in truth["photos_detail"].items() if d["time"] is None]
+    assert notime and all("no time" in reasons[name] for name in notime)
+
+
+# Measured at 320 x 240 (fitted value against the truth, k = 0.00465 everywhere): each of these
+# groups comes back with a wrong value that is neither flagged as an upper bound nor unreliable.
+HARD_PRESET_FAILURES = {
+    "zenith": "known bug: sun at 87 deg, the shadow is under the pillar: rho 0.001 for a truth of 0.20, "
+              "with reliable = true (only k is flagged as not identifiable)",
+    "subpixel": "known bug: penumbra under a pixel (80 m top-down map): k 0.065 (14x the truth) and rho "
+                "0.55 for 0.25, identifiable and reliable",
+    "out-of-frame": "known bug: shadow partly out of frame: rho 0.39 for 0.30 (k -36 %), reliable",
+    "clutter": "known bug: cluttered ground: k +50 % (0.0070) and rho 0.31 for 0.28, reliable",
+}
+
+
+@pytest.mark.parametrize("label", [
+    pytest.param(label, marks=pytest.mark.xfail(reason=HARD_PRESET_FAILURES[label], strict=True))
+    if label in HARD_PRESET_FAILURES else label
+    for label in ("low-sun", "zenith", "subpixel", "out-of-frame", "clutter")])
+def test_hard_cases_preset_recovers_the_truth_or_says_it_cannot(hard_cases_preset, label):
+    """Each group: k within 15 % of the truth, or not identifiable with range_k an upper bound;
+    rho within 0.02, or the group marked unreliable."""
+    truth, results = hard_cases_preset
+    t = {g["label"]: g for g in truth["groups"]}[label]
+    (g,) = [g for g in results.groups if g.label == label]
+    assert g.error is None, g.error
+    if g.identifiable:
+        assert abs(g.range_k - t["range_k"]) / t["range_k"] < 0.15, (g.range_k, t["range_k"])
+    else:
+        assert g.range_k >= t["range_k"] and any("upper bound" in w for w in g.warnings)
+    assert abs(g.rho - t["rho"]) < 0.02 or not g.reliable, (g.rho, t["rho"], g.reliable)
+
+
 def test_bad_files_are_skipped_with_reasons_and_do_not_stop_the_rest(tmp_path):
     from fitting.api import fit_folder
     folder = _render_folder(tmp_path / "mixed", seed=3)
