@@ -42,6 +42,8 @@ class PhotoMetadata:
     altitude_m: float | None = None
     make: str = "softshadow"
     model: str = "data_synth"
+    focal_px: float | None = None  # the pinhole focal length in pixels, written as a camera would
+    size: tuple[int, int] | None = None  # (width, height) in pixels, with focal_px
 
 
 def _dms(value: float):
@@ -68,6 +70,18 @@ def exif_bytes(meta: PhotoMetadata) -> bytes:
         minutes = int(off.total_seconds() // 60)
         sign = "+" if minutes >= 0 else "-"
         exif[piexif.ExifIFD.OffsetTimeOriginal] = f"{sign}{abs(minutes) // 60:02d}:{abs(minutes) % 60:02d}".encode()
+    if meta.focal_px is not None and meta.size is not None:
+        # A 36 mm wide sensor across the image's long side: FocalLength in mm and the focal
+        # plane's resolution in pixels per centimetre give the focal length in pixels back.
+        px_per_mm = max(meta.size) / 36.0
+        focal = Fraction(meta.focal_px / px_per_mm).limit_denominator(100000)
+        res = Fraction(px_per_mm * 10.0).limit_denominator(100000)
+        exif[piexif.ExifIFD.FocalLength] = (focal.numerator, focal.denominator)
+        exif[piexif.ExifIFD.FocalPlaneXResolution] = (res.numerator, res.denominator)
+        exif[piexif.ExifIFD.FocalPlaneYResolution] = (res.numerator, res.denominator)
+        exif[piexif.ExifIFD.FocalPlaneResolutionUnit] = 3  # centimetres
+        exif[piexif.ExifIFD.PixelXDimension] = int(meta.size[0])
+        exif[piexif.ExifIFD.PixelYDimension] = int(meta.size[1])
     if meta.latitude is not None and meta.longitude is not None:
         gps[piexif.GPSIFD.GPSVersionID] = (2, 3, 0, 0)
         gps[piexif.GPSIFD.GPSLatitudeRef] = b"N" if meta.latitude >= 0 else b"S"

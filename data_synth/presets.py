@@ -313,7 +313,8 @@ _BUILDERS = {
     "wall": _wall,
     "hard-cases": _hard_cases,
 }
-PRESETS = tuple(_BUILDERS)
+# "street" has its own scene (many occluders, zones of ground, painted clouds): data_synth.street.
+PRESETS = tuple(_BUILDERS) + ("street",)
 
 
 def build_preset(name: str, seed: int = 0, size: tuple[int, int] | None = None) -> PresetPlan:

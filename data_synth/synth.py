@@ -164,6 +164,12 @@ def _synthesize(out_dir, preset, seed, renderer, size, fmt, quality, progress, f
         raise ValueError(f"cameras must be 'explicit' or 'markers', got {cameras!r}")
     if not 1 <= int(quality) <= 100:
         raise ValueError(f"JPEG quality must be 1..100, got {quality}")
+    if preset == "street":
+        if renderer != "physical":
+            raise ValueError("preset 'street' is rendered by the physical renderer only")
+        from .street import synthesize_street
+        _prepare_out_dir(Path(out_dir), force)
+        return synthesize_street(out_dir, seed, size, fmt or "jpg", quality, render_quality, noise)
     plan: PresetPlan = build_preset(preset, seed, size)
     fmt = fmt or plan.fmt
     if fmt not in FORMATS:
@@ -231,7 +237,9 @@ def _synthesize(out_dir, preset, seed, renderer, size, fmt, quality, progress, f
             continue
         exif_time = photo.time if (photo.exif_time and fmt == "jpg") else None
         site = plan.site or {}
-        meta = PhotoMetadata(exif_time, site.get("latitude"), site.get("longitude"))
+        focal = float(camera.K[0][0]) if isinstance(camera, PinholeCamera) else None
+        meta = PhotoMetadata(exif_time, site.get("latitude"), site.get("longitude"), focal_px=focal,
+                             size=tuple(plan.size))
         write_photo(out / name, linear, fmt, quality, meta)
         files.append(name)
         entry = PhotoSpec(camera=cam_spec if (cameras == "explicit" or cam_spec.kind == "topdown") else None)

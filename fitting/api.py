@@ -10,6 +10,7 @@ group. With ``out_dir`` every finished group is written at once to
 from __future__ import annotations
 
 import concurrent.futures
+import dataclasses
 import datetime as _dt
 import json
 import re
@@ -25,19 +26,60 @@ from scene import CameraSpec, SceneError, SceneSpec, load_scene, photo_sun
 from softshadow import (MeshError, Pose, SoftShadowModel, SunBelowHorizonError, check_sun_above_horizon,
                         one_blas_thread)
 
-from .files import atomic_writer, software_versions
+from .files import software_versions
 from .grouping import PhotoGroup, group_photos, photo_time
 from .ignore_masks import IgnoreMaskError, ignore_mask_path, read_ignore_mask
+from .photo_check import judge, photo_agreement
 from .photos import Photo, PhotoError, list_photos, read_photo
+from .resume import GroupStore, group_key, photo_digest
 from .results import FitResults, GroupResult
 from .solve import FitOptions, fit_group
 from .views import PhotoView
 
-__all__ = ["fit_folder", "fit_photos", "fit_and_report", "FolderError"]
+__all__ = ["fit_folder", "fit_photos", "fit_and_report", "FolderError", "unreadable_summary"]
 
 
 class FolderError(ValueError):
-    """The folder as a whole cannot be fitted (no images, unreadable scene.toml)."""
+    """The folder as a whole cannot be fitted (no images, unreadable scene.toml): a one-line
+    reason; ``skipped`` holds the per-file reasons behind it ({"photo", "reason"}), if any."""
+
+    def __init__(self, message: str, skipped: list[dict] | None = None):
+        super().__init__(message)
+        self.skipped = list(skipped or [])
+
+
+def unreadable_summary(skipped: list[dict]) -> str:
+    """One line for a folder where nothing could be read: how many files and why, by reason
+    ("200 files, none readable: 199 text files, 1 empty file"); the details are in ``skipped``."""
+    if not skipped:
+        return "no image files"
+    kinds: dict[tuple[str, str], int] = {}
+    for s in skipped:
+        kind = _reason_kind(str(s.get("reason", "")))
+        kinds[kind] = kinds.get(kind, 0) + 1
+    n = len(skipped)
+    parts = ", ".join(f"{c} {kind[0] if c == 1 else kind[1]}"
+                      for kind, c in sorted(kinds.items(), key=lambda kv: (-kv[1], kv[0])))
+    return f"{n} file{'s' if n != 1 else ''}, none readable: {parts}"
+
+
+# Reasons of fitting.photos, by the words they start with -> the kind of file (singular, plural).
+_REASON_KINDS = (("not an image (the file holds text)", "text file", "text files"),
+                 ("empty file", "empty file", "empty files"),
+                 ("not an image (extension", "file of another type", "files of other types"),
+                 ("not an image (no extension", "file without extension", "files without extension"),
+                 ("not an image (content", "file that is not an image", "files that are not images"),
+                 ("truncated", "truncated image", "truncated images"),
+                 ("corrupt", "corrupt image", "corrupt images"),
+                 ("unsupported", "unsupported image", "unsupported images"),
+                 ("not a RAW", "unreadable RAW file", "unreadable RAW files"))
+
+
+def _reason_kind(reason: str) -> tuple[str, str]:
+    for start, one, many in _REASON_KINDS:
+        if reason.startswith(start):
+            return one, many
+    return "unreadable file", "unreadable files"
 
 
 def _safe_label(label: str) -> str:
@@ -124,13 +166,59 @@ def _measure_without_scene(photo: Photo, when, scene: SceneSpec | None) -> Group
     return result
 
 
+def _fit_checked(model, pose, views: list[PhotoView], group: PhotoGroup,
+                 options: FitOptions) -> tuple[GroupResult, list[dict]]:
+    """Fit a group, then check each photo against the fit (``photo_check``): a photo that does not
+    fit is left out (a ``skipped`` entry naming the group and why) and the group refitted without
+    it; a group where no photo shows a shadow gets "no shadow in view" and no values; a doubt that
+    cannot be resolved makes the group unreliable, with a warning."""
+    start = _time.perf_counter()
+    # The check reads the fit's profile data, which the fit builds only when plots are wanted.
+    checked = dataclasses.replace(options, plots=True)
+    left_out: list[dict] = []
+    while True:
+        result = _fit_group_with_sun(model, pose, views, PhotoGroup(group.label, group.time,
+                                                                    [v.name for v in views]), checked)
+        if not result.fitted:
+            break
+        verdict = judge(photo_agreement(result))
+        if verdict.no_shadow:
+            result = GroupResult(group.label, group.time, [v.name for v in views], error=verdict.no_shadow,
+                                 warnings=result.warnings)
+            break
+        if verdict.leave_out and len(views) > 1:
+            name, reason = verdict.leave_out[0]
+            left_out.append({"photo": name, "reason": f"left out of group {group.label}: {reason}"})
+            views = [v for v in views if v.name != name]
+            continue
+        if verdict.warnings:
+            result.warnings += verdict.warnings
+            result.reliable = False
+        break
+    if result.fitted and result.identifiable and result.range_k is not None and result.range_k > options.range_k_max:
+        # The samples' band and the start were sized for k up to range_k_max: beyond it the band
+        # may cut the penumbra short.
+        result.warnings.append(f"k = {result.range_k:.4g} is beyond range_k_max = {options.range_k_max:g}: the "
+                               "samples may not cover the whole penumbra (raise --range-k-max)")
+        result.reliable = False
+    if left_out and result.fitted:
+        result.warnings.append("refitted without " + ", ".join(s["photo"] for s in left_out)
+                               + ", which did not fit the other photos (see skipped)")
+    if not options.plots:
+        result.plot_profiles, result.plot_overlays = [], []
+    result.seconds = _time.perf_counter() - start
+    return result, left_out
+
+
 def fit_photos(photos: list[Photo], scene: SceneSpec | None = None, options: FitOptions | None = None,
                half_size: bool = False, progress: Callable | None = None,
-               done: dict[str, GroupResult] | None = None,
+               store: GroupStore | None = None,
                on_group: Callable[[GroupResult], None] | None = None, jobs: int = 1) -> FitResults:
     """Fit photos already decoded (``fitting.photos.read_photo``) with an optional scene.
 
-    done: results of groups already fitted (by label), reused when their photos match.
+    store: finished groups kept on disk (``fitting.resume.GroupStore``): a group whose resume key
+    (photos' contents, scene, options, software) matches a record is reused, and every group
+    fitted is written there as soon as it is finished.
     on_group: called with each group's result as soon as it is finished.
     progress: a callable returning a progress bar (tqdm-like: update, close) for the groups.
     jobs: groups fitted at once (threads).
@@ -138,7 +226,8 @@ def fit_photos(photos: list[Photo], scene: SceneSpec | None = None, options: Fit
     # Fits run in float64 (LM in float32 stalls short of its tolerances), scoped to this call so
     # that a caller's own JAX code keeps its precision; one BLAS thread (softshadow.one_blas_thread).
     with jax.enable_x64(True), one_blas_thread():
-        return _fit_photos(photos, scene, options, progress, done, on_group, jobs)
+        return _fit_photos(photos, scene, options or FitOptions(), half_size, progress, store, on_group,
+                           jobs)
 
 
 def _in_float64(fn, *args):
@@ -147,16 +236,16 @@ def _in_float64(fn, *args):
         return fn(*args)
 
 
-def _fit_photos(photos, scene, options, progress, done, on_group, jobs) -> FitResults:
-    options = options or FitOptions()
+def _fit_photos(photos, scene, options, half_size, progress, store, on_group, jobs) -> FitResults:
     skipped: list[dict] = []
+    software = software_versions()
     by_name = {p.name: p for p in photos}
     times = {}
     for p in photos:
         try:
             times[p.name] = photo_time(p.name, p.exif, scene)
         except SceneError as exc:
-            times[p.name] = None
+            # One entry per photo: the unreadable time, not also "no time" from the grouping.
             skipped.append({"photo": p.name, "reason": str(exc)})
     groups_out: list[GroupResult] = []
     if scene is None or scene.object is None:
@@ -166,7 +255,7 @@ def _fit_photos(photos, scene, options, progress, done, on_group, jobs) -> FitRe
             groups_out.append(result)
             if on_group:
                 on_group(result)
-        return FitResults(groups_out, skipped, software_versions())
+        return FitResults(groups_out, skipped, software)
     if scene.receiver.kind != "plane":
         # Never fitted silently as flat ground: the fitter models the plane z = 0 only (so far).
         raise FolderError(f"[receiver] kind {scene.receiver.kind!r} cannot be fitted yet: the fitter "
@@ -176,12 +265,20 @@ def _fit_photos(photos, scene, options, progress, done, on_group, jobs) -> FitRe
     except MeshError as exc:
         raise FolderError(f"cannot use the mesh: {exc}") from exc
     pose = Pose(scene.object.position, scene.object.rotation_deg, scene.object.scale)
-    explicit = {n: scene.photo(n).group for n in by_name if scene.photo(n).group}
-    groups, no_time = group_photos({n: times.get(n) for n in by_name}, explicit)
+    timed = {n: times[n] for n in times}
+    explicit = {n: scene.photo(n).group for n in timed if scene.photo(n).group}
+    groups, no_time = group_photos(timed, explicit)
     skipped += [{"photo": n, "reason": r} for n, r in no_time]
+    digests = {n: photo_digest(p) for n, p in by_name.items()} if store is not None else {}
+
     def fit_one(group: PhotoGroup) -> tuple[GroupResult, list[dict]]:
-        if done and group.label in done and sorted(done[group.label].photos) == sorted(group.photos):
-            return done[group.label], []
+        key = None
+        if store is not None:
+            key = group_key({n: digests[n] for n in group.photos}, scene, options, software,
+                            {"half_size": half_size, "label": group.label})
+            kept = store.get(key)
+            if kept is not None:
+                return kept
         views, group_skipped = [], []
         for name in group.photos:
             photo = by_name[name]
@@ -193,57 +290,64 @@ def _fit_photos(photos, scene, options, progress, done, on_group, jobs) -> FitRe
                 group_skipped.append({"photo": name, "reason": str(exc).splitlines()[0]})
                 continue
             views.append(view)
-        kept = [v.name for v in views]
         if not views:
-            return GroupResult(group.label, group.time, group.photos,
-                               error="no usable photo in this group (see skipped)"), group_skipped
-        try:
-            result = _fit_group_with_sun(model, pose, views, PhotoGroup(group.label, group.time, kept),
-                                         options)
-        except Exception as exc:  # a failed group must not lose the others
-            result = GroupResult(group.label, group.time, kept,
-                                 error=f"fit failed: {type(exc).__name__}: {exc}".splitlines()[0])
+            result = GroupResult(group.label, group.time, group.photos,
+                                 error="no usable photo in this group (see skipped)")
+        else:
+            try:
+                result, left_out = _fit_checked(model, pose, views, group, options)
+                group_skipped += left_out
+            except Exception as exc:  # a failed group must not lose the others
+                result = GroupResult(group.label, group.time, [v.name for v in views],
+                                     error=f"fit failed: {type(exc).__name__}: {exc}".splitlines()[0])
+        if store is not None:
+            store.put(result, key, group_skipped, _safe_label(group.label))
         return result, group_skipped
 
     ordered: dict[int, GroupResult] = {}
     bar = progress(groups) if progress else None
-    if jobs > 1 and len(groups) > 1:
-        # Threads: XLA releases the GIL, and the compiled solver is shared between them.
-        with concurrent.futures.ThreadPoolExecutor(max_workers=jobs) as pool:
-            futures = {pool.submit(_in_float64, fit_one, g): i for i, g in enumerate(groups)}
-            for future in concurrent.futures.as_completed(futures):
-                result, more = future.result()
-                ordered[futures[future]] = result
+    try:
+        if jobs > 1 and len(groups) > 1:
+            # Threads: XLA releases the GIL, and the compiled solver is shared between them.
+            with concurrent.futures.ThreadPoolExecutor(max_workers=jobs) as pool:
+                futures = {pool.submit(_in_float64, fit_one, g): i for i, g in enumerate(groups)}
+                for future in concurrent.futures.as_completed(futures):
+                    result, more = future.result()
+                    ordered[futures[future]] = result
+                    skipped += more
+                    if on_group:
+                        on_group(result)
+                    if bar is not None:
+                        bar.update(1)
+        else:
+            for i, group in enumerate(groups):
+                result, more = fit_one(group)
+                ordered[i] = result
                 skipped += more
                 if on_group:
                     on_group(result)
                 if bar is not None:
                     bar.update(1)
-    else:
-        for i, group in enumerate(groups):
-            result, more = fit_one(group)
-            ordered[i] = result
-            skipped += more
-            if on_group:
-                on_group(result)
-            if bar is not None:
-                bar.update(1)
-    if bar is not None:
-        bar.close()
+    finally:
+        if bar is not None:  # also when interrupted: the next line starts on a line of its own
+            bar.close()
     groups_out += [ordered[i] for i in range(len(groups))]
-    return FitResults(groups_out, skipped, software_versions())
+    return FitResults(groups_out, skipped, software)
 
 
 def fit_folder(path, scene: SceneSpec | str | Path | None = None, options: FitOptions | None = None,
                out_dir=None, force: bool = False, half_size: bool = False,
                progress: Callable | None = None, jobs: int = 1,
-               on_group: Callable[[GroupResult], None] | None = None) -> FitResults:
+               on_group: Callable[[GroupResult], None] | None = None,
+               on_resume: Callable[[int, int], None] | None = None) -> FitResults:
     """Fit every time of day in a photo folder.
 
     scene: a SceneSpec, a path to a scene.toml, or None to read ``path/scene.toml`` if any.
     out_dir: when given, finished groups are kept in ``out_dir/groups/*.json`` as they
-    finish and reused on the next run (``force`` refits them).
+    finish and reused on the next run when nothing that decides them changed (``fitting.resume``);
+    ``force`` removes the kept groups and a previous report first, then refits everything.
     on_group: called with each group's result as soon as it is finished (and kept).
+    on_resume: called once with (groups reused, groups in all) when kept groups were reused.
     Raises FolderError when nothing in the folder can be read.
     """
     folder = Path(path)
@@ -271,40 +375,32 @@ def fit_folder(path, scene: SceneSpec | str | Path | None = None, options: FitOp
         except IgnoreMaskError as exc:
             skipped.append({"photo": f.name, "reason": str(exc)})
     if not photos:
-        reasons = "; ".join(f"{s['photo']}: {s['reason']}" for s in skipped) or "no image files"
-        raise FolderError(f"no readable photo in {folder} ({reasons})")
-    done: dict[str, GroupResult] = {}
-    groups_dir = None
+        raise FolderError(f"no readable photo in {folder}: {unreadable_summary(skipped)}", skipped)
+    store = None
     if out_dir is not None:
-        groups_dir = Path(out_dir) / "groups"
-        groups_dir.mkdir(parents=True, exist_ok=True)
-        if not force:
-            for f in groups_dir.glob("*.json"):
-                try:
-                    g = GroupResult.from_json(json.loads(f.read_text()))
-                    done[g.label] = g
-                except (ValueError, TypeError, OSError):
-                    continue  # a damaged record is simply refitted
-
-    def keep(result: GroupResult):
-        if groups_dir is not None:
-            with atomic_writer(groups_dir / f"{_safe_label(result.label)}.json") as fh:
-                fh.write(json.dumps(result.to_json(), indent=1))
-        if on_group is not None:
-            on_group(result)
-
-    results = fit_photos(photos, scene, options, half_size, progress, done, keep, jobs)
+        from .report import clear_report
+        store = GroupStore(Path(out_dir) / "groups", force=force)
+        if force:
+            # Old groups and the old report go before the first new group is kept: a refit
+            # stopped half-way leaves only the new groups, which the next run resumes.
+            store.clear()
+            clear_report(out_dir)
+    results = fit_photos(photos, scene, options, half_size, progress, store, on_group, jobs)
+    if store is not None and store.reused and on_resume is not None:
+        on_resume(store.reused, len(results.groups))
     results.skipped = skipped + results.skipped
     return results
 
 
 def fit_and_report(photo_dir, out_dir, options: FitOptions | None = None, force: bool = False,
                    half_size: bool = False, truth=None, reference=None, jobs: int = 1,
-                   progress: Callable | None = None) -> FitResults:
+                   progress: Callable | None = None,
+                   on_resume: Callable[[int, int], None] | None = None) -> FitResults:
     """Fit a folder and write everything into ``out_dir``: results.json, table2.md/.csv and
     plots/ (``fit_folder`` then ``report.write_report``); returns the FitResults.
 
     truth, reference: a truth.json document and the paper's table, shown beside the fit.
+    on_resume: see ``fit_folder``.
     """
     from .report import plot_group_safely, write_report
 
@@ -317,7 +413,7 @@ def fit_and_report(photo_dir, out_dir, options: FitOptions | None = None, force:
                     if options.plots else None)
         results = fit_folder(photo_dir, options=options, out_dir=out_dir, force=force,
                              half_size=half_size, progress=progress, jobs=jobs,
-                             on_group=on_group)
+                             on_group=on_group, on_resume=on_resume)
         group_plots = [p for f in pending for p in f.result()]
     write_report(results, out_dir, reference=reference, truth=truth, plots=options.plots,
                  group_plots=group_plots)

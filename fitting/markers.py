@@ -182,19 +182,25 @@ def _correspondences(gray8: np.ndarray, camera_spec: CameraSpec):
     # refines each saddle point itself); on rendered views this was as good as any method.
     detector = cv2.aruco.CharucoDetector(board, cv2.aruco.CharucoParameters(),
                                          _detector_params(cv2.aruco.CORNER_REFINE_SUBPIX))
-    ch_corners, ch_ids, _, mk_ids = detector.detectBoard(gray8)
+    ch_corners, ch_ids, mk_corners, mk_ids = detector.detectBoard(gray8)
     n_charuco = 0 if ch_ids is None else len(ch_ids)
     if n_charuco >= MIN_POINTS:
         return (board_world_points(camera_spec, np.ravel(ch_ids)),
                 np.asarray(ch_corners, dtype=np.float64).reshape(-1, 2), "charuco")
     corners, ids = _board_markers(gray8, board)
+    if mk_ids is not None and len(mk_ids) > len(ids):
+        # The ChArUco detector's own markers, when it found more than the AprilTag-refined pass.
+        on_board = np.isin(np.ravel(mk_ids), np.ravel(board.getIds()))
+        corners = np.asarray(mk_corners, dtype=np.float64).reshape(-1, 4, 2)[on_board]
+        ids = np.ravel(mk_ids)[on_board].astype(np.int64)
     if 4 * len(ids) >= MIN_POINTS:
         world = marker_world_points(camera_spec, ids).reshape(-1, 3)
         return world, corners.reshape(-1, 2), "markers"
-    n_markers = max(len(ids), 0 if mk_ids is None else len(mk_ids))
-    if n_charuco == 0 and n_markers == 0:
+    if n_charuco == 0 and len(ids) == 0:
         raise RegistrationError(f"board not found (no {camera_spec.dictionary} markers detected)")
-    raise RegistrationError(f"too few corners ({max(n_charuco, 4 * n_markers)}; need {MIN_POINTS})")
+    # Both counts decided: neither the chessboard corners nor the markers' corners were enough.
+    raise RegistrationError(f"too few board corners: {n_charuco} chessboard corners and {len(ids)} "
+                            f"marker{'s' if len(ids) != 1 else ''} ({4 * len(ids)} corners); need {MIN_POINTS}")
 
 
 def _pose(world: np.ndarray, image: np.ndarray, K: np.ndarray, dist):
@@ -268,7 +274,7 @@ def register_board(gray_or_rgb_image, camera_spec: CameraSpec, K=None, exif: dic
         caller (source "given"); when K is None, ``camera_spec.K`` with ``camera_spec.dist``
         ("scene"), else EXIF (``fitting.exif.intrinsics_from_exif``, no distortion: "exif"),
         else the focal length is fitted ("fitted").
-    Raises RegistrationError ("board not found ...", "too few corners (n; ...)", "focal length
+    Raises RegistrationError ("board not found ...", "too few board corners: ...", "focal length
     not constrained ...") with a one-line reason.
     """
     gray8 = _to_gray8(gray_or_rgb_image)

@@ -37,6 +37,7 @@ __all__ = [
     "PAPER_TABLE2", "PAPER_TIME_TOLERANCE_MIN", "software_versions", "nearest_paper_time",
     "reference_for_group", "brightness_stderr", "range_stderr_paper", "TableCell",
     "write_results_json", "write_table2", "format_table", "write_report",
+    "REPORT_FILES", "clear_report",
 ]
 
 logger = logging.getLogger(__name__)
@@ -45,6 +46,22 @@ UPPER_BOUND = "≤"
 MISSING = "—"
 RANGE_NAME = "Range of the soft shadow"
 BRIGHTNESS_NAME = "Brightness of the shadow"
+
+#: The files of a finished report in OUT_DIR (besides plots/*.png).
+REPORT_FILES = ("results.json", "table2.md", "table2.csv")
+
+
+def clear_report(out_dir) -> None:
+    """Remove a previous run's report (REPORT_FILES and plots/*.png) from OUT_DIR, so that a
+    refit that stops half-way never leaves old results beside new groups."""
+    out_dir = Path(out_dir)
+    for name in REPORT_FILES:
+        (out_dir / name).unlink(missing_ok=True)
+    plots = out_dir / "plots"
+    if plots.is_dir():
+        for f in plots.glob("*.png"):
+            f.unlink(missing_ok=True)
+
 
 def _json_default(obj):
     """numpy scalars/arrays and paths in ``skipped`` or ``software`` -> JSON types."""

@@ -146,7 +146,8 @@ class FitResults:
 
     @property
     def n_fitted(self) -> int:
-        return sum(g.fitted for g in self.groups)
+        """Groups with values from a converged fit (a solve that stopped early is not a fit)."""
+        return sum(g.fitted and g.converged for g in self.groups)
 
     def to_json(self) -> dict[str, Any]:
         return {"groups": [g.to_json() for g in self.groups], "skipped": list(self.skipped),

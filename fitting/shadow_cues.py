@@ -25,8 +25,9 @@ from scipy.signal import find_peaks
 __all__ = ["bluer_umbrae", "log_rho_modes", "edge_structures", "reliability", "mode_of_log_rho"]
 
 # Skylit umbrae are bluer: on the real photo DSC_0569 the blue step minus the
-# red step was about 0.8 (log) across shadow edges, about 0 across paint.
-BLUER_MIN_LOG = 0.1
+# red step was about 0.8 (log) across shadow edges, about 0 across paint; the
+# tints of grey materials (asphalt against concrete) give up to 0.15.
+BLUER_MIN_LOG = 0.25
 # The blue cue is used only when at least this many profiles (and this share
 # of the shadow-like ones) show it, i.e. when the sky is blue at all.
 BLUER_MIN_COUNT = 5

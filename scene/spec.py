@@ -1,13 +1,14 @@
 """``scene.toml``: reading and writing the photo-folder scene description (CONVENTIONS).
 
 Plain dataclasses, validated on load with messages that name the file and
-key. Unknown tables and keys are kept in ``extra`` so nothing is lost on a
-round trip.
+key. Unknown tables and keys are refused by name (with the nearest known
+name), so that a misspelt setting is never ignored in silence.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import datetime as _dt
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -16,7 +17,7 @@ import numpy as np
 
 from softshadow import GroundGrid, PinholeCamera
 
-__all__ = ["SceneError", "SiteSpec", "ObjectSpec", "ReceiverSpec", "CameraSpec", "PhotoSpec", "SceneSpec",
+__all__ = ["NO_GEOMETRY", "TABLES", "SceneError", "SiteSpec", "ObjectSpec", "ReceiverSpec", "CameraSpec", "PhotoSpec", "SceneSpec",
            "load_scene", "dump_scene", "scene_from_dict", "scene_to_dict"]
 
 CAMERA_KINDS = ("explicit", "topdown", "markers")
@@ -126,7 +127,6 @@ class PhotoSpec:
     camera: CameraSpec | None = None
     depth: str | None = None   # this photo's range image (receiver kind "depth"), relative to the folder
     ignore: str | None = None  # this photo's ignore mask (non-zero pixels are left out), relative to the folder
-    extra: dict = dataclasses.field(default_factory=dict)
 
 
 @dataclasses.dataclass
@@ -136,7 +136,6 @@ class SceneSpec:
     receiver: ReceiverSpec = dataclasses.field(default_factory=ReceiverSpec)
     camera: CameraSpec | None = None
     photos: dict[str, PhotoSpec] = dataclasses.field(default_factory=dict)
-    extra: dict = dataclasses.field(default_factory=dict)
     base_dir: Path | None = None
 
     def photo(self, name: str) -> PhotoSpec:
@@ -161,47 +160,95 @@ def _floats(value, n, where):
     return tuple(float(v) for v in arr)
 
 
-def _camera(table: dict, where: str) -> CameraSpec:
+def _number(value, where: str, positive: bool = False) -> float:
+    """A finite number from a TOML value (ints and floats; not strings or booleans)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise SceneError(f"{where} must be a number, got {value!r}")
+    x = float(value)
+    if not np.isfinite(x):
+        raise SceneError(f"{where} must be finite, got {value!r}")
+    if positive and not x > 0:
+        raise SceneError(f"{where} must be positive, got {value!r}")
+    return x
+
+
+def _array(value, shape, where: str) -> list:
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise SceneError(f"{where} must be numbers with shape {shape}, got {value!r}") from exc
+    if (shape is not None and arr.shape != shape) or arr.ndim == 0 or not np.all(np.isfinite(arr)):
+        raise SceneError(f"{where} must be finite numbers" + (f" with shape {shape}" if shape else "")
+                         + f", got {value!r}")
+    return arr.tolist()
+
+
+def _table(value, where: str) -> dict:
+    if not isinstance(value, dict):
+        raise SceneError(f"{where} must be a table, got {value!r}")
+    return dict(value)
+
+
+def _check_keys(table: dict, known, where: str) -> None:
+    """Unknown keys are refused by name (a misspelt key would otherwise be ignored in silence)."""
+    import difflib
+    for key in table:
+        if key not in known:
+            near = difflib.get_close_matches(key, list(known), n=1)
+            hint = f"; did you mean {near[0]!r}?" if near else f" (known: {', '.join(known)})"
+            raise SceneError(f"{where}: unknown key {key!r}{hint}")
+
+
+_CAMERA_KEYS = {"explicit": ("kind", "K", "R", "t", "dist"), "topdown": ("kind", "pixel_m", "origin_m"),
+                "markers": ("kind", "dictionary", "squares", "square_m", "marker_m", "origin_m", "K", "dist")}
+
+
+def _camera(table, where: str) -> CameraSpec:
+    table = _table(table, where)
     kind = table.get("kind")
     if kind not in CAMERA_KINDS:
         raise SceneError(f"{where}.kind must be one of {CAMERA_KINDS}, got {kind!r}")
+    _check_keys(table, _CAMERA_KEYS[kind], f"{where} (kind {kind!r})")
     cam = CameraSpec(kind=kind)
     if kind == "explicit":
         for key, shape in (("K", (3, 3)), ("R", (3, 3)), ("t", (3,))):
             if key not in table:
                 raise SceneError(f"{where}: an explicit camera needs {key}")
-            arr = np.asarray(table[key], dtype=float)
-            if arr.shape != shape or not np.all(np.isfinite(arr)):
-                raise SceneError(f"{where}.{key} must be finite with shape {shape}")
-            setattr(cam, key, arr.tolist())
+            setattr(cam, key, _array(table[key], shape, f"{where}.{key}"))
         if abs(np.linalg.det(np.asarray(cam.R)) - 1) > 1e-3:
             raise SceneError(f"{where}.R is not a rotation matrix")
         if "dist" in table:
-            cam.dist = list(map(float, table["dist"]))
+            cam.dist = _array(table["dist"], None, f"{where}.dist")
     elif kind == "topdown":
         if "pixel_m" not in table or "origin_m" not in table:
             raise SceneError(f"{where}: a top-down camera needs pixel_m and origin_m")
-        cam.pixel_m = float(table["pixel_m"])
-        if not cam.pixel_m > 0:
-            raise SceneError(f"{where}.pixel_m must be positive")
+        cam.pixel_m = _number(table["pixel_m"], f"{where}.pixel_m", positive=True)
         cam.origin_m = _floats(table["origin_m"], 2, f"{where}.origin_m")
     else:
         cam.dictionary = str(table.get("dictionary", cam.dictionary))
-        cam.squares = tuple(int(v) for v in table.get("squares", cam.squares))
-        cam.square_m = float(table.get("square_m", cam.square_m))
-        cam.marker_m = float(table.get("marker_m", cam.marker_m))
+        squares = table.get("squares", cam.squares)
+        if (not isinstance(squares, (list, tuple)) or len(squares) != 2
+                or not all(isinstance(v, int) and not isinstance(v, bool) for v in squares)):
+            raise SceneError(f"{where}.squares must be two whole numbers, got {squares!r}")
+        cam.squares = tuple(squares)
+        cam.square_m = _number(table.get("square_m", cam.square_m), f"{where}.square_m", positive=True)
+        cam.marker_m = _number(table.get("marker_m", cam.marker_m), f"{where}.marker_m", positive=True)
         if "origin_m" in table:
             cam.origin_m = _floats(table["origin_m"], 2, f"{where}.origin_m")
-        for key in ("K", "dist"):
-            if key in table:
-                setattr(cam, key, np.asarray(table[key], dtype=float).tolist())
+        if "K" in table:
+            cam.K = _array(table["K"], (3, 3), f"{where}.K")
+        if "dist" in table:
+            cam.dist = _array(table["dist"], None, f"{where}.dist")
     return cam
 
 
-def _receiver(table: dict, where: str) -> ReceiverSpec:
+def _receiver(table, where: str) -> ReceiverSpec:
+    table = _table(table, where)
     kind = table.pop("kind", "plane")
     if kind not in RECEIVER_KINDS:
         raise SceneError(f"{where}.kind must be one of {RECEIVER_KINDS}, got {kind!r}")
+    known = {"plane": (), "depth": ("depth",), "mesh": ("mesh", "position", "rotation_deg", "scale")}[kind]
+    _check_keys(table, known, f"{where} (kind {kind!r})")
     spec = ReceiverSpec(kind=kind)
     if kind == "depth" and "depth" in table:
         spec.depth = str(table.pop("depth"))
@@ -211,9 +258,7 @@ def _receiver(table: dict, where: str) -> ReceiverSpec:
         spec.mesh = str(table.pop("mesh"))
         spec.position = _floats(table.pop("position", (0, 0, 0)), 3, f"{where}.position")
         spec.rotation_deg = _floats(table.pop("rotation_deg", (0, 0, 0)), 3, f"{where}.rotation_deg")
-        spec.scale = float(table.pop("scale", 1.0))
-        if not spec.scale > 0:
-            raise SceneError(f"{where}.scale must be positive")
+        spec.scale = _number(table.pop("scale", 1.0), f"{where}.scale", positive=True)
     return spec
 
 
@@ -229,46 +274,71 @@ def load_scene(path: str | Path) -> SceneSpec:
     return scene_from_dict(data, base_dir=path.parent, source=str(path))
 
 
+#: The tables of scene.toml.
+TABLES = ("site", "object", "receiver", "camera", "photos")
+#: ``[object] mesh = NO_GEOMETRY``: the folder has no known occluder; each photo is measured on its own.
+NO_GEOMETRY = "none"
+_PHOTO_KEYS = ("time", "group", "sun_azimuth_deg", "sun_elevation_deg", "camera", "depth", "ignore")
+
+
 def scene_from_dict(data: dict, base_dir=None, source="scene.toml") -> SceneSpec:
+    """A SceneSpec from a parsed scene.toml. Unknown tables and keys, values of the wrong type and a
+    missing [object] are SceneErrors naming the key: a misspelt setting is never ignored in silence.
+    ``[object] mesh = "none"`` says explicitly that there is no geometry (``SceneSpec.object`` None)."""
     data = dict(data)
     spec = SceneSpec(base_dir=Path(base_dir) if base_dir is not None else None)
+    _check_tables(data, source)
     if "site" in data:
-        s = data.pop("site")
-        try:
-            spec.site = SiteSpec(float(s["latitude"]), float(s["longitude"]), s.get("timezone"),
-                                 float(s.get("altitude_m", 0.0)))
-        except (KeyError, TypeError, ValueError) as exc:
-            raise SceneError(f"{source} [site] needs numeric latitude and longitude") from exc
+        s = _table(data.pop("site"), f"{source} [site]")
+        _check_keys(s, ("latitude", "longitude", "timezone", "altitude_m"), f"{source} [site]")
+        for key in ("latitude", "longitude"):
+            if key not in s:
+                raise SceneError(f"{source} [site] needs numeric latitude and longitude")
+        timezone = s.get("timezone")
+        if timezone is not None and not isinstance(timezone, str):
+            raise SceneError(f"{source} [site].timezone must be a name such as \"Asia/Tokyo\", got {timezone!r}")
+        spec.site = SiteSpec(_number(s["latitude"], f"{source} [site].latitude"),
+                             _number(s["longitude"], f"{source} [site].longitude"), timezone,
+                             _number(s.get("altitude_m", 0.0), f"{source} [site].altitude_m"))
         if not (-90 <= spec.site.latitude <= 90 and -180 <= spec.site.longitude <= 360):
             raise SceneError(f"{source} [site] latitude/longitude out of range")
-    if "object" in data:
-        o = data.pop("object")
-        if "mesh" not in o:
-            raise SceneError(f"{source} [object] needs mesh (a built-in name or a file path)")
-        spec.object = ObjectSpec(str(o["mesh"]),
+    if "object" not in data:
+        raise SceneError(f"{source} has no [object] table: name the occluder ([object] mesh = \"pillar\" "
+                         f"or a mesh file), or write [object] mesh = \"{NO_GEOMETRY}\" to measure each photo "
+                         "on its own without geometry")
+    o = _table(data.pop("object"), f"{source} [object]")
+    _check_keys(o, ("mesh", "position", "rotation_deg", "scale"), f"{source} [object]")
+    if "mesh" not in o:
+        raise SceneError(f"{source} [object] needs mesh (a built-in name or a file path, or "
+                         f"\"{NO_GEOMETRY}\" for no geometry)")
+    if not isinstance(o["mesh"], str) or not o["mesh"]:
+        raise SceneError(f"{source} [object].mesh must be a name or a file path, got {o['mesh']!r}")
+    if o["mesh"] == NO_GEOMETRY:
+        if len(o) > 1:
+            raise SceneError(f"{source} [object]: mesh = \"{NO_GEOMETRY}\" takes no other keys")
+    else:
+        spec.object = ObjectSpec(o["mesh"],
                                  _floats(o.get("position", (0, 0, 0)), 3, f"{source} [object].position"),
                                  _floats(o.get("rotation_deg", (0, 0, 0)), 3, f"{source} [object].rotation_deg"),
-                                 float(o.get("scale", 1.0)))
-        if not spec.object.scale > 0:
-            raise SceneError(f"{source} [object].scale must be positive")
+                                 _number(o.get("scale", 1.0), f"{source} [object].scale", positive=True))
     if "receiver" in data:
-        spec.receiver = _receiver(dict(data.pop("receiver")), f"{source} [receiver]")
+        spec.receiver = _receiver(data.pop("receiver"), f"{source} [receiver]")
     if "camera" in data:
         spec.camera = _camera(data.pop("camera"), f"{source} [camera]")
-    for name, p in (data.pop("photos", {}) or {}).items():
-        p = dict(p)
+    for name, p in _table(data.pop("photos", {}) or {}, f"{source} [photos]").items():
         where = f'{source} [photos."{name}"]'
+        p = _table(p, where)
+        _check_keys(p, _PHOTO_KEYS, where)
         photo = PhotoSpec()
-        if "time" in p:
-            photo.time = str(p.pop("time"))
-        if "group" in p:
-            photo.group = str(p.pop("group"))
+        for key in ("time", "group"):
+            if key in p:
+                value = p.pop(key)
+                if not isinstance(value, (str, int, float, _dt.datetime)) or isinstance(value, bool):
+                    raise SceneError(f"{where}.{key} must be text, got {value!r}")
+                setattr(photo, key, str(value))
         for key in ("sun_azimuth_deg", "sun_elevation_deg"):
             if key in p:
-                value = float(p.pop(key))
-                if not np.isfinite(value):
-                    raise SceneError(f"{where}.{key} must be finite")
-                setattr(photo, key, value)
+                setattr(photo, key, _number(p.pop(key), f"{where}.{key}"))
         if "camera" in p:
             photo.camera = _camera(p.pop("camera"), f"{where}.camera")
         for key in ("depth", "ignore"):
@@ -277,10 +347,17 @@ def scene_from_dict(data: dict, base_dir=None, source="scene.toml") -> SceneSpec
                 if not isinstance(value, str) or not value:
                     raise SceneError(f"{where}.{key} must be a file name, got {value!r}")
                 setattr(photo, key, value)
-        photo.extra = p
         spec.photos[name] = photo
-    spec.extra = data
     return spec
+
+
+def _check_tables(data: dict, source: str) -> None:
+    import difflib
+    for key in data:
+        if key not in TABLES:
+            near = difflib.get_close_matches(key, TABLES, n=1)
+            hint = f"; did you mean [{near[0]}]?" if near else f" (known tables: {', '.join(TABLES)})"
+            raise SceneError(f"{source}: unknown table [{key}]{hint}")
 
 
 def scene_to_dict(spec: SceneSpec) -> dict:
@@ -291,10 +368,11 @@ def scene_to_dict(spec: SceneSpec) -> dict:
         o = spec.object
         out["object"] = {"mesh": o.mesh, "position": list(o.position),
                          "rotation_deg": list(o.rotation_deg), "scale": o.scale}
+    else:
+        out["object"] = {"mesh": NO_GEOMETRY}
     out["receiver"] = spec.receiver.to_toml()
     if spec.camera is not None:
         out["camera"] = spec.camera.to_toml()
-    out.update(spec.extra)
     if spec.photos:
         photos = {}
         for name, p in spec.photos.items():
@@ -304,7 +382,6 @@ def scene_to_dict(spec: SceneSpec) -> dict:
                     entry[key] = getattr(p, key)
             if p.camera is not None:
                 entry["camera"] = p.camera.to_toml()
-            entry.update(p.extra)
             photos[name] = entry
         out["photos"] = photos
     return out

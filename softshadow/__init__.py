@@ -16,15 +16,18 @@ from .params import (Pose, ShadowParams, Sun, brightness_to_paper, paper_to_rang
                      range_to_paper, rotation_matrix_xyz)
 from .penumbra import (PROFILES, RULES, blurred_profile_alpha, occluded_disk_fraction, penumbra_coordinate,
                        profile_alpha, shade)
-from .plan import (GridPlan, PointPlan, bucket_size, concatenate_plans, edge_band_widths, plan_grid,
-                   plan_points)
+from .plan import (BACKENDS, GridPlan, PointPlan, bucket_size, concatenate_plans, edge_band_widths,
+                   light_band_widths, plan_grid, plan_points)
 from .posed import PosedOccluder, pose_matrix, posed_vertices
 from .raster import project_to_ground
+from .shadowmap import BIAS_PX, LightFrame, ShadowMap, depth_bias, faces_away, rasterise_depth, shadow_map
 from .render import CameraRender, SoftShadowModel, object_mask
 from .sun import SunBelowHorizonError, check_sun_above_horizon, light_direction, sun_direction
 from .threads import one_blas_thread
 
 __all__ = [
+    "BACKENDS", "BIAS_PX", "LightFrame", "ShadowMap", "depth_bias", "faces_away", "light_band_widths",
+    "rasterise_depth", "shadow_map",
     "BUILTIN_MESHES", "CameraRender", "GridPlan", "GroundGrid", "MeshError", "Occluder", "PROFILES",
     "PinholeCamera", "PointPlan", "Pose", "PosedOccluder", "RULES", "ShadowParams", "Silhouette",
     "SoftShadowModel", "Sun", "SunBelowHorizonError", "blurred_profile_alpha", "brightness_to_paper",

@@ -181,7 +181,10 @@ def load_mesh(name_or_path: str | Path, base_dir: str | Path | None = None) -> t
     try:
         loaded = trimesh.load(path, force="mesh", process=False)
     except Exception as exc:  # trimesh raises many types for broken files
-        raise MeshError(f"cannot read mesh {path}: {exc}") from exc
+        # Its messages describe the parser's trouble ("'utf-8' codec can't decode ..."), not the
+        # file's: say what the user needs to know, and keep the parser's words as the cause.
+        raise MeshError(f"{path.name} is not a mesh that can be read ({path.suffix or 'no extension'} "
+                        f"file; trimesh: {type(exc).__name__})") from exc
     if not isinstance(loaded, trimesh.Trimesh):
         raise MeshError(f"{path} holds no triangle mesh")
     return clean_mesh(loaded, str(path))

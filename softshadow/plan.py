@@ -23,9 +23,10 @@ from .occluder import Occluder
 from .params import Pose, Sun
 from .posed import PosedOccluder
 from .raster import ShadowRaster, candidate_labels, rasterise_shadow
+from .shadowmap import LightFrame, depth_bias, faces_away, shadow_map
 
 __all__ = ["EdgeSet", "PointPlan", "GridPlan", "plan_points", "plan_grid", "concatenate_plans",
-           "edge_band_widths", "bucket_size", "grid_bucket_size"]
+           "edge_band_widths", "bucket_size", "grid_bucket_size", "light_band_widths", "BACKENDS"]
 
 MAX_RASTER_SIDE = 2048
 # The wedge reaches half its width on each side of the outline; the band adds a fifth for the
@@ -123,16 +124,44 @@ def _raster_for(posed: PosedOccluder, region_lo, region_hi, pixel_m, pad_m):
     return rasterise_shadow(grid, world, posed.light, posed.silhouette, ground)
 
 
+BACKENDS = ("auto", "ground", "light")
+
+
 def plan_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k_max: float,
                 rule: str = "edge", pixel_m: float | None = None,
-                margin_px: float = 2.5, pad_to: int | None = None) -> PointPlan:
-    """Discrete choices for receiver points (N, 3) on the ground plane z = 0.
+                margin_px: float = 2.5, pad_to: int | None = None, normals: np.ndarray | None = None,
+                backend: str = "auto", dtype=np.float64, receiver_tolerance_m: float = 0.0) -> PointPlan:
+    """Discrete choices for receiver points (N, 3) anywhere: the ground, a range image, a mesh,
+    the object itself.
 
     range_k_max: the largest k the plan must hold for (sets the band width).
-    pixel_m: raster resolution (default: the points' extent / 1024).
+    pixel_m: raster resolution in metres (default: the extent / 1024; for the light-space
+    back end, of the sun's view of the region the shadow can reach).
     pad_to: pad the point arrays to this length (default: a power-of-two bucket).
+    normals: receiver normals (N, 3), optional: a point whose surface faces away from the sun
+    (n . L >= 0) is in attached shadow (hard = 1, alpha = 1), and the depth test's bias
+    grows with the receiver's slope seen from the sun.
+    backend: ``ground`` (the points lie on z = 0: top-down raster, as ``plan_grid``),
+    ``light`` (the sun's shadow map and light-space raster, any points), ``auto`` (ground
+    when every point has z = 0 and no normal is given or all are +z, else light).
+    dtype: the float type of the light-space depth test (float32 to measure precision).
+    receiver_tolerance_m: the receiver points' own depth error (a range image's
+    quantisation), added to the depth test's bias (``softshadow.shadowmap``).
     """
+    if backend not in BACKENDS:
+        raise ValueError(f"unknown receiver back end {backend!r}; choose one of {BACKENDS}")
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if normals is not None:
+        normals = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+        if len(normals) != len(points):
+            raise ValueError(f"{len(normals)} normals for {len(points)} receiver points")
+    if backend == "auto":
+        flat = not np.any(points[:, 2]) and (normals is None or (
+            not np.any(normals[:, :2]) and np.all(normals[:, 2] > 0)))
+        backend = "ground" if flat else "light"
+    if backend == "light":
+        return _plan_points_light(occ, pose, sun, points, range_k_max, rule, pixel_m, margin_px, pad_to,
+                                  normals, dtype, receiver_tolerance_m)
     posed = PosedOccluder.make(occ, pose, sun)
     sil, light = posed.silhouette, posed.light
     a, b, direction = posed.edge_geometry(rule)
@@ -168,6 +197,111 @@ def plan_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k
             near_boundary[:n] = ok & (dist <= 0.25 * widths[np.maximum(label, 0)]
                                       + 1.5 * raster.grid.pixel_m) & _clean_outline(raster, label)
     return PointPlan(EdgeSet(*_pack_edges(occ, sil)), edge_id, hard, active, near_boundary)
+
+
+def light_band_widths(depth_behind: np.ndarray, range_k: float) -> np.ndarray:
+    """Width (m, perpendicular to the light) of a penumbra wedge at ``depth_behind`` metres
+    behind its edge along the light: 2 k d for the ``edge`` rule (L +- k n, n perpendicular
+    to L), and at most 2 k (1 + k) d for the ``paper`` rule's tilted N."""
+    return 2.0 * range_k * (1.0 + range_k) * np.maximum(depth_behind, 0.0)
+
+
+def _plan_points_light(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k_max: float,
+                       rule: str, pixel_m: float | None, margin_px: float, pad_to: int | None,
+                       normals: np.ndarray | None, dtype, receiver_tolerance_m: float) -> PointPlan:
+    """``plan_points`` in the sun's view: the same raster code as the ground's, on the plane
+    perpendicular to the light, plus the shadow map's depth test (``shadowmap``)."""
+    posed = PosedOccluder.make(occ, pose, sun)
+    sil, light, world = posed.silhouette, posed.light, posed.world
+    n = len(points)
+    size = pad_to or bucket_size(n)
+    edge_id = np.zeros((size, N_CANDIDATES), np.int32)
+    hard = np.zeros(size)
+    active = np.zeros(size, bool)
+    near_boundary = np.zeros(size)
+    attached = np.zeros(n, bool) if normals is None else faces_away(normals, light)
+    hard[:n] = attached
+    edges = EdgeSet(*_pack_edges(occ, sil))
+    if not (n and len(sil.vertex_ids)):
+        return PointPlan(edges, edge_id, hard, active, near_boundary)
+    frame = LightFrame.of_light(light, 0.5 * (world.min(0) + world.max(0)))
+    # In ``dtype`` (float32 rounds as a float32 pipeline would), the rest in float64.
+    uv_v, d_v = (a.astype(np.float64) for a in frame.project(world, dtype))
+    uv_all, d_all = (a.astype(np.float64) for a in frame.project(points, dtype))
+    ids = sil.vertex_ids
+    edge_depth = np.minimum(d_v[ids[:, 0]], d_v[ids[:, 1]])  # the edge's end nearer the sun
+    # The region the shadow can reach: the occluder's view padded by the widest wedge any
+    # point can see (and the raster's margins, at the coarsest pixel); points outside it are
+    # lit (or in attached shadow) and take no further work.
+    reach = float(light_band_widths(d_all.max() - edge_depth.min(), range_k_max))
+    lo_occ, hi_occ = uv_v.min(0), uv_v.max(0)
+    extent = float((hi_occ - lo_occ).max()) + 3.0 * reach
+    margin_m = (margin_px + CANDIDATE_REACH_PX + 2) * max(pixel_m or 0.0, extent / 512)
+    lo_r, hi_r = lo_occ - 1.5 * reach - margin_m, hi_occ + 1.5 * reach + margin_m
+    cand = np.flatnonzero((uv_all[:, 0] >= lo_r[0]) & (uv_all[:, 0] <= hi_r[0])
+                          & (uv_all[:, 1] >= lo_r[1]) & (uv_all[:, 1] <= hi_r[1]))
+    if not len(cand):
+        return PointPlan(edges, edge_id, hard, active, near_boundary)
+    uv_p, d_p, pts = uv_all[cand], d_all[cand], points[cand]
+    lo_pts, hi_pts = uv_p.min(0), uv_p.max(0)
+    if pixel_m is None:
+        # About the points' own spacing in the sun's view (finer buys nothing but time), within
+        # [extent / 2048, extent / 512].
+        spacing = np.sqrt(np.prod(np.maximum(hi_pts - lo_pts, 1e-9)) / len(cand))
+        pixel_m = float(np.clip(spacing, extent / 2048, extent / 512))
+    pixel_m = max(pixel_m, 1e-5)
+    pad_m = 1.5 * reach + (margin_px + CANDIDATE_REACH_PX + 2) * pixel_m
+    lo = np.maximum(lo_occ - pad_m, lo_pts - pad_m)
+    hi = np.minimum(hi_occ + pad_m, hi_pts + pad_m)
+    if np.any(hi <= lo):
+        return PointPlan(edges, edge_id, hard, active, near_boundary)
+    pixel_m = max(pixel_m, float((hi - lo).max()) / MAX_RASTER_SIDE)
+    width = int(np.ceil((hi[0] - lo[0]) / pixel_m)) + 1
+    height = int(np.ceil((hi[1] - lo[1]) / pixel_m)) + 1
+    grid = GroundGrid(pixel_m, (float(lo[0]), float(hi[1])), width, height)
+    # The ground's raster code with light-space vertex positions: hard = the occluder's
+    # silhouette region, labels and distances to its outline.
+    raster = rasterise_shadow(grid, world, light, sil, uv_v)
+    in_view, label, dist = raster.lookup(uv_p)
+    near = np.flatnonzero(dist <= 2.0 * pixel_m)
+    if len(near):  # a raster pixel is too coarse for the side near the outline: test exactly
+        in_view[near] = posed.hard_shadow_at(uv_p[near], projected=uv_v)
+    # The depth test where the occluder is in the sun's way. The nearest faces to the sun are
+    # lit ones for a closed mesh, any face for an open one.
+    faces = occ.faces[sil.lit] if occ.watertight else occ.faces
+    behind = np.zeros(len(cand), bool)
+    test = np.flatnonzero(in_view > 0)
+    # Farther from the sun than the whole occluder: behind it wherever it is in the way, no
+    # lookup needed (most of a cast shadow). The others go to the shadow map.
+    far = d_p[test] > d_v[faces].max(initial=-np.inf) + 0.5 * pixel_m
+    behind[test[far]] = True
+    test = test[~far]
+    if len(test):
+        smap = shadow_map(grid, uv_v, d_v, faces, dtype)
+        occ_depth, face_slope, exact = smap.occluder_depth(uv_p[test].astype(dtype))
+        recv_slope = 0.0
+        if normals is not None:
+            nt = normals[cand[test]]
+            cos = np.abs(nt[:, 0] * light[0] + nt[:, 1] * light[1] + nt[:, 2] * light[2])
+            recv_slope = np.sqrt(np.maximum(1.0 - cos * cos, 0.0)) / np.maximum(cos, 1e-12)
+        scale = max(smap.scale, float(np.abs(pts[test]).max()), float(np.abs(world).max()))
+        bias = depth_bias(pixel_m, face_slope, recv_slope, scale, dtype, exact, receiver_tolerance_m)
+        behind[test] = d_p[test].astype(dtype) > occ_depth + bias
+    att = attached[cand]
+    hard[cand] = behind | att
+    ok = label >= 0
+    widths = light_band_widths(d_p - edge_depth[np.maximum(label, 0)], range_k_max)
+    band = BAND_FRACTION * widths + margin_px * pixel_m
+    act = ok & (dist <= band) & ~att
+    active[cand] = act
+    near_boundary[cand] = act & (dist <= 0.25 * widths + 1.5 * pixel_m) & _clean_outline(raster, label)
+    sel = np.flatnonzero(act)
+    if len(sel):
+        cr = np.clip(np.rint(grid.to_pixel(uv_p[sel])).astype(np.int64), 0, [width - 1, height - 1])
+        edge_id[cand[sel]] = np.maximum(candidate_labels(raster.edge_label, cr[:, 1], cr[:, 0],
+                                                         radii=CANDIDATE_RADII_PX, max_candidates=N_CANDIDATES,
+                                                         neighbours=raster.edge_neighbours), 0)
+    return PointPlan(edges, edge_id, hard, active, near_boundary)
 
 
 @dataclasses.dataclass(frozen=True)

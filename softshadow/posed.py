@@ -85,10 +85,15 @@ class PosedOccluder:
         """The vertices' shadows (V, 2) on the plane z = plane_z, along the light."""
         return project_to_ground(self.world, self.light, plane_z)
 
-    def hard_shadow_at(self, points_xy: np.ndarray) -> np.ndarray:
-        """Whether ground points (N, 2) on z = 0 lie in the hard shadow (N,) bool (exact
-        winding test against the projected fill edges; O(points x edges))."""
-        ground = self.ground_vertices()
+    def hard_shadow_at(self, points_xy: np.ndarray, projected: np.ndarray | None = None) -> np.ndarray:
+        """Whether points (N, 2) lie inside the projected mesh's shadow (N,) bool (exact winding
+        test against the projected fill edges; O(points x edges)).
+
+        projected: the vertices (V, 2) under the projection the points are given in; by
+        default their shadows on the ground z = 0 (points_xy then ground points); the
+        light-space plan passes their (u, v) in the sun's view.
+        """
+        ground = self.ground_vertices() if projected is None else projected
         inside = np.zeros(len(points_xy), bool)
         for edges, weights in self.silhouette.fill_edges:
             inside |= winding_at_points(points_xy, ground[edges[:, 0]], ground[edges[:, 1]], weights)

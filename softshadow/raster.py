@@ -302,11 +302,14 @@ def candidate_labels(edge_label: np.ndarray, rows: np.ndarray, cols: np.ndarray,
 
 
 def winding_at_points(points: np.ndarray, start: np.ndarray, end: np.ndarray, weight: np.ndarray,
-                      chunk_elements: int = 4_000_000) -> np.ndarray:
+                      chunk_elements: int = 4_000_000, points_per_strip: int = 64) -> np.ndarray:
     """Non-zero winding test (N,) bool of points (N, 2) against weighted directed segments.
 
-    The exact twin of ``winding_fill`` at arbitrary points (same half-open rule),
-    O(points x segments) in chunks; used where a raster pixel is too coarse.
+    The exact twin of ``winding_fill`` at arbitrary points (same half-open rule). The
+    points are cut into horizontal strips of ``points_per_strip`` (sorted by y), and each
+    strip tests only the segments whose y-range meets it: O(points x segments crossing
+    their strip), in chunks of at most ``chunk_elements``; used where a raster pixel is
+    too coarse.
     """
     out = np.zeros(len(points), bool)
     if not len(start) or not len(points):
@@ -317,12 +320,25 @@ def winding_at_points(points: np.ndarray, start: np.ndarray, end: np.ndarray, we
     dirw = np.where(y1 > y0, 1.0, -1.0) * weight
     with np.errstate(divide="ignore", invalid="ignore"):
         slope = np.where(y1 != y0, (x1 - x0) / (y1 - y0), 0.0)
-    step = max(1, chunk_elements // len(start))
-    for i in range(0, len(points), step):
-        p = points[i:i + step]
-        py, px = p[:, 1:2], p[:, 0:1]
-        crosses = (py >= ymin) & (py < ymax)
-        xc = x0 + (py - y0) * slope
-        left = crosses & (xc <= px)
-        out[i:i + step] = np.abs(left.astype(np.float64) @ dirw) > 0.5
+    order = np.argsort(points[:, 1], kind="stable")
+    # Segments sorted by ymin: a strip's candidates are a prefix of them (ymin <= strip top),
+    # of which those with ymax > strip bottom cross it.
+    by_min = np.argsort(ymin, kind="stable")
+    ymin_sorted = ymin[by_min]
+    for s0 in range(0, len(order), points_per_strip):
+        idx = order[s0:s0 + points_per_strip]
+        p = points[idx]
+        lo, hi = p[0, 1], p[-1, 1]
+        prefix = by_min[:np.searchsorted(ymin_sorted, hi, side="right")]
+        seg = prefix[ymax[prefix] > lo]
+        if not len(seg):
+            continue
+        step = max(1, chunk_elements // len(seg))
+        for i in range(0, len(idx), step):
+            q = p[i:i + step]
+            py, px = q[:, 1:2], q[:, 0:1]
+            crosses = (py >= ymin[seg]) & (py < ymax[seg])
+            xc = x0[seg] + (py - y0[seg]) * slope[seg]
+            left = crosses & (xc <= px)
+            out[idx[i:i + step]] = np.abs(left.astype(np.float64) @ dirw[seg]) > 0.5
     return out

@@ -24,7 +24,7 @@ from .evaluate import plan_alpha
 from .occluder import Occluder
 from .params import Pose, ShadowParams, Sun
 from .penumbra import PROFILES, RULES, shade
-from .plan import GridPlan, PointPlan, plan_grid, plan_points
+from .plan import GridPlan, PointPlan, bucket_size, plan_grid, plan_points
 from .posed import posed_vertices
 
 __all__ = ["SoftShadowModel", "CameraRender", "object_mask"]
@@ -51,6 +51,16 @@ def _ground_map_core(hard, band_index, origin_x, origin_y, pixel_m, plan: PointP
     # Padding entries index one past the end and are dropped.
     alpha = hard.reshape(-1).astype(dtype).at[band_index].set(alpha_band.astype(dtype), mode="drop")
     return shade(alpha, params.rho).reshape(shape)
+
+
+@functools.partial(jax.jit, static_argnames=("rule", "profile"))
+def _band_points_core(band_points, band_plan: PointPlan, hard, band_index, pose, sun, params, rule, profile):
+    """Shading at all of a plan's points (padded): the hard shadow, with the band points'
+    alpha from the penumbra formula scattered in (padding indices are dropped)."""
+    dtype = params.rho.dtype
+    alpha_band = plan_alpha(band_points, band_plan, pose, sun, params.range_k, rule, profile)
+    alpha = hard.astype(dtype).at[band_index].set(alpha_band.astype(dtype), mode="drop")
+    return shade(alpha, params.rho)
 
 
 @functools.partial(jax.jit, static_argnames=("rule", "profile"))
@@ -128,8 +138,11 @@ class SoftShadowModel:
         return plan_grid(self.occluder, pose, sun, grid, range_k_max, self.rule,
                          dtype=jnp.result_type(float))
 
-    def plan_points(self, sun: Sun, pose: Pose, points, range_k_max: float, **kwargs) -> PointPlan:
-        return plan_points(self.occluder, pose, sun, points, range_k_max, self.rule, **kwargs)
+    def plan_points(self, sun: Sun, pose: Pose, points, range_k_max: float, normals=None,
+                    **kwargs) -> PointPlan:
+        """``softshadow.plan_points`` for this occluder and rule (points anywhere, normals optional)."""
+        return plan_points(self.occluder, pose, sun, points, range_k_max, self.rule, normals=normals,
+                           **kwargs)
 
     # -- renders (JAX) -----------------------------------------------------------------------
     def ground_map(self, params: ShadowParams, sun: Sun, pose: Pose, grid: GroundGrid,
@@ -145,18 +158,40 @@ class SoftShadowModel:
                                 grid.pixel_m, plan.plan, pose, sun, params, self.rule, self.profile,
                                 (grid.height, grid.width))
 
-    def at_points(self, params: ShadowParams, sun: Sun, pose: Pose, points,
-                  plan: PointPlan | None = None, range_k_max: float | None = None) -> jax.Array:
-        """Shading (N,) at receiver points (N, 3) on z = 0."""
+    def at_points(self, params: ShadowParams, sun: Sun, pose: Pose, points, normals=None,
+                  plan: PointPlan | None = None, range_k_max: float | None = None,
+                  **plan_kwargs) -> jax.Array:
+        """Shading (N,) at receiver points (N, 3) anywhere (see ``plan_points``).
+
+        normals (N, 3), optional: points whose surface faces away from the sun are in attached
+        shadow (shading rho). The shading is the sun's part only: a tilted receiver's lit level
+        (sun incidence, sky) is the brightness model's, not the renderer's. ``plan_kwargs`` go
+        to ``plan_points`` (pixel_m, backend, ...). Only the points in a penumbra band are
+        evaluated in JAX; the others take the plan's hard shadow.
+        """
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         if plan is None:
-            plan = self.plan_points(sun, pose, points, _band_k(params, range_k_max))
+            plan = self.plan_points(sun, pose, points, _band_k(params, range_k_max), normals=normals,
+                                    **plan_kwargs)
         n = len(points)
+        dtype = jnp.result_type(float)
+        if isinstance(plan.active, np.ndarray):  # a concrete plan: evaluate its band points only
+            band = np.flatnonzero(plan.active[:n])
+            m = len(band)
+            size = bucket_size(m)
+            take = np.zeros(size, np.int64)
+            take[:m] = band
+            index = np.full(size, len(plan.hard), np.int64)  # padding: one past the end, dropped
+            index[:m] = band
+            sub = PointPlan(plan.edges, plan.edge_id[take], plan.hard[take], np.arange(size) < m,
+                            plan.near_boundary[take])
+            out = _band_points_core(jnp.asarray(points[take], dtype), sub, plan.hard, index, pose, sun,
+                                    params, self.rule, self.profile)
+            return out[:n]
         size = plan.edge_id.shape[0]
         padded = np.zeros((size, 3))
         padded[:n] = points
-        out = _points_core(jnp.asarray(padded, jnp.result_type(float)), plan, pose, sun, params,
-                           self.rule, self.profile)
+        out = _points_core(jnp.asarray(padded, dtype), plan, pose, sun, params, self.rule, self.profile)
         return out[:n]
 
     def camera_image(self, params: ShadowParams, sun: Sun, pose: Pose,

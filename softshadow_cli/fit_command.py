@@ -1,11 +1,17 @@
-"""``softshadow fit PHOTO_DIR --out OUT_DIR``: fit a photo folder and write its report."""
+"""``softshadow fit PHOTO_DIR --out OUT_DIR``: fit a photo folder and write its report.
+
+Exit status: 0 when at least one group was fitted; 1 when none was (or the folder cannot be
+read); 2 when the output place is unusable or holds results (without ``--force``); 130 on
+Ctrl-C. Every refusal is one line on stderr (``--verbose`` adds the details).
+"""
 
 from __future__ import annotations
 
 import sys
+import tempfile
 from pathlib import Path
 
-__all__ = ["run_fit", "fit_options", "progress_bar"]
+__all__ = ["run_fit", "fit_options", "progress_bar", "check_out_dir"]
 
 
 def fit_options(args):
@@ -26,26 +32,61 @@ def progress_bar(total_label: str):
     return bar
 
 
+def check_out_dir(out: Path) -> str | None:
+    """Why ``out`` cannot take a fit's outputs (one line), or None when it can. Creates nothing:
+    the place is probed with a temporary folder in the nearest existing ancestor, removed at once."""
+    if out.exists() and not out.is_dir():
+        return f"--out {out} is a file, not a folder"
+    probe = out
+    while not probe.exists():
+        if probe.parent == probe:
+            break
+        probe = probe.parent
+    if not probe.is_dir():
+        return f"--out {out} cannot be created: {probe} is a file, not a folder"
+    try:
+        Path(tempfile.mkdtemp(dir=probe, prefix=".softshadow-probe-")).rmdir()
+    except OSError as exc:
+        return f"--out {out} cannot be written: {probe}: {exc.strerror or exc}"
+    return None
+
+
+def _fail(message: str, code: int) -> int:
+    print(f"softshadow fit: {message}", file=sys.stderr)
+    return code
+
+
 def run_fit(args) -> int:
     from fitting import FolderError, fit_and_report, format_table
     out = Path(args.out)
+    problem = check_out_dir(out)
+    if problem:
+        return _fail(problem, 2)
     if (out / "results.json").exists() and not args.force:
-        print(f"softshadow fit: {out / 'results.json'} exists; use --force to overwrite", file=sys.stderr)
-        return 2
-    out.mkdir(parents=True, exist_ok=True)
+        return _fail(f"{out / 'results.json'} exists; use --force to overwrite", 2)
+
+    def resumed(reused: int, total: int) -> None:
+        print(f"softshadow fit: resumed: {reused} of {total} groups reused from {out / 'groups'} (same "
+              "photos, scene, options and software); --force refits them", file=sys.stderr)
+
     try:
         results = fit_and_report(args.photo_dir, out, fit_options(args), force=args.force,
                                  half_size=args.half_size, jobs=max(1, args.jobs),
-                                 progress=progress_bar("fitting"))
+                                 progress=progress_bar("fitting"), on_resume=resumed)
     except FolderError as exc:
-        print(f"softshadow fit: {exc}", file=sys.stderr)
-        return 1
+        if args.verbose:
+            for s in exc.skipped:
+                print(f"skipped {s['photo']}: {s['reason']}", file=sys.stderr)
+        return _fail(str(exc).splitlines()[0], 1)
+    except KeyboardInterrupt:
+        kept = len(list((out / "groups").glob("*.json"))) if (out / "groups").is_dir() else 0
+        return _fail(f"interrupted: {kept} finished group{'s' if kept != 1 else ''} kept in "
+                     f"{out / 'groups'}; run the same command again to resume", 130)
     print(format_table(results))
     for g in results.groups:
         if g.error:
             print(f"group {g.label}: {g.error}", file=sys.stderr)
     if results.n_fitted == 0:
-        print("softshadow fit: no group could be fitted (reasons above)", file=sys.stderr)
-        return 1
-    print(f"wrote {out / 'results.json'}, {out / 'table2.md'}, {out / 'plots'}")
+        return _fail("no group could be fitted (reasons above)", 1)
+    print(f"wrote {out / 'results.json'}, {out / 'table2.md'}" + (f", {out / 'plots'}" if args.plots else ""))
     return 0

@@ -123,9 +123,12 @@ def _add_bench(sub):
                        description="Benchmarks: speed against error, as JSON.")
     p.add_argument("--json", dest="json_path", help="also write the JSON here")
     p.add_argument("--quick", action="store_true", help="fewer repeats and sizes")
-    p.add_argument("--what", default="render", choices=("render", "fit", "all", "sweep"),
+    p.add_argument("--what", default="render",
+                   choices=("render", "fit", "all", "sweep", "receiver", "precision"),
                    help="render / fit benchmarks, both (all), or the speed-against-error sweep with its "
-                        "image and parameter errors against a known truth (sweep)")
+                        "image and parameter errors against a known truth (sweep); the light-space back "
+                        "end on a 512x512 range image beside the ground map (receiver, also in render); "
+                        "the shadow map's depth in float32 against float64 (precision)")
     p.add_argument("--report", help="with --what sweep: also write the Markdown report here (and its plot "
                                     "in img/ beside it), e.g. docs/speed_vs_error.md")
     p.add_argument("--no-fit", dest="fit", action="store_false",
@@ -149,10 +152,20 @@ def main(argv=None) -> int:
     _add_demo(sub)
     _add_bench(sub)
     args = parser.parse_args(argv)
-    _use_compilation_cache()
-    from softshadow import one_blas_thread
-    with one_blas_thread():
-        return int(args.func(args) or 0)
+    try:
+        _use_compilation_cache()
+        from softshadow import one_blas_thread
+        with one_blas_thread():
+            return int(args.func(args) or 0)
+    except KeyboardInterrupt:
+        return _fail(args.command, "interrupted", 130)
+    except Exception as exc:
+        # A bug or an unforeseen input: one line for the user, the traceback with --verbose.
+        if getattr(args, "verbose", False):
+            raise
+        first = (str(exc).splitlines() or [""])[0]
+        return _fail(args.command, f"unexpected error: {type(exc).__name__}: {first}"
+                     + (" (--verbose shows the traceback)" if hasattr(args, "verbose") else ""))
 
 
 if __name__ == "__main__":

@@ -56,6 +56,40 @@ def run(args: argparse.Namespace) -> int:
     except (ValueError, RuntimeError, OSError) as exc:
         print(f"softshadow synth: {exc}", file=sys.stderr)
         return 1
+    if getattr(args, "cameras", "explicit") == "markers":
+        warning = markers_warning(out)
+        if warning:
+            print(f"softshadow synth: warning: {warning}", file=sys.stderr)
     print(out)
     return 0
+
+
+def markers_warning(folder) -> str | None:
+    """One line when the printed board of a ``--cameras markers`` folder cannot be registered in
+    some photos (the board is too small in the image at that size), else None. Each photo is
+    registered as ``softshadow fit`` would."""
+    from pathlib import Path
+
+    from fitting import RegistrationError, list_photos, read_photo, register_board
+    from scene import load_scene
+
+    folder = Path(folder)
+    scene = load_scene(folder / "scene.toml")
+    files, _ = list_photos(folder)
+    failed = []
+    for f in files:
+        spec = scene.camera_for(f.name)
+        if spec is None or spec.kind != "markers":
+            continue
+        photo = read_photo(f)
+        try:
+            register_board(photo.gray, spec, exif=photo.exif)
+        except RegistrationError as exc:
+            failed.append((f.name, str(exc)))
+    if not failed:
+        return None
+    name, reason = failed[0]
+    return (f"the board cannot be registered in {len(failed)} of {len(files)} photos ({name}: {reason}); "
+            "it is too small in the image at this size: use a larger --size (1600x1200 or more) or "
+            "--cameras explicit")
 

@@ -16,6 +16,8 @@ from softshadow_cli.bench.meshes import bench_mesh, decimated, mit_dragon
 from softshadow_cli.bench.reference import PhysicalReference, block_mean
 from softshadow_cli.bench.speed_report import pareto_front
 from softshadow_cli.bench.sweep import image_error, linear_equivalent_k
+from softshadow_cli.bench.scaling import loglog_slope
+from softshadow_cli.bench.table1 import crossing_width
 from softshadow_cli.main import main
 
 
@@ -48,6 +50,33 @@ def test_image_error_is_zero_for_the_truth_and_sees_a_band_offset():
     assert image_error(fine, GroundGrid.around((0.0, 0.0), 1.0, 16), ref, grid, none)["rms"] < 1e-12
 
 
+def test_crossing_width_interpolates_both_ends():
+    # Below 0.5 from x = 1.5 to x = 4.5 (samples 1 m apart): 3 m.
+    p = np.array([1.0, 0.75, 0.25, 0.0, 0.25, 0.75, 1.0])
+    assert crossing_width(p, 0.5, 1.0) == pytest.approx(3.0)
+    # From 1 + 0.1 / 0.6 to 4 + 0.3 / 0.8 samples, 2 m apart.
+    assert crossing_width(np.array([1.0, 0.6, 0.0, 0.0, 0.2, 1.0]), 0.5, 2.0) == pytest.approx(2.0 * (4.375 - 1 - 1 / 6))
+    assert crossing_width(np.ones(5), 0.5, 1.0) == 0.0
+
+
+def test_loglog_slope():
+    x = np.array([10.0, 100.0, 1000.0])
+    assert loglog_slope(x, 3 * x ** 1.5) == pytest.approx(1.5)
+    assert loglog_slope([1.0], [2.0]) is None
+
+
+def test_naive_renderer_matches_the_renderer_on_the_pillar():
+    from softshadow import Pose, ShadowParams, SoftShadowModel, Sun
+    from softshadow_cli.bench.naive import NaiveRenderer
+    from softshadow_cli.bench.sweep import scene_grid
+    mesh = bench_mesh("pillar")
+    s = -np.asarray(Sun(200.0, 40.0).light_np)
+    grid = scene_grid(mesh, s, 48)
+    naive = NaiveRenderer(mesh).render(s, grid, 0.02, 0.2)
+    ours = np.asarray(SoftShadowModel.from_mesh(mesh).ground_map(ShadowParams(0.02, 0.2), Sun(200.0, 40.0), Pose(), grid))
+    assert np.sqrt(np.mean((naive - ours) ** 2)) < 0.01 and np.mean(np.abs(naive - ours) > 0.05) < 0.01
+
+
 def test_linear_ramp_closest_to_the_disk_profile():
     # CONVENTIONS: the best-fitting linear ramp to a real disk is about 0.854 tan r.
     assert linear_equivalent_k(0.01) == pytest.approx(0.00854, abs=3e-5)
@@ -72,9 +101,20 @@ def test_sweep_quick_writes_json_report_and_plot(tmp_path, monkeypatch, capsys):
     for sweep in ("resolution", "profile", "dtype", "lod"):
         assert result[sweep] and all("error" in c for c in result[sweep])
     assert [c["dtype"] for c in result["dtype"]] == ["float32", "float64"]
+    for key in ("pillar", "ball", "dragon"):  # the paper's algorithm, hard and soft, beside Table 3
+        row = result["paper"]["table3"][key]
+        assert row["paper_soft_ms"] > row["paper_hard_ms"] and "error" in row["soft"] and "error" in row["hard"]
+    assert [r["label"] for r in result["paper"]["table2"]] == ["09:20", "13:21", "16:21"]
+    assert [r["distance_m"] for r in result["table1"]] == [0.3, 1.5, 3.0]
+    sc = result["scaling"]
+    assert [r["faces"] for r in sc["by_faces"]] == [176, 1472] and "median_ms" in sc["by_faces"][0]["naive"]
+    assert set(sc["slope_vs_faces"]) == {"softshadow", "paper", "naive"}
+    assert all(r["measured_S_m"] > r["measured_H_m"] > 0 for r in result["table1"])
     assert "fit_samples" not in result  # --no-fit (the fit sweep reuses fit.bench_same_model)
     assert result["environment"]["versions"]["jax"]
     assert list((tmp_path / "cache").glob("reference-*.npz"))  # the truth is cached
     text = md.read_text()
     assert "img/speed_vs_error_pareto.png" in text and result["environment"]["date_utc"] in text
+    assert "Table 1" in text and "Table 3" in text and "Table 2 in the paper's own parameters" in text
     assert (md.parent / "img" / "speed_vs_error_pareto.png").stat().st_size > 1000
+    assert (md.parent / "img" / "speed_vs_error_scaling.png").stat().st_size > 1000

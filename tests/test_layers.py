@@ -29,7 +29,8 @@ ALLOWED = {
     "softshadow_cli": set(PACKAGES),
 }
 PUBLIC_ONLY = ("softshadow", "scene")  # imported from above by their public names only
-DISCRETE_RENDERER_MODULES = ("meshes", "camera", "occluder", "raster", "posed", "plan", "colour", "threads")
+DISCRETE_RENDERER_MODULES = ("meshes", "camera", "occluder", "raster", "posed", "plan", "colour", "threads",
+                             "shadowmap")
 
 
 def _imports(path: Path):
@@ -132,11 +133,16 @@ def test_plans_run_no_eager_jax(no_eager_jax):
     sun, pose = Sun(150.0, 40.0), Pose((0.1, 0.2, 0.0), (0.0, 0.0, 20.0))
     grid = GroundGrid.around((-0.5, 1.0), 4.0, 96)
     points = grid.pixel_centres().reshape(-1, 3)[::7]
+    # Receiver points that are not on the plane, with normals: the light-space plan.
+    raised = points + np.c_[np.zeros((len(points), 2)), 0.1 * np.sin(points[:, :1])]
+    normals = np.tile([0.0, 0.3, 1.0], (len(points), 1))
     with no_eager_jax():
         plan = model.plan_grid(sun, pose, grid, 0.02)
         point_plan = model.plan_points(sun, pose, points, 0.02)
-    assert plan.n_band > 0
-    leaves = jax.tree_util.tree_leaves(point_plan) + jax.tree_util.tree_leaves(plan.plan)
+        light_plan = model.plan_points(sun, pose, raised, 0.02, normals)
+    assert plan.n_band > 0 and light_plan.active.any()
+    leaves = (jax.tree_util.tree_leaves(point_plan) + jax.tree_util.tree_leaves(plan.plan)
+              + jax.tree_util.tree_leaves(light_plan))
     assert all(isinstance(leaf, np.ndarray) for leaf in leaves), "plans hold NumPy leaves"
 
 

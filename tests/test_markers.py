@@ -226,7 +226,9 @@ def test_one_marker_is_too_few_corners():
     single = np.full_like(image, 255)
     (x0, y0), (x1, y1) = np.floor(xy.min(0)).astype(int), np.ceil(xy.max(0)).astype(int)
     single[y0:y1, x0:x1] = image[y0:y1, x0:x1]
-    with pytest.raises(RegistrationError, match=r"^too few corners \(4; need 6\)$"):
+    # The message gives the counts that decided: no chessboard corner, one marker's four corners.
+    with pytest.raises(RegistrationError,
+                       match=r"^too few board corners: 0 chessboard corners and 1 marker \(4 corners\); need 6$"):
         register_board(render_view(OBLIQUE, single), SPEC, K=OBLIQUE.K)
 
 

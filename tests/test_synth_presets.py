@@ -223,4 +223,5 @@ def test_cli_runs_and_refuses_to_overwrite(tmp_path, capsys):
     assert run(args) == 0
     with pytest.raises(SystemExit):
         parser.parse_args([str(out), "--size", "64by48"])
-    assert set(PRESETS) == {"table2", "pillar", "ball", "dragon", "depth-background", "steps", "wall", "hard-cases"}
+    assert set(PRESETS) == {"table2", "pillar", "ball", "dragon", "depth-background", "steps", "wall", "hard-cases",
+                            "street"}

@@ -33,6 +33,13 @@ def run_bench(args) -> int:
     if args.what in ("render", "all"):
         from .render import bench_render
         result["render"] = bench_render(sizes=sizes, repeats=3 if args.quick else 7)
+    if args.what in ("render", "all", "receiver"):
+        from .render import bench_depth_receiver
+        result.setdefault("render", {})["depth_receiver_512"] = bench_depth_receiver(
+            repeats=3 if args.quick else 7)
+    if args.what in ("precision", "all"):
+        from .shadow_precision import bench_shadow_precision
+        result["shadow_map_precision"] = bench_shadow_precision()
     if args.what in ("fit", "all"):
         from .fit import bench_fit
         result["fit"] = bench_fit(quick=args.quick)

@@ -88,3 +88,76 @@ def bench_render(sizes=(256, 512, 1024), meshes=("pillar", "ball", "dragon"), re
             }
     out["peak_memory_mb"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1)
     return out
+
+
+def depth_receiver_scene(size: int = 512, mesh: str = "dragon"):
+    """A range image of the built-in mesh standing on the ground in front of a 0.15 m step.
+
+    A camera (``size`` x ``size`` pixels) looks at the scene; each pixel's ray is cast
+    against the ground, the step and the mesh itself (trimesh), its distance along the
+    optical axis kept as a range image (CONVENTIONS: z_cam, metres), and the receiver
+    points are unprojected from that range image. Returns (model, points (N, 3),
+    normals (N, 3), camera); pixels that see nothing are left out.
+    """
+    import numpy as np
+    import trimesh
+
+    from softshadow import SoftShadowModel, look_at_camera
+
+    model = SoftShadowModel.from_mesh(mesh)
+    occ = model.occluder
+    obj = trimesh.Trimesh(occ.vertices, occ.faces, process=False)
+    ground = trimesh.Trimesh([[-6, -6, 0], [6, -6, 0], [6, 1.2, 0], [-6, 1.2, 0]], [[0, 1, 2], [0, 2, 3]])
+    step = trimesh.creation.box(extents=(12.0, 6.0, 0.15))
+    step.apply_translation((0.0, 1.2 + 3.0, 0.075))
+    scene = trimesh.util.concatenate([obj, ground, step])
+    camera = look_at_camera((2.2, -2.6, 2.4), (0.2, 0.9, 0.2), size, size, 60.0)
+    rows, cols = np.mgrid[0:size, 0:size]
+    dirs = camera.pixel_rays(cols.ravel(), rows.ravel())
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    origins = np.broadcast_to(camera.centre, dirs.shape)
+    loc, ray, tri = scene.ray.intersects_location(origins, dirs, multiple_hits=False)
+    z_cam = np.full(size * size, np.nan)
+    z_cam[ray] = (loc - camera.centre) @ camera.R[2]
+    normals = np.zeros((size * size, 3))
+    normals[ray] = scene.face_normals[tri]
+    # The range image back to points, as a depth receiver reads it.
+    ok = np.isfinite(z_cam)
+    rays = camera.pixel_rays(cols.ravel()[ok], rows.ravel()[ok])
+    points = camera.centre + rays * (z_cam[ok] / (rays @ camera.R[2]))[:, None]
+    return model, points, normals[ok], camera
+
+
+def bench_depth_receiver(size: int = 512, mesh: str = "dragon", repeats: int = 7) -> dict:
+    """The light-space back end on a ``size``^2 range image (the mesh, the ground and a step)
+    beside the ground back end on a ``size``^2 top-down map, in the same run.
+
+    ``light_ms``: plan plus evaluation at every range-image point (``at_points`` with
+    normals); ``ground_ms``: ``ground_map`` on a map framing the shadow; ``ratio`` =
+    light_ms / ground_ms.
+    """
+    import numpy as np
+
+    from softshadow import GroundGrid, Pose, ShadowParams, Sun, project_to_ground
+
+    model, points, normals, _ = depth_receiver_scene(size, mesh)
+    sun, pose = Sun(200.0, 40.0), Pose()
+    params = ShadowParams(0.01, 0.3)
+    world = np.asarray(model.occluder.vertices)
+    g = project_to_ground(world, sun.light_np)
+    pts = np.vstack([g, world[:, :2]])
+    grid = GroundGrid.around((pts.min(0) + pts.max(0)) / 2, float((pts.max(0) - pts.min(0)).max()) * 1.1, size)
+
+    def light():
+        model.at_points(params, sun, pose, points, normals).block_until_ready()
+
+    def ground():
+        model.ground_map(params, sun, pose, grid).block_until_ready()
+
+    plan = model.plan_points(sun, pose, points, 0.01, normals)
+    light_ms = _median_ms(light, repeats)
+    ground_ms = _median_ms(ground, repeats)
+    n = len(points)
+    return {"points": int(n), "band_points": int(plan.active[:n].sum()),
+            "hard_points": int(plan.hard[:n].sum()), "light_ms": round(light_ms, 2),
+            "ground_ms": round(ground_ms, 2), "ratio": round(light_ms / ground_ms, 3)}

@@ -39,6 +39,8 @@ class SweepSettings:
         self.quick = quick
         self.reference_pixels = 64 if quick else 512
         self.reference_samples = 64 if quick else 4096
+        # The knot's many silhouette edges make its rays the dearest: fewer (its noise is reported).
+        self.reference_samples_for = {} if quick else {"knot": 1024}
         self.base_pixels = 64 if quick else 512
         self.resolutions = (32, 128) if quick else (128, 256, 512, 1024, 2048)
         self.lod_faces = (2000,) if quick else (26584, 10000, 3000, 1000, 300)
@@ -46,6 +48,10 @@ class SweepSettings:
         self.fit_samples = (300,) if quick else (150, 400, 1300)
         self.fit_seeds = 2 if quick else 12
         self.meshes = ("pillar", "ball", "dragon") if quick else BENCH_MESHES
+        # The paper's algorithm, fitted by grid search: its range (pixels) and expansion (L' tilt).
+        self.paper_ranges = (0, 2) if quick else tuple(range(0, 41))
+        self.paper_expands = (0.0,) if quick else (0.0, 0.002, 0.004, 0.006, 0.008, 0.01, 0.012)
+        self.table2_samples = 64 if quick else 1024
 
 
 @functools.lru_cache(maxsize=None)
@@ -101,7 +107,7 @@ def image_error(image: np.ndarray, grid, reference, ref_grid, footprint_of) -> d
 class _Scene:
     """One mesh under the bench's light: the physical reference and the renderer's inputs."""
 
-    def __init__(self, mesh, settings: SweepSettings, truth_mesh=None):
+    def __init__(self, mesh, settings: SweepSettings, truth_mesh=None, name: str | None = None):
         from data_synth import SunSky
         from softshadow import Pose, SoftShadowModel, Sun, object_mask
         self.mesh = mesh
@@ -110,7 +116,8 @@ class _Scene:
         truth = truth_mesh if truth_mesh is not None else mesh
         self.truth_model = SoftShadowModel.from_mesh(truth)
         self.ref_grid = scene_grid(truth, self.light.direction, settings.reference_pixels)
-        self.reference = physical_reference(truth, self.light, self.ref_grid, settings.reference_samples)
+        self.samples = settings.reference_samples_for.get(name, settings.reference_samples)
+        self.reference = physical_reference(truth, self.light, self.ref_grid, self.samples)
         self.model = SoftShadowModel.from_mesh(mesh)
         self._object_mask = object_mask
         self.faces = int(len(mesh.faces))
@@ -158,10 +165,10 @@ def run_sweep(settings: SweepSettings, fit: bool = True, progress=print) -> dict
     references = {}
     for name in settings.meshes:
         progress(f"bench sweep: reference for {name}")
-        scenes[name] = _Scene(bench_mesh(name), settings)
+        scenes[name] = _Scene(bench_mesh(name), settings, name=name)
         ref = scenes[name].reference
         references[name] = {"noise_rms_band": ref.noise_rms, "seconds": round(ref.seconds, 2),
-                            "pixels": settings.reference_pixels, "samples": settings.reference_samples,
+                            "pixels": settings.reference_pixels, "samples": scenes[name].samples,
                             "pixel_m": scenes[name].ref_grid.pixel_m, "band_pixels": int(ref.band().sum())}
     out["reference"] = references
     for name, scene in scenes.items():
@@ -176,9 +183,20 @@ def run_sweep(settings: SweepSettings, fit: bool = True, progress=print) -> dict
                     for d in ("float32", "float64")]
     progress("bench sweep: level of detail")
     full = scenes["dragon"].mesh
-    out["lod"] = [_Scene(decimated(full, f), settings, truth_mesh=full).case(settings.base_pixels,
+    out["lod"] = [_Scene(decimated(full, f), settings, truth_mesh=full, name="dragon").case(settings.base_pixels,
                                                                             repeats=settings.repeats)
                   for f in settings.lod_faces]
+    progress("bench sweep: the paper's algorithm (Table 3)")
+    from .paper import bench_paper_table2, bench_paper_table3
+    out["paper"] = {"table3": bench_paper_table3(scenes, settings)}
+    progress("bench sweep: the paper's algorithm fitted to the table2 lights (Table 2)")
+    out["paper"]["table2"] = bench_paper_table2(settings)
+    progress("bench sweep: Table 1 (expansion ratios)")
+    from .table1 import bench_table1
+    out["table1"] = bench_table1(pixels=64 if settings.quick else 512, samples=64 if settings.quick else 512)
+    progress("bench sweep: scaling against faces and pixels")
+    from .scaling import bench_scaling
+    out["scaling"] = bench_scaling(quick=settings.quick, repeats=settings.repeats if settings.quick else 3)
     if fit:
         progress("bench sweep: fit samples per photo")
         out["fit_samples"] = fit_samples_sweep(settings)

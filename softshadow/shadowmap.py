@@ -1,0 +1,301 @@
+"""The sun's shadow map: the occluder seen from the light, its depth, and the depth test (NumPy).
+
+The sun is orthographic: every point p maps to light space by a rigid change of
+frame, (u, v) = ((p - o) . e1, (p - o) . e2) on a plane perpendicular to the
+light L, and depth d = (p - o) . L (metres along the light's travel, growing
+away from the sun). The occluder's faces drawn there with their depths give
+the shadow map: for every light-space pixel the nearest face to the sun and
+its depth. A receiver point is behind the occluder (in its cast shadow) when
+its depth exceeds the occluder's depth at its (u, v) by more than a bias.
+
+``rasterise_depth`` is generic over the projection: it takes any 2-D pixel
+coordinates and per-vertex depths that are affine in them over a triangle
+(orthographic depth here; a perspective projector passes NDC depth or 1/w).
+
+The bias (see docs/shadow_map.md). The map stores, per pixel, which face is
+nearest the sun. A receiver point takes the face of its pixel, or else of
+the first of the 8 around it, whose light-space triangle contains it, and
+compares against that face's plane evaluated at its own (u, v): exact, so a
+point on a face of the occluder compares against itself and only rounding is
+left. Where no such face is found (a face smaller than a pixel, missed by
+every pixel centre) the nearest covered pixel's face plane is extrapolated,
+by under 0.71 pixel: an error up to 0.71 px (tan a + tan b) for the two
+surfaces' slopes. So
+
+    bias = BIAS_PX * pixel + PRECISION_ULPS * eps(dtype) * scale + tolerance
+           [+ SLOPE_PX * pixel * (min(tan_face, TAN_MAX) + min(tan_recv, TAN_MAX)) where extrapolated]
+
+with tan the slope of the depth across light space (tan of the angle between
+the surface's normal and the light), tan_recv from the receiver's normal when
+given, and tolerance the receiver data's own depth error (a range image's
+quantisation), which the caller states. Acne (a lit surface shadowing itself)
+needs an error above the bias; peter-panning (a contact shadow detached from
+the contact) is at most the bias measured along the light.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .camera import GroundGrid
+
+__all__ = ["LightFrame", "ShadowMap", "rasterise_depth", "shadow_map", "depth_bias", "faces_away",
+           "BIAS_PX", "SLOPE_PX", "TAN_MAX", "PRECISION_ULPS", "FACING_TOL"]
+
+BIAS_PX = 0.05        # constant part of the bias, in light-space pixels
+SLOPE_PX = 0.75       # slope-scaled part: > 0.71, the farthest a point lies from its pixel centre
+TAN_MAX = 1000.0      # slopes are clipped here (faces within 0.06 deg of the light)
+PRECISION_ULPS = 16.0  # rounding allowance, in ulps of the coordinates' magnitude
+FACING_TOL = 1e-9     # |n . L| below this: edge-on to the sun, counted as facing away
+
+
+@dataclasses.dataclass(frozen=True)
+class LightFrame:
+    """An orthonormal frame of the sun's view: e1, e2 span the plane perpendicular to the
+    light (3,) unit, origin (3,) world metres (the occluder's centre keeps depths small)."""
+
+    light: np.ndarray
+    e1: np.ndarray
+    e2: np.ndarray
+    origin: np.ndarray
+
+    @classmethod
+    def of_light(cls, light, origin=(0.0, 0.0, 0.0)) -> "LightFrame":
+        light = np.asarray(light, np.float64)
+        light = light / np.linalg.norm(light)
+        # The world axis least aligned with the light keeps the cross product well conditioned
+        # at any elevation, 90 deg included.
+        axis = np.zeros(3)
+        axis[int(np.argmin(np.abs(light)))] = 1.0
+        e1 = np.cross(axis, light)
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(light, e1)
+        return cls(light, e1, e2, np.asarray(origin, np.float64))
+
+    def project(self, points: np.ndarray, dtype=np.float64) -> tuple[np.ndarray, np.ndarray]:
+        """Light-space (u, v) (N, 2) and depth (N,) of world points (N, 3), computed in ``dtype``."""
+        p = np.asarray(points, dtype).reshape(-1, 3) - self.origin.astype(dtype)
+        out = p @ np.stack([self.e1, self.e2, self.light], 1).astype(dtype)
+        return out[:, :2], out[:, 2]
+
+
+def faces_away(normals: np.ndarray, light: np.ndarray) -> np.ndarray:
+    """Attached shadow (N,) bool: the surface at a point with this unit normal (N, 3) faces
+    away from the sun (n . L >= 0, the sun at or below its horizon; within FACING_TOL, so a
+    face exactly edge-on to the light counts whatever the rounding), so the sun does not
+    light it."""
+    n = np.asarray(normals, np.float64).reshape(-1, 3)
+    light = np.asarray(light, np.float64)
+    return n[:, 0] * light[0] + n[:, 1] * light[1] + n[:, 2] * light[2] >= -FACING_TOL
+
+
+def rasterise_depth(xy: np.ndarray, depth: np.ndarray, faces: np.ndarray, shape: tuple[int, int],
+                    chunk_fragments: int = 2_000_000) -> tuple[np.ndarray, np.ndarray]:
+    """Nearest-face depth buffer of triangles, generic over the projection.
+
+    xy (V, 2) pixel coordinates (col, row; pixel centres at integers); depth (V,) any
+    quantity affine in xy over each triangle (smaller is nearer); faces (F, 3);
+    shape (H, W). Returns depth (H, W) in depth's dtype (+inf where no face covers the
+    pixel centre) and face_id (H, W) int32 (the index into ``faces`` of the nearest face,
+    -1 where none). A pixel centre on a shared edge belongs to both faces (no cracks).
+
+    Scanline: each face's rows, each row's span of columns from the face's edges, then the
+    depth from the face's plane at those pixel centres; O(covered pixels + face rows).
+    """
+    h, w = shape
+    dtype = np.result_type(depth.dtype, np.float32)
+    zbuf = np.full(h * w, np.inf, dtype)
+    fid = np.full(h * w, -1, np.int32)
+    tri = xy[faces].astype(np.float64)  # (F, 3, 2)
+    tz = depth[faces].astype(np.float64)
+    x0, y0 = tri[:, 0, 0], tri[:, 0, 1]
+    e1x, e1y = tri[:, 1, 0] - x0, tri[:, 1, 1] - y0
+    e2x, e2y = tri[:, 2, 0] - x0, tri[:, 2, 1] - y0
+    area = e1x * e2y - e1y * e2x
+    ymin, ymax = tri[:, :, 1].min(1), tri[:, :, 1].max(1)
+    r0 = np.clip(np.ceil(ymin - 1e-9), 0, h).astype(np.int64)
+    r1 = np.clip(np.floor(ymax + 1e-9), -1, h - 1).astype(np.int64)
+    keep = (r1 >= r0) & (np.abs(area) > 1e-12) & np.all(np.isfinite(tz), 1) & np.all(np.isfinite(tri), (1, 2))
+    keep &= (tri[:, :, 0].max(1) >= -0.5) & (tri[:, :, 0].min(1) <= w - 0.5)
+    f = np.flatnonzero(keep)
+    if not len(f):
+        return zbuf.reshape(h, w), fid.reshape(h, w)
+    # Depth planes in pixel coordinates: z = z0 + gx (x - x0) + gy (y - y0).
+    z0 = tz[f, 0]
+    dz1, dz2 = tz[f, 1] - z0, tz[f, 2] - z0
+    gx = (dz1 * e2y[f] - dz2 * e1y[f]) / area[f]
+    gy = (dz2 * e1x[f] - dz1 * e2x[f]) / area[f]
+    # One span per (face, row): where the row's line crosses the face's three edges.
+    n_rows = r1[f] - r0[f] + 1
+    span_face = np.repeat(np.arange(len(f)), n_rows)
+    row = r0[f][span_face] + (np.arange(len(span_face)) - np.repeat(np.cumsum(n_rows) - n_rows, n_rows))
+    t = tri[f][span_face]  # (S, 3, 2)
+    lo = np.full(len(row), np.inf)
+    hi = np.full(len(row), -np.inf)
+    for a, b in ((0, 1), (1, 2), (2, 0)):
+        ya, yb = t[:, a, 1], t[:, b, 1]
+        xa, xb = t[:, a, 0], t[:, b, 0]
+        dy = yb - ya
+        on = (row >= np.minimum(ya, yb) - 1e-9) & (row <= np.maximum(ya, yb) + 1e-9)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            frac = np.where(np.abs(dy) > 1e-12, np.clip((row - ya) / dy, 0.0, 1.0), 0.0)
+        xc = xa + frac * (xb - xa)
+        flat = on & (np.abs(dy) <= 1e-12)  # a horizontal edge on the row: both ends
+        lo = np.where(on, np.minimum(lo, np.where(flat, np.minimum(xa, xb), xc)), lo)
+        hi = np.where(on, np.maximum(hi, np.where(flat, np.maximum(xa, xb), xc)), hi)
+    c0 = np.clip(np.ceil(lo - 1e-9), 0, w).astype(np.int64)
+    c1 = np.clip(np.floor(hi + 1e-9), -1, w - 1).astype(np.int64)
+    n_cols = np.maximum(c1 - c0 + 1, 0)
+    total = np.cumsum(n_cols)
+    # Chunks of whole spans, each at most ~chunk_fragments pixels.
+    cuts = np.searchsorted(total, np.arange(1, 1 + int(total[-1]) // chunk_fragments) * chunk_fragments)
+    for part in np.split(np.arange(len(row)), np.unique(cuts)):
+        if not len(part):
+            continue
+        m = n_cols[part]
+        spn = np.repeat(part, m)
+        col = c0[spn] + (np.arange(len(spn)) - np.repeat(np.cumsum(m) - m, m))
+        fs = span_face[spn]
+        rr = row[spn]
+        z = (z0[fs] + gx[fs] * (col - x0[f][fs]) + gy[fs] * (rr - y0[f][fs])).astype(dtype)
+        pix = rr * w + col
+        np.minimum.at(zbuf, pix, z)
+        won = z <= zbuf[pix]
+        fid[pix[won]] = f[fs[won]]
+    return zbuf.reshape(h, w), fid.reshape(h, w)
+
+
+@dataclasses.dataclass(frozen=True)
+class ShadowMap:
+    """The occluder's depth from the sun on a light-space grid.
+
+    grid: a ``GroundGrid`` whose (x, y) are light-space (u, v); depth (H, W) nearest depth
+    at pixel centres (+inf: no face); face_id (H, W) index into ``plane`` (-1: none);
+    plane (F, 3) each face's depth plane (A, B, d0), d = d0 + A (u - u0) + B (v - v0) about
+    its first corner (u0, v0) = triangle[:, 0]; slope (F,) its |grad d|
+    (tan of the angle between the face's normal and the light); triangle (F, 3, 2) its
+    light-space corners; scale: the magnitude of the coordinates, for the rounding allowance.
+    """
+
+    grid: GroundGrid
+    depth: np.ndarray
+    face_id: np.ndarray
+    plane: np.ndarray
+    slope: np.ndarray
+    triangle: np.ndarray
+    scale: float
+
+    def occluder_depth(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The occluder's depth (N,) at light-space points (N, 2) (+inf where no face is near),
+        the slope (N,) of the face used, and whether its triangle contains the point (N,) (the
+        depth is then exact; else extrapolated, and the bias grows with the slopes).
+
+        The face nearest the sun at the point's pixel, or else at the first of its 8
+        neighbours, whose triangle contains the point: its plane, exact. Where none does (a face
+        smaller than a pixel, missed by every pixel centre), the nearest covered pixel's
+        face within 2 pixels, its plane extrapolated, with its slope for the bias.
+        """
+        g = self.grid
+        h, w = self.face_id.shape
+        cr = np.rint(g.to_pixel(uv)).astype(np.int64)
+        rows, cols = cr[:, 1], cr[:, 0]
+        inf = np.asarray(np.inf, self.plane.dtype)
+        best = np.full(len(uv), inf, self.plane.dtype)
+        # The point's own pixel first; its 8 neighbours only for the points its face misses.
+        todo = np.arange(len(uv))
+        for dr, dc in ((0, 0), (-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (-1, 1), (1, -1), (1, 1)):
+            if not len(todo):
+                break
+            r, c = rows[todo] + dr, cols[todo] + dc
+            ok = (r >= 0) & (r < h) & (c >= 0) & (c < w)
+            f = np.where(ok, self.face_id[np.clip(r, 0, h - 1), np.clip(c, 0, w - 1)], -1)
+            fi = np.maximum(f, 0)
+            u, v = uv[todo, 0], uv[todo, 1]
+            t = self.triangle[fi]  # (m, 3, 2)
+            ex1, ey1 = t[:, 1, 0] - t[:, 0, 0], t[:, 1, 1] - t[:, 0, 1]
+            ex2, ey2 = t[:, 2, 0] - t[:, 0, 0], t[:, 2, 1] - t[:, 0, 1]
+            px, py = u - t[:, 0, 0], v - t[:, 0, 1]
+            area = ex1 * ey2 - ey1 * ex2
+            area = np.where(area != 0, area, 1.0)
+            b1 = (px * ey2 - py * ex2) / area
+            b2 = (ex1 * py - ey1 * px) / area
+            tol = -1e-7
+            inside = (f >= 0) & (b1 >= tol) & (b2 >= tol) & (b1 + b2 <= 1.0 - tol)
+            best[todo] = np.where(inside, self._plane_at(fi, u, v), inf)
+            todo = todo[~inside]
+        slope = np.zeros(len(uv), self.plane.dtype)
+        exact = np.isfinite(best)
+        miss = np.flatnonzero(~exact)
+        if len(miss):
+            face = self._nearest_face(rows[miss], cols[miss])
+            has = face >= 0
+            best[miss] = np.where(has, self._plane_at(np.maximum(face, 0), uv[miss, 0], uv[miss, 1]), inf)
+            slope[miss] = np.where(has, self.slope[np.maximum(face, 0)], 0.0)
+        return best, slope, exact
+
+    def _plane_at(self, face: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Depth of faces' planes (N,) at light-space points (u, v) (N,)."""
+        p, corner = self.plane[face], self.triangle[face, 0]
+        return p[:, 2] + p[:, 0] * (u - corner[:, 0]) + p[:, 1] * (v - corner[:, 1])
+
+    def _nearest_face(self, rows: np.ndarray, cols: np.ndarray, reach: int = 2) -> np.ndarray:
+        """The face id (N,) of the covered pixel nearest each pixel, within ``reach`` (-1: none)."""
+        h, w = self.face_id.shape
+        face = np.full(len(rows), -1, np.int64)
+        offsets = sorted(((dr, dc) for dr in range(-reach, reach + 1) for dc in range(-reach, reach + 1)),
+                         key=lambda o: o[0] ** 2 + o[1] ** 2)
+        todo = np.arange(len(rows))
+        for dr, dc in offsets:
+            r, c = rows[todo] + dr, cols[todo] + dc
+            ok = (r >= 0) & (r < h) & (c >= 0) & (c < w)
+            face[todo] = np.where(ok, self.face_id[np.clip(r, 0, h - 1), np.clip(c, 0, w - 1)], -1)
+            todo = todo[face[todo] < 0]
+            if not len(todo):
+                break
+        return face
+
+
+def depth_bias(pixel_m: float, slope_face, slope_receiver=0.0, scale: float = 1.0,
+               dtype=np.float64, exact=None, tolerance_m: float = 0.0) -> np.ndarray:
+    """The depth test's bias (metres along the light), per point; see the module docstring.
+
+    exact (N,) bool: where the occluder's depth came from the face containing the point
+    (no slope term); None: everywhere extrapolated.
+    """
+    tan = np.minimum(slope_face, TAN_MAX) + np.minimum(slope_receiver, TAN_MAX)
+    slope_term = SLOPE_PX * pixel_m * tan
+    if exact is not None:
+        slope_term = np.where(exact, 0.0, slope_term)
+    return (BIAS_PX * pixel_m + PRECISION_ULPS * float(np.finfo(dtype).eps) * scale + tolerance_m
+            + slope_term)
+
+
+def _face_planes(uvd: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Depth planes (F, 3) and slopes (F,) of faces with light-space vertices uvd (V, 3).
+
+    A plane is (A, B, d0): d = d0 + A (u - u0) + B (v - v0) about the face's first corner
+    (u0, v0, d0). Relative to the corner, not as A u + B v + C: a face nearly edge-on to the
+    light has large A, B, and C = d0 - A u0 - B v0 cancels catastrophically in float32.
+    """
+    p = uvd[faces]
+    n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    nd = np.where(np.abs(n[:, 2]) > 1e-300, n[:, 2], 1e-300)
+    a, b = -n[:, 0] / nd, -n[:, 1] / nd
+    return np.stack([a, b, p[:, 0, 2]], 1), np.hypot(a, b)
+
+
+def shadow_map(grid: GroundGrid, uv: np.ndarray, depth: np.ndarray, faces: np.ndarray,
+               dtype=np.float64) -> ShadowMap:
+    """The shadow map of faces (F, 3) with light-space vertices uv (V, 2) and depths (V,) on grid.
+
+    dtype: the float type of the depth buffer and the planes (float32 to measure precision).
+    """
+    uv = np.asarray(uv, dtype)
+    depth = np.asarray(depth, dtype)
+    zbuf, fid = rasterise_depth(grid.to_pixel(uv).astype(dtype), depth, faces,
+                                (grid.height, grid.width))
+    plane, slope = _face_planes(np.column_stack([uv, depth]), faces)
+    scale = float(np.abs(np.column_stack([uv, depth])).max(initial=1.0))
+    return ShadowMap(grid, zbuf, fid, plane.astype(dtype), slope.astype(dtype), uv[faces], scale)

@@ -1,0 +1,405 @@
+"""The photo-folder contract without silent failures: a photo that does not fit its group, stale
+resumes, ignored settings, unguarded output, unclear messages (no traceback without --verbose).
+
+One synthetic table2 folder at 800x600 (physical renderer, fast quality) is rendered once per
+session; the cases are copies of it with one thing broken.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+SIZE = (800, 600)
+
+
+# --------------------------------------------------------------------------- folders
+
+@pytest.fixture(scope="session")
+def table2(tmp_path_factory) -> Path:
+    from data_synth import RenderQuality, synthesize
+    fast = RenderQuality(sun_samples=16, sky_samples=256, sky_fine_nodes=48, object_sky_samples=16)
+    return synthesize(tmp_path_factory.mktemp("contract") / "table2", "table2", seed=0, size=SIZE,
+                      progress=False, render_quality=fast)
+
+
+def _truth(folder: Path) -> dict:
+    return {g["label"]: g for g in json.loads((folder / "truth.json").read_text())["groups"]}
+
+
+def _copy(src: Path, dst: Path, photos=None) -> Path:
+    """A copy of a synthetic folder (only ``photos`` when given; scene.toml keeps every entry)."""
+    dst.mkdir(parents=True)
+    for f in src.iterdir():
+        if f.suffix == ".jpg" and photos is not None and f.name not in photos:
+            continue
+        shutil.copy(f, dst / f.name)
+    return dst
+
+
+def _scene(folder: Path) -> dict:
+    import tomllib
+    return tomllib.loads((folder / "scene.toml").read_text())
+
+
+def _write_scene(folder: Path, data: dict) -> None:
+    import tomli_w
+    (folder / "scene.toml").write_text(tomli_w.dumps(data))
+
+
+def _gray_with_exif_of(path: Path) -> None:
+    """Replace a photo by a uniform gray frame with the same EXIF (a lens cap, a frame without the
+    shadow)."""
+    import piexif
+    from PIL import Image
+    exif = piexif.dump(piexif.load(str(path)))
+    Image.fromarray(np.full((SIZE[1], SIZE[0], 3), 128, np.uint8)).save(path, exif=exif, quality=92)
+
+
+def _set_exif_time(path: Path, text: str | None) -> None:
+    import piexif
+    exif = piexif.load(str(path))
+    if text is None:
+        exif["Exif"].pop(piexif.ExifIFD.DateTimeOriginal, None)
+        exif["Exif"].pop(piexif.ExifIFD.OffsetTimeOriginal, None)
+    else:
+        exif["Exif"][piexif.ExifIFD.DateTimeOriginal] = text.encode()
+    piexif.insert(piexif.dump(exif), str(path))
+
+
+@pytest.fixture(scope="session")
+def bad_photos(table2, tmp_path_factory):
+    """Every group of table2 with one bad photo, fitted once:
+
+    09:20: IMG_0003's camera in scene.toml is 3 degrees off (its registration is off), and
+           IMG_0011 (a copy of IMG_0002) gives sun_elevation_deg without sun_azimuth_deg;
+    13:21: IMG_0006 is a uniform gray frame with the same EXIF time;
+    16:21: IMG_0010 is a 13:21 photo (IMG_0005) whose clock says 16:22 (its time is wrong),
+           in place of IMG_0009; IMG_0012 (a copy of IMG_0007) has no EXIF time and an
+           unreadable scene.toml time.
+    """
+    from scipy.spatial.transform import Rotation
+
+    from fitting import FitOptions, fit_folder
+    folder = _copy(table2, tmp_path_factory.mktemp("bad") / "bad",
+                   [f"IMG_000{i}.jpg" for i in range(1, 9)])
+    data = _scene(folder)
+    photos = data["photos"]
+    del photos["IMG_0009.jpg"]
+    R = np.asarray(photos["IMG_0003.jpg"]["camera"]["R"])
+    photos["IMG_0003.jpg"]["camera"]["R"] = (Rotation.from_euler("z", 3, degrees=True).as_matrix() @ R).tolist()
+    _gray_with_exif_of(folder / "IMG_0006.jpg")
+    shutil.copy(folder / "IMG_0005.jpg", folder / "IMG_0010.jpg")
+    _set_exif_time(folder / "IMG_0010.jpg", "2026:04:20 16:22:00")
+    photos["IMG_0010.jpg"] = dict(photos["IMG_0005.jpg"])
+    shutil.copy(folder / "IMG_0002.jpg", folder / "IMG_0011.jpg")
+    photos["IMG_0011.jpg"] = dict(photos["IMG_0002.jpg"], sun_elevation_deg=50.0)
+    shutil.copy(folder / "IMG_0007.jpg", folder / "IMG_0012.jpg")
+    _set_exif_time(folder / "IMG_0012.jpg", None)
+    photos["IMG_0012.jpg"] = dict(photos["IMG_0007.jpg"], time="yesterday at 9")
+    _write_scene(folder, data)
+    results = fit_folder(folder, options=FitOptions(plots=False))
+    return results, {g.label[:2]: g for g in results.groups}, _truth(table2)
+
+
+@pytest.fixture(scope="session")
+def one_group(table2, tmp_path_factory) -> Path:
+    """The three 13:21 photos of table2 and its scene.toml."""
+    return _copy(table2, tmp_path_factory.mktemp("one") / "one", ["IMG_0004.jpg", "IMG_0005.jpg", "IMG_0006.jpg"])
+
+
+def _reasons(results) -> dict[str, list[str]]:
+    out: dict[str, list[str]] = {}
+    for s in results.skipped:
+        out.setdefault(s["photo"], []).append(s["reason"])
+    return out
+
+
+# --------------------------------------------------------------------------- issue 14: photos that do not fit
+
+def test_gray_frame_is_left_out_and_the_group_is_right(bad_photos):
+    results, groups, truth = bad_photos
+    g = groups["13"]
+    assert "IMG_0006.jpg" not in g.photos and g.fitted and g.converged
+    assert abs(g.rho - truth["13:21"]["rho"]) < 0.01
+    (reason,) = _reasons(results)["IMG_0006.jpg"]
+    assert reason.startswith(f"left out of group {g.label}: no shadow edge where the model puts one")
+
+
+def test_photo_with_a_wrong_time_is_left_out(bad_photos):
+    results, groups, truth = bad_photos
+    g = groups["16"]
+    assert "IMG_0010.jpg" not in g.photos and g.fitted
+    assert abs(g.rho - truth["16:21"]["rho"]) < 0.02
+    (reason,) = _reasons(results)["IMG_0010.jpg"]
+    assert reason.startswith(f"left out of group {g.label}:")
+    assert any("refitted without IMG_0010.jpg" in w for w in g.warnings)
+
+
+def test_photo_with_its_camera_off_is_left_out(bad_photos):
+    results, groups, truth = bad_photos
+    g = groups["09"]
+    assert "IMG_0003.jpg" not in g.photos and g.fitted
+    assert abs(g.rho - truth["09:20"]["rho"]) < 0.01
+    (reason,) = _reasons(results)["IMG_0003.jpg"]
+    # Rolled 3 degrees, its view puts the model's shadow partly on lit ground: either reason fits.
+    assert reason.startswith(f"left out of group {g.label}: ") and ("camera" in reason)
+
+
+def test_half_a_sun_and_an_unreadable_time_are_one_line_each(bad_photos):
+    results, groups, _ = bad_photos
+    reasons = _reasons(results)
+    (half_sun,) = reasons["IMG_0011.jpg"]
+    assert "sun_elevation_deg without sun_azimuth_deg" in half_sun and "\n" not in half_sun
+    (bad_time,) = reasons["IMG_0012.jpg"]  # one entry: not also "no time in scene.toml"
+    assert "yesterday at 9" in bad_time and "\n" not in bad_time
+    assert all(n not in g.photos for g in groups.values() for n in ("IMG_0011.jpg", "IMG_0012.jpg"))
+
+
+def test_judge_rules():
+    from fitting.photo_check import PhotoAgreement, judge
+    ok = [PhotoAgreement(f"{i}.jpg", 0.02 + 0.002 * i, 0.8, 0.8) for i in range(3)]
+    assert judge(ok).leave_out == [] and judge(ok).warnings == [] and judge(ok).no_shadow is None
+    lens_cap = ok[:2] + [PhotoAgreement("cap.jpg", 0.05, 0.01, 0.7)]
+    assert [n for n, _ in judge(lens_cap).leave_out] == ["cap.jpg"]
+    off = ok[:2] + [PhotoAgreement("off.jpg", 0.2, 0.75, 0.8)]
+    assert [n for n, _ in judge(off).leave_out] == ["off.jpg"]
+    # Two photos that disagree: neither can be blamed, so the group is unreliable.
+    verdict = judge([ok[0], PhotoAgreement("off.jpg", 0.2, 0.75, 0.8)])
+    assert verdict.leave_out == [] and "cannot be told" in verdict.warnings[0]
+    # But a photo without the shadow the other shows can be blamed even among two.
+    assert [n for n, _ in judge([ok[0], lens_cap[2]]).leave_out] == ["cap.jpg"]
+    assert judge([PhotoAgreement(f"{i}.jpg", 0.01, 0.01, 0.0) for i in range(3)]).no_shadow
+
+
+def test_group_without_a_shadow_in_view_fits_nothing(one_group, tmp_path):
+    from fitting import FitOptions, fit_folder
+    folder = _copy(one_group, tmp_path / "gray")
+    for f in folder.glob("*.jpg"):
+        _gray_with_exif_of(f)
+    (g,) = fit_folder(folder, options=FitOptions(plots=False)).groups
+    assert g.error.startswith("no shadow in view") and g.rho is None and g.range_k is None
+
+
+def test_k_beyond_range_k_max_is_not_trusted(one_group):
+    from fitting import FitOptions, fit_folder
+    (g,) = fit_folder(one_group, options=FitOptions(plots=False, range_k_max=0.003)).groups
+    assert g.fitted and g.range_k > 0.003
+    assert not g.reliable and any("range_k_max" in w for w in g.warnings)
+
+
+# --------------------------------------------------------------------------- resume and --force
+
+def test_resume_key_covers_photos_scene_options_and_software(one_group, tmp_path):
+    from fitting import FitOptions, fit_folder
+    from fitting.resume import group_key
+    folder, out = _copy(one_group, tmp_path / "f"), tmp_path / "out"
+    options = FitOptions(plots=False)
+    calls = []
+
+    def run():
+        calls.clear()
+        return fit_folder(folder, options=options, out_dir=out, on_resume=lambda *a: calls.append(a))
+
+    (first,) = run().groups
+    assert first.reliable and first.warnings == [] and len(first.photos) == 3  # a clean group stays whole
+    (again,) = run().groups
+    assert calls == [(1, 1)] and again.rho == first.rho
+    # Another photo under the same name: refitted, not the stale record.
+    shutil.copy(folder / "IMG_0005.jpg", folder / "IMG_0004.jpg")
+    (changed,) = run().groups
+    assert calls == [] and changed.rho != first.rho
+    # An edited scene.toml: refitted.
+    data = _scene(folder)
+    data["object"]["position"] = [0.0, 0.0, 0.001]
+    _write_scene(folder, data)
+    run()
+    assert calls == []
+    # Options and software versions are in the key too.
+    digests, software = {"a.jpg": "0" * 64}, {"softshadow": "1", "jax": "1", "optimistix": "1"}
+    base = group_key(digests, None, FitOptions(), software)
+    assert base == group_key(digests, None, FitOptions(plots=False, verbose=True), software)
+    assert base != group_key(digests, None, FitOptions(profiles=("linear",)), software)
+    assert base != group_key(digests, None, FitOptions(range_k_max=0.05), software)
+    assert base != group_key(digests, None, FitOptions(), dict(software, softshadow="2"))
+
+
+def test_interrupted_force_run_leaves_consistent_outputs(one_group, tmp_path):
+    from fitting import FitOptions, fit_folder, write_report
+    out = tmp_path / "out"
+    options = FitOptions(plots=False)
+    write_report(fit_folder(one_group, options=options, out_dir=out), out, plots=False)
+    assert (out / "results.json").exists()
+
+    def stop(_):
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        fit_folder(one_group, options=options, out_dir=out, force=True, on_group=stop)
+    # The old report is gone with the old groups; the new group is kept for the next run.
+    assert not any((out / n).exists() for n in ("results.json", "table2.md", "table2.csv"))
+    assert len(list((out / "groups").glob("*.json"))) == 1
+
+
+def test_ctrl_c_prints_one_line_and_resumes(one_group, tmp_path):
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "softshadow_cli", "fit", str(one_group), "--out", str(out), "--no-plots"]
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+    err = bytearray()
+
+    def read():
+        for chunk in iter(lambda: proc.stderr.read1(4096), b""):
+            err.extend(chunk)
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    deadline = time.monotonic() + 120
+    while b"fitting" not in err and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.2)
+    proc.send_signal(signal.SIGINT)
+    proc.wait(timeout=60)
+    reader.join(timeout=10)
+    text = err.decode(errors="replace")
+    assert proc.returncode == 130, text
+    assert "Traceback" not in text and "KeyboardInterrupt" not in text
+    lines = [ln for ln in text.replace("\r", "\n").splitlines() if "softshadow fit:" in ln]
+    assert len(lines) == 1 and lines[0].startswith("softshadow fit: interrupted"), text
+    assert "run the same command again to resume" in lines[0]
+
+
+# --------------------------------------------------------------------------- the command line
+
+def _main(argv, monkeypatch, capsys):
+    import importlib
+    cli = importlib.import_module("softshadow_cli.main")
+    monkeypatch.setattr(cli, "_use_compilation_cache", lambda: None)
+    code = cli.main(argv)
+    captured = capsys.readouterr()
+    return code, captured.err
+
+
+def _one_line(err: str) -> str:
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "Traceback" not in err, err
+    return lines[0]
+
+
+def test_out_that_is_a_file_or_under_a_file_is_refused_before_any_work(one_group, tmp_path, monkeypatch, capsys):
+    a_file = tmp_path / "results"
+    a_file.write_text("not a folder")
+    for out in (a_file, a_file / "sub"):
+        code, err = _main(["fit", str(one_group), "--out", str(out)], monkeypatch, capsys)
+        assert code == 2 and "is a file, not a folder" in _one_line(err)
+
+
+def test_read_only_out_is_refused(one_group, tmp_path, monkeypatch, capsys):
+    if os.geteuid() == 0:  # root writes anywhere a permission bit forbids: use a read-only file system
+        out = Path("/sys/softshadow-test/out")
+        if not Path("/sys").is_dir():
+            pytest.skip("no read-only place for root")
+    else:
+        locked = tmp_path / "locked"
+        locked.mkdir(mode=0o500)
+        out = locked / "out"
+    code, err = _main(["fit", str(one_group), "--out", str(out)], monkeypatch, capsys)
+    assert code == 2 and "cannot be written" in _one_line(err)
+    assert not out.exists()
+
+
+def test_every_file_bad_gives_a_summary_and_leaves_no_output(tmp_path, monkeypatch, capsys):
+    folder = tmp_path / "junk"
+    folder.mkdir()
+    for i in range(199):
+        (folder / f"IMG_{i:04d}.jpg").write_text(f"this is note {i}, not a photo\n")
+    (folder / "IMG_9999.jpg").write_bytes(b"")
+    out = tmp_path / "out"
+    code, err = _main(["fit", str(folder), "--out", str(out)], monkeypatch, capsys)
+    line = _one_line(err)
+    assert code == 1 and line.endswith("200 files, none readable: 199 text files, 1 empty file")
+    assert not out.exists()
+    code, err = _main(["fit", str(folder), "--out", str(out), "--verbose"], monkeypatch, capsys)
+    assert code == 1 and "IMG_0007.jpg" in err and not out.exists()
+
+
+@pytest.mark.parametrize("edit, words", [
+    (lambda d: d.__setitem__("objet", d.pop("object")), ["unknown table [objet]", "[object]"]),
+    (lambda d: d.pop("object"), ["no [object] table", 'mesh = "none"']),
+    (lambda d: d["object"].__setitem__("positon", [0, 0, 0]), ["unknown key 'positon'", "position"]),
+    (lambda d: d["photos"]["IMG_0004.jpg"].__setitem__("sun_elevation_deg", "high"),
+     ["sun_elevation_deg must be a number", "'high'"]),
+    (lambda d: d["object"].__setitem__("mesh", "broken.ply"), ["broken.ply is not a mesh that can be read"]),
+])
+def test_scene_errors_are_one_line_naming_the_key(one_group, tmp_path, monkeypatch, capsys, edit, words):
+    folder = _copy(one_group, tmp_path / "f")
+    (folder / "broken.ply").write_bytes(b"ply\nformat ascii 1.0\nelement vertex 3\nend_header\n\xff\xfe\x00garbage")
+    data = _scene(folder)
+    edit(data)
+    _write_scene(folder, data)
+    out = tmp_path / "out"
+    code, err = _main(["fit", str(folder), "--out", str(out)], monkeypatch, capsys)
+    line = _one_line(err)
+    assert code == 1 and all(w in line for w in words), line
+    assert not out.exists()
+
+
+def test_explicit_no_geometry_measures_each_photo(one_group, tmp_path):
+    from fitting import fit_folder
+    from scene import load_scene
+    from PIL import Image
+    folder = _copy(one_group, tmp_path / "f", ["IMG_0004.jpg"])
+    with Image.open(folder / "IMG_0004.jpg") as im:  # a tiny copy: the measurement is not the point
+        im.resize((64, 48)).save(folder / "IMG_0004.jpg", exif=im.info.get("exif", b""))
+    data = _scene(folder)
+    data["object"] = {"mesh": "none"}
+    _write_scene(folder, data)
+    assert load_scene(folder / "scene.toml").object is None
+    (g,) = fit_folder(folder).groups  # one group per photo, labelled with its name: no geometry
+    assert g.label == "IMG_0004.jpg" and g.photos == ["IMG_0004.jpg"] and g.range_k is None
+
+
+def test_exit_status_needs_a_converged_group(one_group, tmp_path, monkeypatch, capsys):
+    import fitting
+    from fitting import FitResults, GroupResult
+    stopped = GroupResult("13:21", "13:21", ["IMG_0004.jpg"], range_k=0.05, rho=0.2, converged=False)
+    monkeypatch.setattr(fitting, "fit_and_report", lambda *a, **k: FitResults([stopped], [], {}))
+    code, err = _main(["fit", str(one_group), "--out", str(tmp_path / "out")], monkeypatch, capsys)
+    assert code == 1 and "no group could be fitted" in err
+    assert FitResults([stopped], [], {}).n_fitted == 0
+
+
+# --------------------------------------------------------------------------- markers at a small size
+
+def test_markers_folder_at_800x600_registers_or_warns(table2, tmp_path):
+    from fitting import RegistrationError, list_photos, read_photo, register_board
+    from scene import load_scene
+    from softshadow_cli.synth_command import markers_warning
+    folder = _copy(table2, tmp_path / "markers")
+    data = _scene(folder)
+    for entry in data["photos"].values():
+        entry.pop("camera")  # rely on the printed board, as `synth --cameras markers` does
+    _write_scene(folder, data)
+    scene = load_scene(folder / "scene.toml")
+    failed = 0
+    for f in list_photos(folder)[0]:
+        photo = read_photo(f)
+        try:
+            register_board(photo.gray, scene.camera_for(f.name), exif=photo.exif)
+        except RegistrationError:
+            failed += 1
+    assert failed <= 3  # the focal length in EXIF: 6 of 9 failed when it had to be fitted
+    warning = markers_warning(folder)
+    if failed:
+        assert warning.startswith(f"the board cannot be registered in {failed} of 9 photos")
+    else:
+        assert warning is None
