@@ -123,10 +123,14 @@ def hard_fit(tmp_path_factory):
 @pytest.mark.parametrize("name", ["low-sun", "rho-dark", "rho-pale"])
 def test_hard_fits_recover_the_truth(hard_fit, name):
     """A sun 8 deg high (penumbra 2k d over ~11 m), and rho near its bounds (umbra nearly black,
-    or a shadow of 3 % contrast): the truth comes back, within a few of the fit's own errors."""
+    or a shadow of 3 % contrast): the truth comes back, within a few of the fit's own errors.
+    The photo check may refuse the 3 % shadow (it asks for 5 %), but then with that reason."""
     cases, groups = hard_fit
     k, rho = cases[name][:2]
     g = groups[name]
+    if name == "rho-pale" and g.error is not None:
+        assert g.error.startswith("no shadow in view") and "3 %" in g.error and g.rho is None, g.error
+        return
     assert g.error is None and g.converged and g.identifiable and g.reliable, (g.error, g.warnings)
     assert abs(g.range_k - k) / k < 0.05 and abs(g.range_k - k) < 5 * g.range_stderr + 1e-4
     assert abs(g.rho - rho) < 0.005 and abs(g.rho - rho) < 5 * g.rho_stderr + 1e-3
