@@ -3,7 +3,8 @@
 Photos are read linearly (``photos``), timed and grouped (``exif``, ``grouping``),
 registered (scene cameras or a ChArUco board, ``markers``), sampled near the
 predicted shadow boundary (``samples``) and fitted with the differentiable
-renderer and optimistix (``model``, ``solve``); ``api`` runs whole folders and
+renderer and optimistix (``model``, ``solve``); ``api`` runs whole folders, ``many``
+runs many folders on Dask, and
 ``report``/``plots`` write the Table-2 report. Fits run in float64, scoped to
 the fitting call (``jax.enable_x64``), so the caller's own precision is kept.
 """
@@ -12,6 +13,7 @@ from .api import FolderError, fit_and_report, fit_folder, fit_photos
 from .edge_measure import EdgeMeasurement, measure_shadow_edges
 from .exif import intrinsics_from_exif, photo_time_from_exif, read_exif
 from .grouping import NO_TIME_REASON, PhotoGroup, group_photos, photo_time
+from .many import DONE_MARKER, SUMMARY_COLUMNS, find_photo_folders, fit_many, write_summary
 from .markers import (Registration, RegistrationError, board_from_spec, board_outline_world,
                       board_world_points, register_board)
 from .photos import (IMAGE_EXTENSIONS, RAW_EXTENSIONS, Photo, PhotoError, linear_to_srgb, list_photos,
@@ -23,11 +25,14 @@ from .solve import FitOptions, fit_group
 from .views import PhotoView
 
 __all__ = [
-    "EdgeMeasurement", "FitOptions", "fit_and_report", "FitResults", "FolderError", "GroupResult", "IMAGE_EXTENSIONS",
+    "DONE_MARKER", "EdgeMeasurement", "FitOptions", "fit_and_report", "FitResults", "FolderError", "GroupResult",
+    "IMAGE_EXTENSIONS",
     "NO_TIME_REASON", "NoShadowInView", "PAPER_TABLE2", "Photo", "PhotoError", "PhotoGroup",
     "PhotoView", "RAW_EXTENSIONS", "Registration", "RegistrationError", "board_from_spec",
-    "board_outline_world", "board_world_points", "fit_folder", "fit_group", "fit_photos",
+    "board_outline_world", "board_world_points", "find_photo_folders", "fit_folder", "fit_group", "fit_many",
+    "fit_photos",
     "format_table", "group_photos", "intrinsics_from_exif", "linear_to_srgb", "list_photos",
     "measure_shadow_edges", "photo_time", "photo_time_from_exif", "read_exif", "read_photo",
-    "register_board", "srgb_to_linear", "write_report", "write_results_json", "write_table2",
+    "register_board", "srgb_to_linear", "SUMMARY_COLUMNS", "write_report", "write_results_json", "write_summary",
+    "write_table2",
 ]

@@ -5,6 +5,8 @@
   (OUT_DIR/plots/<label>_overlay_<photo stem>.png).
 - ``plot_range_vs_time``: range and brightness against time of day
   (OUT_DIR/plots/range_vs_time.png).
+- ``plot_folders_vs_time``: k and rho against time of day across many folders
+  (OUT/summary.png of ``fitting.fit_many``).
 
 Figures are built on ``matplotlib.figure.Figure`` directly, so plotting works in
 threads and never touches the user's pyplot backend.
@@ -20,7 +22,7 @@ from typing import Mapping
 import numpy as np
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
-from matplotlib.ticker import MultipleLocator
+from matplotlib.ticker import FuncFormatter, MultipleLocator
 from matplotlib.transforms import offset_copy
 
 from .comparison import (brightness_stderr, groups_in_time_order, minutes_of_day, range_stderr_paper,
@@ -30,7 +32,7 @@ from .files import atomic_path
 from .results import FitResults, GroupResult, OverlayPlotData, ProfilePlotData
 
 __all__ = ["safe_name", "plot_group", "plot_profiles", "plot_overlay", "plot_range_vs_time",
-           "MAX_OVERLAY_SIDE"]
+           "plot_folders_vs_time", "MAX_OVERLAY_SIDE"]
 
 #: Overlays show the photo downsampled to at most this many pixels on its longer side.
 MAX_OVERLAY_SIDE = 800
@@ -332,3 +334,39 @@ def plot_range_vs_time(results: FitResults, out_dir, reference: Mapping | None =
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=8)
     return _save(fig, _plots_dir(out_dir) / "range_vs_time.png")
+
+
+def plot_folders_vs_time(summary, path) -> Path | None:
+    """A plot across folders (``fitting.fit_many``'s summary, a pandas DataFrame): k and rho
+    against time of day, one line per folder with one-sigma error bars. Written to ``path``
+    (PNG); None when no fitted group has a time of day."""
+    rows = summary[summary["rho"].notna()].copy()
+    rows["minutes"] = [minutes_of_day(t) for t in rows["time"]]
+    rows = rows[rows["minutes"].notna()]
+    if rows.empty:
+        return None
+    fig = Figure(figsize=(7.5, 5.5), layout="constrained")
+    ax_k, ax_rho = fig.subplots(2, 1, sharex=True)
+    folders = list(dict.fromkeys(rows["folder"]))
+    for folder in folders:
+        part = rows[rows["folder"] == folder].sort_values("minutes")
+        hours = part["minutes"].to_numpy(float) / 60.0
+        k = part["range_k"].to_numpy(float)
+        ax_k.errorbar(hours, k, yerr=np.nan_to_num(part["range_stderr"].to_numpy(float)), marker="o",
+                      ms=4, capsize=2, lw=1, label=folder)
+        ax_rho.errorbar(hours, part["rho"].to_numpy(float),
+                        yerr=np.nan_to_num(part["rho_stderr"].to_numpy(float)), marker="o", ms=4,
+                        capsize=2, lw=1, label=folder)
+    ax_k.set_ylabel("range k")
+    ax_rho.set_ylabel("brightness rho")
+    ax_rho.set_xlabel("time of day")
+    ax_rho.xaxis.set_major_formatter(FuncFormatter(lambda h, _: f"{int(h) % 24:02d}:{round(h % 1 * 60) % 60:02d}"))
+    ax_k.set_title(f"{len(folders)} folder(s): k and rho against time of day")
+    for ax in (ax_k, ax_rho):
+        ax.grid(True, alpha=0.3)
+    if len(folders) <= 12:  # beyond that a legend hides the data
+        ax_k.legend(fontsize="small", ncols=2 if len(folders) > 6 else 1)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=_DPI)
+    return path

@@ -8,6 +8,7 @@ alpha ramping between the two silhouettes, and the umbra at brightness rho.
 
 from ._version import __version__
 from .colour import linear_to_srgb, srgb_to_linear
+from .compilation_cache import default_cache_dir, use_compilation_cache
 from .camera import GroundGrid, PinholeCamera, look_at_camera
 from .evaluate import plan_alpha, plan_alpha_jit, plan_coordinate, plan_coordinate_light
 from .meshes import BUILTIN_MESHES, MeshError, builtin_mesh, load_mesh
@@ -31,10 +32,11 @@ __all__ = [
     "BUILTIN_MESHES", "CameraRender", "GridPlan", "GroundGrid", "MeshError", "Occluder", "PROFILES",
     "PinholeCamera", "PointPlan", "Pose", "PosedOccluder", "RULES", "ShadowParams", "Silhouette",
     "SoftShadowModel", "Sun", "SunBelowHorizonError", "blurred_profile_alpha", "brightness_to_paper",
-    "bucket_size", "builtin_mesh", "check_sun_above_horizon", "concatenate_plans", "edge_band_widths",
-    "light_direction", "linear_to_srgb", "load_mesh", "look_at_camera", "object_mask", "occluded_disk_fraction", "one_blas_thread",
+    "bucket_size", "builtin_mesh", "check_sun_above_horizon", "concatenate_plans", "default_cache_dir",
+    "edge_band_widths", "light_direction", "linear_to_srgb", "load_mesh", "look_at_camera", "object_mask",
+    "occluded_disk_fraction", "one_blas_thread",
     "paper_to_range_k", "paper_to_rho", "penumbra_coordinate", "plan_alpha", "plan_alpha_jit",
     "plan_coordinate", "plan_coordinate_light", "plan_grid", "plan_points", "pose_matrix",
     "posed_vertices", "profile_alpha", "project_to_ground", "range_to_paper",
-    "rotation_matrix_xyz", "shade", "srgb_to_linear", "sun_direction", "__version__",
+    "rotation_matrix_xyz", "shade", "srgb_to_linear", "sun_direction", "use_compilation_cache", "__version__",
 ]

@@ -1,4 +1,5 @@
-"""``softshadow fit PHOTO_DIR --out OUT_DIR``: fit a photo folder and write its report.
+"""``softshadow fit PHOTO_DIR --out OUT_DIR``: fit a photo folder and write its report;
+with ``--recursive``, every photo folder under it on Dask (``fitting.fit_many``).
 
 Exit status: 0 when at least one group was fitted; 1 when none was (or the folder cannot be
 read); 2 when the output place is unusable or holds results (without ``--force``); 130 on
@@ -11,7 +12,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-__all__ = ["run_fit", "fit_options", "progress_bar", "check_out_dir"]
+__all__ = ["run_fit", "run_fit_many", "fit_options", "progress_bar", "check_out_dir"]
 
 
 def fit_options(args):
@@ -56,7 +57,40 @@ def _fail(message: str, code: int) -> int:
     return code
 
 
+def run_fit_many(args) -> int:
+    """``softshadow fit ROOT --out OUT --recursive``: every photo folder under ROOT on Dask."""
+    from fitting import fit_many
+    if args.workers is not None and args.workers < 1:
+        return _fail(f"--workers must be at least 1, got {args.workers}", 2)
+    problem = check_out_dir(Path(args.out))
+    if problem:
+        return _fail(problem, 2)
+    try:
+        table = fit_many(args.photo_dir, args.out, scheduler=args.scheduler, workers=args.workers,
+                         options=fit_options(args), force=args.force)
+    except (ValueError, OSError) as exc:
+        return _fail(str(exc).splitlines()[0], 1)
+    except KeyboardInterrupt:
+        from fitting import DONE_MARKER
+        done = len(list(Path(args.out).rglob(DONE_MARKER)))
+        return _fail(f"interrupted: {done} folder{'s' if done != 1 else ''} done in {args.out}; run the "
+                     "same command again to resume", 130)
+    failed = table[table["error"].notna()]
+    for row in failed.itertuples():
+        what = row.folder if not isinstance(row.label, str) else f"{row.folder} group {row.label}"
+        print(f"{what}: {row.error}", file=sys.stderr)
+    fitted = int(table["rho"].notna().sum())
+    folders = table["folder"].nunique()
+    print(f"{fitted} group(s) fitted in {folders} folder(s), {len(failed)} failed; "
+          f"wrote {Path(args.out) / 'summary.csv'}")
+    return 0 if fitted else 1
+
+
 def run_fit(args) -> int:
+    if getattr(args, "recursive", False):
+        return run_fit_many(args)
+    if getattr(args, "scheduler", "local") != "local" or getattr(args, "workers", None) is not None:
+        return _fail("--scheduler and --workers go with --recursive", 2)
     from fitting import FolderError, fit_and_report, format_table
     out = Path(args.out)
     problem = check_out_dir(out)

@@ -3,23 +3,15 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
-from pathlib import Path
 
 __all__ = ["main"]
 
 
 def _use_compilation_cache() -> None:
     """JAX's persistent compilation cache: a second run skips most compilation."""
-    import jax
-    cache = Path(os.environ.get("SOFTSHADOW_JAX_CACHE", Path.home() / ".cache" / "softshadow" / "jax"))
-    try:
-        cache.mkdir(parents=True, exist_ok=True)
-        jax.config.update("jax_compilation_cache_dir", str(cache))
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
-    except OSError:
-        pass
+    from softshadow import use_compilation_cache
+    use_compilation_cache()
 
 
 def _fail(command: str, message: str, code: int = 1) -> int:
@@ -71,8 +63,16 @@ def _run_render(args) -> int:
 def _add_fit(sub):
     p = sub.add_parser("fit", help="fit range and brightness per time of day from a photo folder",
                        description="Fit the soft shadow's range k and brightness rho per time of day.")
-    p.add_argument("photo_dir", metavar="PHOTO_DIR")
+    p.add_argument("photo_dir", metavar="PHOTO_DIR", help="a photo folder (with --recursive: ROOT, a folder of them)")
     p.add_argument("--out", required=True, metavar="OUT_DIR", help="results.json, table2.md/.csv, plots/")
+    p.add_argument("--recursive", action="store_true",
+                   help="fit every photo folder under ROOT into OUT/<relative path>/ on Dask, with "
+                        "OUT/summary.csv and OUT/summary.png; an interrupted run resumes")
+    p.add_argument("--scheduler", default="local", metavar="local|tcp://HOST:PORT",
+                   help="with --recursive: local worker processes (default) or an existing Dask "
+                        "scheduler's address")
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="with --recursive and --scheduler local: worker processes (default: one per core)")
     p.add_argument("--force", action="store_true", help="overwrite existing results and refit all groups")
     p.add_argument("--jobs", type=int, default=1, help="groups fitted at once (threads; default 1)")
     p.add_argument("--verbose", action="store_true", help="print solver details")

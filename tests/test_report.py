@@ -285,12 +285,22 @@ def test_overlay_draws_alpha_where_the_shadow_is(tmp_path):
     assert shade.mean() > lit.mean() + 0.1
 
 
-def test_overlay_of_a_big_photo_is_fast(tmp_path):
+def test_overlay_of_a_big_photo_is_drawn_with_a_stride(tmp_path, monkeypatch):
+    """A 1600x1200 photo reaches matplotlib strided to MAX_OVERLAY_SIDE (drawing it whole
+    took seconds per plot), with its axes still in the photo's pixels."""
+    from matplotlib.axes import Axes
+    drawn = []
+    imshow = Axes.imshow
+
+    def spy(self, x, *args, **kwargs):
+        drawn.append((np.shape(x), kwargs.get("extent")))
+        return imshow(self, x, *args, **kwargs)
+
+    monkeypatch.setattr(Axes, "imshow", spy)
     group = GroupResult("09:20", "09:20", ["big.jpg"], plot_overlays=[_overlay("big.jpg", 1200, 1600)])
-    plots.plot_group(GroupResult("w", None, [], plot_overlays=[_overlay("w.jpg")]), tmp_path)  # warm-up
-    start = time.perf_counter()
     (path,) = plots.plot_group(group, tmp_path)
-    assert time.perf_counter() - start < 1.5
+    assert drawn and all(max(shape[:2]) <= plots.MAX_OVERLAY_SIDE for shape, _ in drawn)
+    assert all(extent[1] >= 1600 - 1 and extent[2] >= 1200 - 1 for _, extent in drawn)
     _png(path)
 
 

@@ -112,20 +112,24 @@ def _paper_sections(paper: dict) -> list[str]:
               "quadrilateral, and a silhouette pixel of intensity I makes its (2I+1) x (2I+1) neighbourhood "
               "soft. So `range` is the soft band's width in shadow-texture pixels at the shadow's far end: a "
               "screen-space number, inversely proportional to the pixel size, not 100 k. The model's linear "
-              "penumbra at the tip of a pillar of height h is 2 k h / sin^2(E) long on the ground, hence "
-              "**range = 2 k h / (sin^2(E) * pixel size)** with the linear-ramp k (about 0.854 tan r for a "
-              "sun disk of radius r).", "",
+              "penumbra at the tip of a pillar of height h is 2 k h / sin^2(E) long on the ground, so a band "
+              "that matched it would have range = 2 k h / (sin^2(E) * pixel size), with the linear-ramp k "
+              "(about 0.854 tan r for a sun disk of radius r): the column \"range from true k\". The fit "
+              "reads a fraction c of that (the last column): its expansion moves the outline outwards and "
+              "takes part of the width, and its band is a square neighbourhood. So at a given resolution "
+              "**range = c * 2 k h / (sin^2(E) * pixel size)** with c as measured below.", "",
               "Below, the table2 preset's three lights (the same sun positions, disk radii and rho as its "
               "photos) rendered top-down by the physical ray caster over each shadow's square, then fitted "
               "with the paper's algorithm (range, expansion, rho; grid search):", "",
               "| time | sun elev. (deg) | pixel (mm) | true k | true rho | paper range | fitted range (px) | "
-              "range from true k (px) | fitted expansion | paper brightness | fitted brightness | true brightness |",
-              "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+              "range from true k (px) | fitted expansion | paper brightness | fitted brightness | true brightness | c = fitted / from k |",
+              "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
         for r in paper["table2"]:
             L.append(f"| {r['label']} | {r['sun_elevation_deg']:.1f} | {1000 * r['pixel_m']:.1f} | "
                      f"{r['truth_range_k']:.5f} | {r['truth_rho']:.3f} | {_f(r['paper_range'], '{:.0f}')} | "
                      f"{r['fitted_range_px']:.0f} | {r['predicted_range_px']:.1f} | {r['fitted_expand']:.3f} | "
-                     f"{_f(r['paper_brightness'], '{:.0f}')} | {r['fitted_brightness']:.1f} | {r['truth_brightness']:.1f} |")
+                     f"{_f(r['paper_brightness'], '{:.0f}')} | {r['fitted_brightness']:.1f} | {r['truth_brightness']:.1f} | "
+                     f"{r['fitted_range_px'] / r['predicted_range_px']:.2f} |")
     return L
 
 
@@ -213,7 +217,9 @@ def write_report(result: dict, md_path: Path, json_name: str | None = None) -> N
          "of one run as ratios.", "",
          f"- Date: {env['date_utc']}",
          f"- Machine: {m['cpu']}, {m['cores']} cores, {m['memory_gb']} GB, {m['platform']}",
-         "- Versions: " + ", ".join(f"{k} {val}" for k, val in v.items() if val), "",
+         "- Versions: " + ", ".join(f"{k} {val}" for k, val in v.items() if val), ""]
+    L += [f"- Note: {n}" for n in result.get("notes", [])] + ([""] if result.get("notes") else [])
+    L += [
          "## The scene and the truth", "",
          f"A top-down ground map of each mesh's shadow: sun azimuth {s['sun_azimuth_deg']} deg, elevation "
          f"{s['sun_elevation_deg']} deg, the real sun's disk (radius {s['sun_radius_deg']} deg), a uniform sky "
