@@ -31,6 +31,7 @@ from .grouping import PhotoGroup, group_photos, photo_time
 from .ignore_masks import IgnoreMaskError, ignore_mask_path, read_ignore_mask
 from .photo_check import judge, photo_agreement
 from .photos import Photo, PhotoError, list_photos, read_photo
+from .receiver_points import ReceiverError, load_receiver_mesh, receiver_for_photo
 from .resume import GroupStore, group_key, photo_digest
 from .results import FitResults, GroupResult
 from .solve import FitOptions, fit_group
@@ -256,10 +257,12 @@ def _fit_photos(photos, scene, options, half_size, progress, store, on_group, jo
             if on_group:
                 on_group(result)
         return FitResults(groups_out, skipped, software)
-    if scene.receiver.kind != "plane":
-        # Never fitted silently as flat ground: the fitter models the plane z = 0 only (so far).
-        raise FolderError(f"[receiver] kind {scene.receiver.kind!r} cannot be fitted yet: the fitter "
-                          "models the ground plane z = 0 only")
+    receiver_meshes: dict = {}
+    if scene.receiver.kind == "mesh":
+        try:  # one mesh for every photo: a receiver that cannot be read stops the folder
+            receiver_meshes["receiver"] = load_receiver_mesh(scene.receiver, scene.base_dir)
+        except ReceiverError as exc:
+            raise FolderError(str(exc)) from exc
     try:
         model = SoftShadowModel.from_mesh(scene.object.mesh, rule=options.rule, base_dir=scene.base_dir)
     except MeshError as exc:
@@ -286,6 +289,10 @@ def _fit_photos(photos, scene, options, half_size, progress, store, on_group, jo
             try:
                 _camera_view(photo, scene.camera_for(name), view)
                 _sun_view(name, times.get(name), scene, view)
+                view.receiver = receiver_for_photo(scene, name, photo.gray.shape, receiver_meshes)
+                if view.receiver.kind != "plane" and view.camera is None:
+                    raise ReceiverError(f"a {scene.receiver.kind} receiver needs a perspective camera, "
+                                        "not a top-down map")
             except (SunBelowHorizonError, SceneError, ValueError) as exc:
                 group_skipped.append({"photo": name, "reason": str(exc).splitlines()[0]})
                 continue

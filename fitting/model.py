@@ -2,14 +2,16 @@
 
 Per sample pixel of photo p with albedo class c:
 
-    observed ~ level[p, c] * (1 + g_p . uv) * (1 - alpha * (1 - rho) - rho * h),
+    observed ~ level[p, c] * (1 + g_p . uv) * ((1 - rho) c (1 - alpha) + rho (1 - h)),
     alpha = profile(u) blurred by a Gaussian of tau = sqrt(blur^2 + 1/12) |du/dpixel|,
 
 where u is softshadow's penumbra coordinate at the pixel's ground point (a
 function of k, the sun and the pose), the 1/12 is the pixel's own area (a
 box of one pixel), blur is the camera's optical blur in pixels, and h the
-sky fraction the object hides from the pixel's ground point (``fitting.sky``;
-0 on open ground, where rho and level are defined). Bounds
+sky fraction hidden from the pixel's receiver point (``fitting.sky``; 0 on open
+ground, where rho and level are defined) and c the sun's incidence on the
+receiver over the open ground's (1 on the ground; ``fitting.receiver_light``).
+On the ground this is level (1 - alpha (1 - rho) - rho h). Bounds
 are kept by reparameterisation: k = K_SCALE softplus(raw_k),
 rho = sigmoid(raw_rho), blur variance = raw_blur (pixels^2, added to the
 pixel's 1/12).
@@ -26,6 +28,8 @@ import numpy as np
 from jaxtyping import Array, Float, Int
 
 from softshadow import PROFILES, PointPlan, Pose, blurred_profile_alpha, light_direction, plan_coordinate_light
+
+from .receiver_light import shadow_factor
 
 __all__ = ["GroupArrays", "FitConfig", "FitParams", "Prediction", "K_SCALE", "k_from_raw", "raw_from_k", "rho_from_raw",
            "raw_from_rho", "predict", "angular_pixel_gradient", "residuals", "pseudo_huber",
@@ -55,7 +59,7 @@ def raw_from_rho(rho):
 class GroupArrays(eqx.Module):
     """All samples of one group as flat JAX arrays (padding has weight 0).
 
-    ground (n, 3); jac (n, 2, 2); observed (n,); weight (n,); photo (n,) photo index;
+    ground (n, 3) receiver points; jac (n, 3, 2) d(point)/d(col, row); observed (n,); weight (n,); photo (n,) photo index;
     albedo_class (n,); uv_norm (n, 2); plan: one plan for all photos (their edges
     stacked); sun_azimuth_deg, sun_elevation_deg, scale (P,) per photo;
     grad_t_pixel (n,) |dT/dpixel| at the start; sky_hidden (n,) the sky fraction the object
@@ -63,7 +67,7 @@ class GroupArrays(eqx.Module):
     """
 
     ground: Float[Array, "n 3"]
-    jac: Float[Array, "n 2 2"]
+    jac: Float[Array, "n 3 2"]
     observed: Float[Array, " n"]
     weight: Float[Array, " n"]
     photo: Int[Array, " n"]
@@ -75,6 +79,7 @@ class GroupArrays(eqx.Module):
     scale: Float[Array, " P"]
     grad_t_pixel: Float[Array, " n"]
     sky_hidden: Float[Array, " n"]
+    sun_cos: Float[Array, " n"]
 
 
 class FitParams(eqx.Module):
@@ -172,12 +177,12 @@ def angular_pixel_gradient(group: GroupArrays, pose: Pose, k, rule: str = "edge"
     def coord(points):
         return plan_coordinate_light(points, group.plan, pose, light, k, rule, with_slope=True)
 
-    # Both ground directions in one batched JVP (one trace of the edge geometry, not three).
-    axes = jnp.zeros((2,) + group.ground.shape, group.ground.dtype)
-    axes = axes.at[0, :, 0].set(1.0).at[1, :, 1].set(1.0)
+    # Along the receiver's two pixel directions (the columns of d(point)/d(col, row)) in one
+    # batched JVP: one trace of the edge geometry, and any receiver surface (not only z = 0).
+    axes = jnp.moveaxis(group.jac, -1, 0)  # (2, n, 3)
     (_, dudt), (du, _) = jax.vmap(lambda t: jax.jvp(coord, (group.ground,), (t,)),
                                   out_axes=((None, None), (0, 0)))(axes)
-    grad_pixel = jnp.einsum("nij,in->nj", group.jac, du)
+    grad_pixel = du.T
     slope = jnp.sqrt(jnp.sum(grad_pixel**2, -1))
     ok = dudt > 0
     return jnp.where(ok, slope / jnp.where(ok, dudt, 1.0), 0.0)
@@ -232,11 +237,12 @@ def shadow_alpha(shape: Float[Array, "4"], group: GroupArrays, pose: Pose, confi
 
 def _shaded(params: FitParams, group: GroupArrays, alpha):
     """Linear values (n,): each photo's open-ground lit level and gradient times the shadow
-    factor, less the sky the object hides (rho is the sky's share on open ground)."""
+    factor on the receiver (``receiver_light.shadow_factor``: rho is the sky's share on open
+    horizontal ground; the sun's incidence and the sky seen set a tilted face's levels)."""
     rho = rho_from_raw(params.raw_rho)
     level = jnp.exp(params.log_level[group.photo, group.albedo_class])
     level = level * (1.0 + jnp.sum(group.uv_norm * params.gradient[group.photo], -1))
-    return level * (1.0 - alpha * (1.0 - rho) - rho * group.sky_hidden)
+    return level * shadow_factor(alpha, rho, group.sun_cos, 1.0 - group.sky_hidden)
 
 
 class Prediction(NamedTuple):

@@ -43,6 +43,7 @@ IGNORED_NAMES = frozenset({"scene.toml", "truth.json"})
 IGNORED_EXTENSIONS = frozenset({".json", ".md", ".npy", ".obj", ".mtl", ".ply", ".stl", ".glb",
                                 ".gltf", ".off", ".dae", ".3mf"})
 
+
 # Linear-light luminance of Rec. 709 / sRGB primaries.
 REC709_WEIGHTS = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
 

@@ -33,7 +33,8 @@ class NoShadowInView(ValueError):
 class PhotoSamples:
     """Pixels of one photo used by the fit.
 
-    uv (n, 2) pixel (col, row); ground (n, 3); jac (n, 2, 2) ground metres per pixel;
+    uv (n, 2) pixel (col, row); ground (n, 3) receiver points; jac (n, 3, 2) d(point)/d(col, row),
+    metres per pixel;
     observed (n,) linear gray; albedo_class (n,) 0 paper / 1 other; uv_norm (n, 2) in
     [-0.5, 0.5]; profile_id (n,) nearest boundary sample; plan: the discrete choices.
     """
@@ -49,7 +50,8 @@ class PhotoSamples:
     plan: PointPlan
     n_profiles: int
     band_px: int
-    sky_hidden: np.ndarray | None = None  # (n,) sky fraction the object hides (``fitting.sky``)
+    sky_hidden: np.ndarray | None = None  # (n,) sky fraction hidden from each point (``fitting.sky``)
+    sun_cos: np.ndarray | None = None  # (n,) sun incidence over the open ground's (None: 1, the ground)
 
 
 def paper_mask(gray: np.ndarray, exclude: np.ndarray) -> np.ndarray | None:
@@ -137,8 +139,14 @@ def select_samples(model: SoftShadowModel, pose: Pose, view: PhotoView, range_k_
 
     sky_occlusion: also find, per sample, the sky fraction the object hides (else 0).
 
-    Raises NoShadowInView when no usable boundary pixel is in the frame.
+    Raises NoShadowInView when no usable boundary pixel is in the frame. A view whose
+    receiver is not the plane is sampled on it (``fitting.receiver_samples``).
     """
+    if view.receiver is not None and view.receiver.kind != "plane":
+        from .receiver_samples import RECEIVER_SAMPLES_FACTOR, select_receiver_samples
+        return select_receiver_samples(model, pose, view, view.receiver, range_k_max, sun_margin_deg,
+                                       RECEIVER_SAMPLES_FACTOR * max_samples, seed, min_band_px, max_band_px,
+                                       sky_occlusion)
     h, w = view.shape
     sun = Sun(view.sun_azimuth_deg, view.sun_elevation_deg)
     # Boundary points on the ground, about one image pixel apart.
@@ -200,7 +208,7 @@ def select_samples(model: SoftShadowModel, pose: Pose, view: PhotoView, range_k_
                              pixel_m=float(np.median(px_size)) / 2)
     uv = np.column_stack([cols, rows]).astype(np.float64)
     return PhotoSamples(
-        name=view.name, uv=uv, ground=ground, jac=jac,
+        name=view.name, uv=uv, ground=ground, jac=np.concatenate([jac, np.zeros((len(jac), 1, 2))], axis=1),
         observed=view.gray[rows, cols].astype(np.float64),
         albedo_class=(np.zeros(len(rows), int) if paper is None else (~paper[rows, cols]).astype(int)),
         uv_norm=np.column_stack([cols / w - 0.5, rows / h - 0.5]),

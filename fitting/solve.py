@@ -26,6 +26,7 @@ from softshadow import GroundGrid, Pose, SoftShadowModel, Sun, bucket_size, conc
 from .model import (K_SCALE, FitConfig, FitParams, GroupArrays, Prediction, angular_pixel_gradient, predict,
                     raw_from_k, raw_from_rho, residuals, residuals_of)
 from .overlay import fitted_alpha_image
+from .receiver_light import shadow_factor
 from .results import GroupResult, OverlayPlotData, ProfilePlotData
 from .samples import NoShadowInView, PhotoSamples, select_samples
 from .views import PhotoView
@@ -92,7 +93,9 @@ def _group_arrays(samples: list[PhotoSamples], views: list[PhotoView]) -> GroupA
         sun_elevation_deg=jnp.asarray([float(v.sun_elevation_deg) for v in views]),
         scale=jnp.asarray(scales), grad_t_pixel=jnp.zeros(size),
         sky_hidden=jnp.asarray(pad(cat([s.sky_hidden if s.sky_hidden is not None
-                                        else np.zeros(len(s.observed)) for s in samples]))))
+                                        else np.zeros(len(s.observed)) for s in samples]))),
+        sun_cos=jnp.asarray(pad(cat([s.sun_cos if s.sun_cos is not None
+                                     else np.ones(len(s.observed)) for s in samples]), 1.0)))
 
 
 def sample_views(model: SoftShadowModel, pose: Pose, views: list[PhotoView], options: FitOptions
@@ -382,13 +385,13 @@ def identifiability(k: float, k_stderr: float, penumbra_px: float | None) -> Ide
 
 
 def profile_plot_data(samples: list[PhotoSamples], prediction: Prediction, rho: float,
-                      sky_hidden: np.ndarray) -> list[ProfilePlotData]:
+                      sky_hidden: np.ndarray, sun_cos: np.ndarray) -> list[ProfilePlotData]:
     """Step 6a: observed and fitted values across the edge for each photo, normalised by the
     fitted lit level, against the signed distance (pixels) from the hard-shadow boundary."""
     out = []
     pred, alpha, u, slope = prediction.values, prediction.alpha, prediction.u, prediction.slope
     for s, sl in zip(samples, _photo_slices(samples)):
-        lvl = pred[sl] / np.maximum(1 - alpha[sl] * (1 - rho) - rho * sky_hidden[sl], 1e-9)
+        lvl = pred[sl] / np.maximum(shadow_factor(alpha[sl], rho, sun_cos[sl], 1 - sky_hidden[sl]), 1e-9)
         dist = np.where(slope[sl] > 0, u[sl] / np.maximum(slope[sl], 1e-12), np.nan)
         out.append(ProfilePlotData(s.name, dist, s.observed / lvl, pred[sl] / lvl, s.profile_id))
     return out
@@ -459,7 +462,8 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
     if ident.warning:
         result.warnings.append(ident.warning)
     if options.plots:
-        result.plot_profiles = profile_plot_data(samples, sol.prediction, est.rho, np.asarray(arrays.sky_hidden))
+        result.plot_profiles = profile_plot_data(samples, sol.prediction, est.rho, np.asarray(arrays.sky_hidden),
+                                                  np.asarray(arrays.sun_cos))
         result.plot_overlays = [_overlay(model, pose, used[i], sol.params, cfg, samples[i])
                                 for i in range(len(samples)) if options.overlays == "all" or i == 0]
     if not sol.converged:

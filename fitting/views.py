@@ -35,6 +35,7 @@ class PhotoView:
     time: _dt.datetime | None = None
     reprojection_error_px: float | None = None
     ignore: np.ndarray | None = None  # (H, W) bool: pixels never to sample (board, clutter)
+    receiver: object | None = None  # fitting.receiver_points.ReceiverSurface; None: the plane z = 0
 
     @property
     def shape(self) -> tuple[int, int]:
