@@ -20,9 +20,11 @@ __all__ = ["model_topdown_folder"]
 
 def model_topdown_folder(folder, k: float = 0.012, rho: float = 0.25, noise: float = 0.004, seed: int = 0,
                          size: int = 192, sun: tuple[float, float] = (150.0, 40.0),
-                         time: str | None = "2026-04-20T10:30:00+09:00", group: str = "10:30") -> Path:
-    """Write ``folder/top.png`` (size x size pixels over 2.6 m around the pillar's shadow) and
-    ``folder/scene.toml`` (sun azimuth/elevation in degrees given); returns the folder.
+                         time: str | None = "2026-04-20T10:30:00+09:00", group: str = "10:30",
+                         centre: tuple[float, float] = (-0.9, 1.6), extent_m: float = 2.6) -> Path:
+    """Write ``folder/top.png`` (size x size pixels over extent_m metres around centre (x, y), by
+    default around the pillar's shadow under the default sun) and ``folder/scene.toml`` (sun
+    azimuth/elevation in degrees given); returns the folder.
 
     k, rho: the shadow's range and brightness; noise: Gaussian sigma in linear units of full
     scale (the lit ground is 0.6); seed: the noise draw.
@@ -31,8 +33,8 @@ def model_topdown_folder(folder, k: float = 0.012, rho: float = 0.25, noise: flo
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     model = SoftShadowModel.from_mesh("pillar", profile="disk")
-    grid = GroundGrid.around((-0.9, 1.6), 2.6, size)
-    fine = GroundGrid.around((-0.9, 1.6), 2.6, 4 * size)
+    grid = GroundGrid.around(tuple(centre), extent_m, size)
+    fine = GroundGrid.around(tuple(centre), extent_m, 4 * size)
     shading = np.asarray(model.ground_map(ShadowParams(k, rho), Sun(*sun), Pose(), fine))
     shading = shading.reshape(size, 4, size, 4).mean(axis=(1, 3))
     rng = np.random.default_rng(seed)

@@ -2,10 +2,14 @@
 
 - JAX runs in float64 for the whole session: the renderer's gradient checks
   compare autodiff with central finite differences, which float32 cannot
-  resolve. This must happen before any JAX array is created, hence here.
-- Hypothesis profiles: ``ci`` (few examples, no deadline: JAX compiles on the
-  first example) is chosen when the environment variable CI is set; ``dev``
-  (more examples, with shrinking) otherwise. HYPOTHESIS_PROFILE overrides both.
+  resolve. This must happen before any JAX array is created, hence here. The
+  float32 path that the command line uses is tested inside
+  ``jax.enable_x64(False)`` scopes (tests/test_float32.py).
+- Hypothesis profiles (docs/testing.md): ``ci`` (20 derandomised examples, no
+  deadline: JAX compiles on the first example; no shrinking) is chosen when the
+  environment variable CI is set; ``dev`` (50 random examples, with shrinking)
+  otherwise; ``long`` (500 examples) for a thorough local run.
+  HYPOTHESIS_PROFILE overrides the choice.
 """
 
 from __future__ import annotations
@@ -21,9 +25,13 @@ from hypothesis import HealthCheck, Phase, settings  # noqa: E402  (after the JA
 _SLOW_OK = [HealthCheck.too_slow, HealthCheck.data_too_large]
 
 # CI: no shrinking (a failure is reported as found; shrinking a renderer scene takes minutes).
-settings.register_profile("ci", max_examples=4, deadline=None, derandomize=True,
+# 20 examples: the property tests' examples share one compiled evaluation each (fixed shapes,
+# tests/gradcheck.py), so after the first example each costs a plan and a few evaluations.
+settings.register_profile("ci", max_examples=20, deadline=None, derandomize=True,
                           phases=(Phase.explicit, Phase.reuse, Phase.generate),
                           suppress_health_check=_SLOW_OK, print_blob=True)
-settings.register_profile("dev", max_examples=12, deadline=None,
+settings.register_profile("dev", max_examples=50, deadline=None,
+                          suppress_health_check=_SLOW_OK, print_blob=True)
+settings.register_profile("long", max_examples=500, deadline=None,
                           suppress_health_check=_SLOW_OK, print_blob=True)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE") or ("ci" if os.environ.get("CI") else "dev"))

@@ -3,25 +3,26 @@
 Synthetic photos: a polygon shadow with a linear penumbra ramp of known full
 width, rendered at 4x4 supersampling (so pixels integrate the ramp as a camera
 does), on textured albedo (concrete-like log-normal noise at two scales, or
-nearly smooth paper), with Poisson-Gaussian noise. Real photos from
-/work/shared (never copied here: no licence) are checked where present.
+nearly smooth paper), with Poisson-Gaussian noise. The independent Mitsuba
+renders are vendored (tests/data/mitsuba); real photos from ../shared/data
+(never copied here: no licence) are checked where present, and
+test_colour_rejects_painted_lines_and_keeps_a_bluish_shadow is their
+synthetic stand-in.
 """
 
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy import ndimage
 
+from datapaths import MITSUBA, WORKSPACE
 from fitting.edge_measure import (NO_EDGE_REASON, EdgeMeasurement, fit_edge_profile, measure_shadow_edges,
                                   ramp_alpha, ramp_log_model)
 
-SHARED = Path("/work/shared/data")
-PAIRS = SHARED / "photos" / "pairs"
-MITSUBA = SHARED / "mitsuba"
+PAIRS = WORKSPACE / "photos" / "pairs"
 LUMA = np.array([0.2126, 0.7152, 0.0722])      # Rec. 709 / sRGB luminance of linear RGB
 
 H, W = 128, 160

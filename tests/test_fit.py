@@ -1,5 +1,5 @@
 """The fitter end to end: same-model data with known truth, bad input, the CLI contract,
-and the independent Mitsuba renders (skipped without ../shared)."""
+and the independent Mitsuba renders (vendored in tests/data/mitsuba)."""
 
 from __future__ import annotations
 
@@ -11,9 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from datapaths import MITSUBA
 
-SHARED = Path(__file__).resolve().parents[2] / "shared"
-MITSUBA = SHARED / "data" / "mitsuba"
 
 TRUE_K, TRUE_RHO = 0.012, 0.25
 SUN = (150.0, 40.0)
@@ -33,11 +32,12 @@ def same_model_folder(tmp_path_factory):
 def test_same_model_fit_recovers_truth_with_honest_errors(same_model_folder):
     from fitting.api import fit_folder
     from fitting.solve import FitOptions
-    # The data were rendered by the model alone, without the sky the pillar hides.
-    results = fit_folder(same_model_folder, options=FitOptions(sky_occlusion=False))
+    # The data were rendered by the model alone, without the sky the pillar hides. Both profiles
+    # are offered: the data were made with the disk profile, and BIC must see it.
+    results = fit_folder(same_model_folder, options=FitOptions(sky_occlusion=False, profiles=("linear", "disk")))
     (g,) = results.groups
     assert g.error is None and g.converged
-    assert g.profile == "disk"  # the data were made with the disk profile; BIC must see it
+    assert g.profile == "disk"
     assert abs(g.range_k - TRUE_K) / TRUE_K < 0.05
     assert abs(g.rho - TRUE_RHO) < 0.01
     # One-sigma errors: the truth lies within a few of them (not absurdly small or large).
@@ -58,12 +58,151 @@ def test_cli_writes_the_conventions_files_and_refuses_to_overwrite(same_model_fo
                 "rho_stderr", "sun_azimuth_deg", "sun_elevation_deg", "rmse", "n_profiles",
                 "converged", "identifiable", "seconds"):
         assert key in group
+    # The command line runs JAX in float32 (only the fit itself is scoped to float64): its results
+    # must still recover the truth as the float64 test above does.
+    assert abs(group["range_k"] - TRUE_K) / TRUE_K < 0.05 and abs(group["rho"] - TRUE_RHO) < 0.01
     assert group["range"] == pytest.approx(100 * group["range_k"])
     assert group["brightness"] == pytest.approx(255 * group["rho"] ** (1 / 2.2))
     assert (out / "table2.md").exists() and (out / "table2.csv").exists()
     assert (out / "groups").is_dir()  # finished groups are kept for resuming
     again = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     assert again.returncode != 0 and "--force" in again.stderr
+
+
+def test_fit_called_from_float32_keeps_the_callers_precision(same_model_folder):
+    """A float32 caller (the command line, a user's session) gets the same fit, and keeps float32."""
+    import jax
+    import jax.numpy as jnp
+
+    from fitting.api import fit_folder
+    from fitting.solve import FitOptions
+    with jax.enable_x64(False):
+        (g,) = fit_folder(same_model_folder, options=FitOptions(sky_occlusion=False, plots=False)).groups
+        assert jnp.zeros(1).dtype == jnp.float32, "the fit must not switch its caller to float64"
+    assert g.error is None and g.converged and g.identifiable
+    assert abs(g.range_k - TRUE_K) / TRUE_K < 0.05 and abs(g.rho - TRUE_RHO) < 0.01
+
+
+def _shadow_centre(sun, fraction=0.5, height=3.0):
+    """A ground point (x, y) at ``fraction`` of the pillar's shadow, from its base to its tip."""
+    az, el = np.radians(sun[0]), np.radians(sun[1])
+    length = height / np.tan(el)
+    return (-fraction * length * np.sin(az), -fraction * length * np.cos(az))
+
+
+@pytest.fixture(scope="module")
+def hard_fit(tmp_path_factory):
+    """One folder, one group per hard case (each with its own sun), fitted once."""
+    from fitting.api import fit_folder
+    from fitting.solve import FitOptions
+    import shutil
+
+    from data_synth import model_topdown_folder
+    from scene import ObjectSpec, SceneSpec, dump_scene, load_scene
+    root = tmp_path_factory.mktemp("hard_fit")
+    folder = root / "all"
+    folder.mkdir()
+    low_sun = (150.0, 8.0)  # a 21 m shadow: map its middle 6 m
+    cases = {  # name: (k, rho, sun, centre, extent)
+        "low-sun": (TRUE_K, TRUE_RHO, low_sun, _shadow_centre(low_sun), 6.0),
+        "k-near-zero": (2e-4, TRUE_RHO, SUN, _shadow_centre(SUN), 2.6),
+        "rho-dark": (TRUE_K, 0.03, SUN, _shadow_centre(SUN), 2.6),
+        "rho-pale": (TRUE_K, 0.97, SUN, _shadow_centre(SUN), 2.6),
+    }
+    photos = {}
+    for hour, (name, (k, rho, sun, centre, extent)) in enumerate(cases.items()):
+        one = model_topdown_folder(root / name, k, rho, seed=hour, sun=sun, centre=centre, extent_m=extent,
+                                   time=f"2026-04-20T{8 + 2 * hour:02d}:00:00+09:00", group=name)
+        shutil.copy(one / "top.png", folder / f"{name}.png")
+        photos[f"{name}.png"] = load_scene(one / "scene.toml").photos["top.png"]
+    dump_scene(SceneSpec(object=ObjectSpec("pillar"), photos=photos), folder / "scene.toml")
+    results = fit_folder(folder, options=FitOptions(sky_occlusion=False, plots=False))
+    return cases, {g.label: g for g in results.groups}
+
+
+@pytest.mark.parametrize("name", ["low-sun", "rho-dark", "rho-pale"])
+def test_hard_fits_recover_the_truth(hard_fit, name):
+    """A sun 8 deg high (penumbra 2k d over ~11 m), and rho near its bounds (umbra nearly black,
+    or a shadow of 3 % contrast): the truth comes back, within a few of the fit's own errors.
+    The photo check may refuse the 3 % shadow (it asks for 5 %), but then with that reason."""
+    cases, groups = hard_fit
+    k, rho = cases[name][:2]
+    g = groups[name]
+    if name == "rho-pale" and g.error is not None:
+        assert g.error.startswith("no shadow in view") and "3 %" in g.error and g.rho is None, g.error
+        return
+    assert g.error is None and g.converged and g.identifiable and g.reliable, (g.error, g.warnings)
+    assert abs(g.range_k - k) / k < 0.05 and abs(g.range_k - k) < 5 * g.range_stderr + 1e-4
+    assert abs(g.rho - rho) < 0.005 and abs(g.rho - rho) < 5 * g.rho_stderr + 1e-3
+    assert 0.0 < g.rho < 1.0
+
+
+def test_hard_fit_with_k_near_zero_is_an_upper_bound(hard_fit):
+    """k = 2e-4: the penumbra (~0.5 mm) is far below the 13.5 mm pixel. The range is not
+    identifiable and comes back as an upper bound (at least the truth), said in the warnings;
+    rho is still measured."""
+    cases, groups = hard_fit
+    k, rho = cases["k-near-zero"][:2]
+    g = groups["k-near-zero"]
+    assert g.error is None
+    assert g.identifiable is False
+    assert g.range_k >= k
+    assert g.range_k < 0.006  # a bound at the pixel scale (one 13.5 mm pixel: k ~ 0.0024), not a blank cheque
+    assert any("upper bound" in w for w in g.warnings)
+    assert abs(g.rho - rho) < 0.005
+
+
+@pytest.fixture(scope="module")
+def hard_cases_preset(tmp_path_factory):
+    """The hard-cases preset at 320 x 240, rendered by data_synth's model renderer, fitted once."""
+    from data_synth import synthesize
+    from data_synth.renderers import RenderQuality
+    from fitting.api import fit_folder
+    from fitting.solve import FitOptions
+    quality = RenderQuality(sun_samples=16, sky_samples=256, sky_fine_nodes=48, object_sky_samples=16)
+    folder = synthesize(tmp_path_factory.mktemp("hard_cases") / "h", "hard-cases", size=(320, 240),
+                        renderer="model", progress=False, render_quality=quality)
+    truth = json.loads((folder / "truth.json").read_text())
+    return truth, fit_folder(folder, options=FitOptions(plots=False))
+
+
+def test_hard_cases_preset_reports_its_bad_photos(hard_cases_preset):
+    truth, results = hard_cases_preset
+    reasons = {s["photo"]: s["reason"] for s in results.skipped}
+    for expected in truth["expected_skipped"]:
+        assert expected["photo"] in reasons
+    notime = [name for name, d in truth["photos_detail"].items() if d["time"] is None]
+    assert notime and all("no time" in reasons[name] for name in notime)
+
+
+# Measured at 320 x 240 (fitted value against the truth, k = 0.00465 everywhere): each of these
+# groups comes back with a wrong value that is neither flagged as an upper bound nor unreliable.
+HARD_PRESET_FAILURES = {
+    "zenith": "known bug: sun at 87 deg, the shadow is under the pillar: rho 0.001 for a truth of 0.20, "
+              "with reliable = true (only k is flagged as not identifiable)",
+    "subpixel": "known bug: penumbra under a pixel (80 m top-down map): k 0.065 (14x the truth) and rho "
+                "0.55 for 0.25, identifiable and reliable",
+    "out-of-frame": "known bug: shadow partly out of frame: rho 0.39 for 0.30 (k -36 %), reliable",
+    "clutter": "known bug: cluttered ground: k +50 % (0.0070) and rho 0.31 for 0.28, reliable",
+}
+
+
+@pytest.mark.parametrize("label", [
+    pytest.param(label, marks=pytest.mark.xfail(reason=HARD_PRESET_FAILURES[label], strict=True))
+    if label in HARD_PRESET_FAILURES else label
+    for label in ("low-sun", "zenith", "subpixel", "out-of-frame", "clutter")])
+def test_hard_cases_preset_recovers_the_truth_or_says_it_cannot(hard_cases_preset, label):
+    """Each group: k within 15 % of the truth, or not identifiable with range_k an upper bound;
+    rho within 0.02, or the group marked unreliable."""
+    truth, results = hard_cases_preset
+    t = {g["label"]: g for g in truth["groups"]}[label]
+    (g,) = [g for g in results.groups if g.label == label]
+    assert g.error is None, g.error
+    if g.identifiable:
+        assert abs(g.range_k - t["range_k"]) / t["range_k"] < 0.15, (g.range_k, t["range_k"])
+    else:
+        assert g.range_k >= t["range_k"] and any("upper bound" in w for w in g.warnings)
+    assert abs(g.rho - t["rho"]) < 0.02 or not g.reliable, (g.rho, t["rho"], g.reliable)
 
 
 def test_bad_files_are_skipped_with_reasons_and_do_not_stop_the_rest(tmp_path):
@@ -111,8 +250,6 @@ def test_a_penumbra_under_a_pixel_is_reported_as_an_upper_bound(tmp_path):
 @pytest.mark.parametrize("name", ["pillar-yaw30-topdown", "ball-topdown", "pillar-sun1deg-photo"])
 def test_independent_mitsuba_renders(name):
     folder = MITSUBA / name
-    if not folder.exists():
-        pytest.skip(f"{folder} is absent (../shared is not beside the repository)")
     from fitting.api import fit_folder
     truth = json.loads((folder / "truth.json").read_text())["groups"][0]
     (g,) = fit_folder(folder).groups

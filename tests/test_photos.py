@@ -14,13 +14,14 @@ import pytest
 import tifffile
 from PIL import Image, ImageOps
 
+from datapaths import WORKSPACE
 from fitting.exif import (FULL_FRAME_DIAGONAL_MM, intrinsics_from_exif, photo_time_from_exif,
                           read_exif)
 from fitting.photos import (IMAGE_EXTENSIONS, RAW_EXTENSIONS, PhotoError, apply_orientation,
                             linear_to_srgb, list_photos, read_photo, srgb_to_linear)
 
-# The project's shared real data (../shared/data next to the repository); absent in CI.
-RAW_DIR = Path(__file__).resolve().parents[2] / "shared" / "data" / "raw"
+# Real RAW files without a licence to copy them (../shared/data/raw, development workspace only).
+RAW_DIR = WORKSPACE / "raw"
 RAW_FILES = ["RAW_KODAK_DC50.KDC", "QT150_27.QTK"]
 
 
@@ -203,6 +204,41 @@ def test_truncated_raw_is_reported(tmp_path):
     cut = tmp_path / "cut.kdc"
     cut.write_bytes(path.read_bytes()[:40000])
     with pytest.raises(PhotoError, match=r"^cut\.kdc: truncated or corrupt RAW"):
+        read_photo(cut)
+
+
+# Synthetic stand-in for the real RAW files (whose licences forbid copying them here): a DNG
+# that data_synth writes from a known linear image (an RGGB mosaic, 16-bit, through pidng).
+
+def _synthetic_dng(tmp_path) -> tuple[Path, np.ndarray]:
+    from data_synth.image_io import write_photo
+    rows, cols = np.mgrid[0:96, 0:128]
+    level = 0.02 + 0.85 * (cols / 127.0) ** 1.5 * (0.6 + 0.4 * rows / 95.0)  # a smooth grey ramp
+    img = np.repeat(level[..., None], 3, axis=2).astype(np.float32)
+    return write_photo(tmp_path / "synthetic.dng", img, "dng"), level
+
+
+def test_synthetic_dng_decodes_linearly(tmp_path):
+    path, level = _synthetic_dng(tmp_path)
+    photo = read_photo(path, half_size=True)
+    assert photo.encoding == "raw" and photo.bit_depth == 16
+    assert photo.linear.shape == (48, 64, 3)
+    block = level.reshape(48, 2, 64, 2).mean(axis=(1, 3))
+    ok = ~photo.saturated & (photo.gray > 0.005)
+    assert ok.mean() > 0.9
+    # Linear: proportional to the written radiometry (log-log slope 1); a display gamma reads ~0.45.
+    slope = np.polyfit(np.log(block[ok]), np.log(photo.gray[ok]), 1)[0]
+    assert 0.97 < slope < 1.03
+    full = read_photo(path)
+    assert full.linear.shape == (96, 128, 3)
+    assert full.gray.mean() == pytest.approx(photo.gray.mean(), rel=0.02)
+
+
+def test_truncated_synthetic_dng_is_reported(tmp_path):
+    path, _ = _synthetic_dng(tmp_path)
+    cut = tmp_path / "cut.dng"
+    cut.write_bytes(path.read_bytes()[:4000])
+    with pytest.raises(PhotoError, match=r"^cut\.dng: truncated or corrupt RAW"):
         read_photo(cut)
 
 

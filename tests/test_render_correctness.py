@@ -28,6 +28,7 @@ from hypothesis import strategies as st
 from matplotlib.path import Path
 from scipy.spatial import ConvexHull
 
+from gradcheck import fixed_shape_grid_plan
 from softshadow import GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun, look_at_camera
 from softshadow.meshes import builtin_mesh
 
@@ -125,8 +126,9 @@ def test_k_zero_equals_ray_cast_hard_shadow(name, sun, pose, grid):
 
 @pytest.mark.parametrize("name,sun,pose,grid", [
     pytest.param(*s, marks=pytest.mark.xfail(
-        reason="known limitation: the dragon's gaps narrower than a penumbra get a full ramp around "
-               "them (edge-based model), so the umbra lightens near them", strict=False))
+        reason="known limitation of the edge-based model: the dragon's gaps narrower than a penumbra "
+               "get a full ramp on both sides, so a few umbra pixels more than a pixel from the hard "
+               "boundary fall below alpha = 0.5 (6 and 2 pixels, alpha 0.26 and 0.32)", strict=True))
     if s[0] == "dragon" else s for s in RAY_SCENES],
                          ids=[f"{s[0]}-{i}" for i, s in enumerate(RAY_SCENES)])
 def test_soft_shadow_is_centred_on_the_ray_cast_boundary(name, sun, pose, grid):
@@ -215,7 +217,7 @@ def test_alpha_in_unit_interval_and_rho_only_scales(mesh, profile, rule, k, rho,
     reach = min(3.0 / np.tan(np.radians(elevation)), 6.0)
     centre = (x - 0.5 * reach * s[0] / np.linalg.norm(s[:2]), -0.5 * reach * s[1] / np.linalg.norm(s[:2]))
     grid = GroundGrid.around(centre, reach + 1.5, 48)
-    plan = mdl.plan_grid(sun, pose, grid, range_k_max=k)
+    plan = fixed_shape_grid_plan(mdl, sun, pose, grid, k)  # one compile for all examples
     shading = np.asarray(mdl.ground_map(ShadowParams(k, rho), sun, pose, grid, plan=plan))
     assert np.all(np.isfinite(shading))
     assert shading.min() >= rho - 1e-12 and shading.max() <= 1.0 + 1e-12
@@ -422,14 +424,33 @@ CONSISTENCY_SCENES = [
 ]
 
 
-RESOLUTION_LIMITATION = pytest.mark.xfail(
-    reason="known limitation: the discrete plan depends on its raster's resolution; holes and edges "
-           "below a raster pixel (the ball's short edges, the dragon's small gaps) are seen by the "
-           "finer raster of at_points and not by a coarse map", strict=False)
+def expected_failure(scenes, failing: dict[str, str]):
+    """CONSISTENCY_SCENES as pytest params, with a strict xfail (reason given) on the failing names."""
+    return [pytest.param(*s, id=s[0], marks=pytest.mark.xfail(reason=failing[s[0]], strict=True))
+            if s[0] in failing else pytest.param(*s, id=s[0]) for s in scenes]
 
 
-@RESOLUTION_LIMITATION
-@pytest.mark.parametrize("name,sun,grid", CONSISTENCY_SCENES, ids=[s[0] for s in CONSISTENCY_SCENES])
+# The discrete plan depends on its raster's resolution: a ground map rasters at its own pixel
+# (94 mm for the pillar here), at_points at the points' extent / 1024 (5.9 mm), so the two plans
+# can disagree where a band or a candidate edge is decided near a raster pixel.
+MAP_VS_POINTS_FAILURES = {
+    "pillar": "known bug: plan_points sizes a point's penumbra band by its nearest outline edge "
+              "(a 0.37 m wedge) while near the shadow's tip a wider neighbouring top edge (0.72 m) "
+              "governs; at_points' 5.9 mm raster leaves 2 tip pixels out of the band (lit, 1.0) that "
+              "the 94 mm map's wider margin keeps (0.94)",
+    "ball": "known limitation: 1 pixel where the map's 47 mm raster and at_points' 2.9 mm raster pick "
+            "different candidate edges among the ball's short silhouette edges (0.405 vs 0.407)",
+    "dragon": "known limitation: the dragon's gaps smaller than the map's 47 mm raster pixel are seen "
+              "by at_points' finer raster and not by the map (347 pixels, up to 0.48)",
+}
+CAMERA_VS_MAP_FAILURES = {
+    "dragon": "known limitation: the camera's plan rasters at its own ground footprint, finer than the "
+              "map's 47 mm pixel, and sees gaps of the dragon that the map does not (148 pixels, up "
+              "to 0.44)",
+}
+
+
+@pytest.mark.parametrize("name,sun,grid", expected_failure(CONSISTENCY_SCENES, MAP_VS_POINTS_FAILURES))
 def test_ground_map_equals_values_at_its_pixel_centres(name, sun, grid):
     mdl = builtin_model(name)
     params, pose = ShadowParams(0.03, 0.3), Pose(rotation_deg=(0.0, 0.0, 17.0))
@@ -442,8 +463,7 @@ def test_ground_map_equals_values_at_its_pixel_centres(name, sun, grid):
                                f"{points[np.argmax(diff)]:.4f}")
 
 
-@RESOLUTION_LIMITATION
-@pytest.mark.parametrize("name,sun,grid", CONSISTENCY_SCENES, ids=[s[0] for s in CONSISTENCY_SCENES])
+@pytest.mark.parametrize("name,sun,grid", expected_failure(CONSISTENCY_SCENES, CAMERA_VS_MAP_FAILURES))
 def test_camera_looking_straight_down_sees_the_ground_map(name, sun, grid):
     mdl = builtin_model(name)
     params, pose = ShadowParams(0.03, 0.3), Pose(rotation_deg=(0.0, 0.0, 17.0))

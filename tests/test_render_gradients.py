@@ -1,12 +1,12 @@
 """Gradients of the soft shadow renderer: autodiff against central finite differences (float64).
 
 The discrete choices (silhouette, governing edge, hard shadow, penumbra band)
-are made once in a plan and held fixed, so the finite differences see the
-same piecewise-smooth function that autodiff differentiates. Points are taken
-inside the penumbra (alpha well inside (0, 1)), away from the linear ramp's
-kinks; a point whose forward and backward differences disagree sits on a kink
-of the piecewise formula (a switch of governing edge) and is left out, but
-most points must remain.
+are made once in a plan and held fixed (tests/gradcheck.py), so the finite
+differences see the same piecewise-smooth function that autodiff
+differentiates. Points are taken inside the penumbra (alpha well inside
+(0, 1)), away from the linear ramp's kinks; a point whose forward and backward
+differences disagree sits on a kink of the piecewise formula (a switch of
+governing edge) and is left out, but most points must remain.
 
 Every differentiable parameter is checked: k, rho, sun azimuth and elevation,
 pose translation x, y, z and rotation about x, y, z, for both expansion rules
@@ -24,23 +24,13 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from gradcheck import PARAM_NAMES, STEPS, check_point_gradients, unpack
 from softshadow import GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun
 from softshadow.meshes import builtin_mesh
-
-PARAM_NAMES = ("range_k", "rho", "azimuth", "elevation", "x", "y", "z", "rot_x", "rot_y", "rot_z")
-# Central-difference steps: small against the scales (k >= 0.01, penumbra widths >= ~5 mm).
-STEPS = np.array([1e-7, 1e-6, 1e-6, 1e-6, 1e-7, 1e-7, 1e-7, 1e-6, 1e-6, 1e-6])
-
 
 @functools.lru_cache(maxsize=None)
 def model(mesh: str, rule: str, profile: str) -> SoftShadowModel:
     return SoftShadowModel.from_mesh(builtin_mesh(mesh), rule=rule, profile=profile)
-
-
-def unpack(theta):
-    """(ShadowParams, Sun, Pose) from the parameter vector (10,) in PARAM_NAMES order."""
-    return (ShadowParams(theta[0], theta[1]), Sun(theta[2], theta[3]),
-            Pose(position=theta[4:7], rotation_deg=theta[7:10]))
 
 
 def ground_of(points_world: np.ndarray, light: np.ndarray) -> np.ndarray:
@@ -79,44 +69,6 @@ def ball_shadow_samples(sun: Sun, pose: Pose) -> np.ndarray:
     dirs = [np.array([np.cos(a), np.sin(a)]) for a in np.linspace(0, 2 * np.pi, 7, endpoint=False)]
     xy = np.concatenate([centre + radii[:, None] * d for d in dirs])
     return np.c_[xy, np.zeros(len(xy))]
-
-
-def check_point_gradients(mdl: SoftShadowModel, theta0: np.ndarray, points: np.ndarray,
-                          range_k_max: float, min_points: int = 8):
-    """Autodiff Jacobian (N, 10) of shading at points vs central differences, plan held fixed."""
-    params, sun, pose = unpack(jnp.asarray(theta0))
-    plan = mdl.plan_points(sun, pose, points, range_k_max=range_k_max)
-
-    def shading(theta):
-        p, s, q = unpack(theta)
-        return mdl.at_points(p, s, q, points, plan=plan)
-
-    base = np.asarray(shading(jnp.asarray(theta0)))
-    rho = theta0[1]
-    alpha = (1.0 - base) / (1.0 - rho)
-    keep = (alpha > 0.05) & (alpha < 0.95)
-    assert keep.sum() >= min_points, (
-        f"only {keep.sum()} sample points in the penumbra; the sampling misses the shadow edge")
-    jac = np.asarray(jax.jacfwd(shading)(jnp.asarray(theta0)))
-    assert np.all(np.isfinite(jac)), "non-finite autodiff gradient inside the penumbra"
-    for i, name in enumerate(PARAM_NAMES):
-        e = np.zeros(10)
-        e[i] = STEPS[i]
-        plus = np.asarray(shading(jnp.asarray(theta0 + e)))
-        minus = np.asarray(shading(jnp.asarray(theta0 - e)))
-        forward, backward = (plus - base) / STEPS[i], (base - minus) / STEPS[i]
-        central = 0.5 * (forward + backward)
-        scale = max(float(np.max(np.abs(central[keep]))), 1e-3)
-        # One-sided differences disagree only at a kink (a ramp end, a switch of edge).
-        smooth = keep & (np.abs(forward - backward) <= 1e-4 * scale)
-        assert smooth.sum() >= 0.85 * keep.sum(), (
-            f"{name}: kinks or jumps at {keep.sum() - smooth.sum()} of {keep.sum()} penumbra points")
-        err = np.abs(jac[smooth, i] - central[smooth])
-        worst = int(np.argmax(err)) if len(err) else 0
-        assert np.all(err <= 1e-4 * scale + 1e-7), (
-            f"{name}: autodiff {jac[smooth, i][worst]:.6g} vs finite difference "
-            f"{central[smooth][worst]:.6g} (scale {scale:.3g})")
-    return jac[keep]
 
 
 scene = st.fixed_dictionaries({

@@ -4,20 +4,18 @@ from __future__ import annotations
 
 import json
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 import trimesh
 
 from data_synth.lighting import SunSky
+from datapaths import MITSUBA as MITSUBA_DIR
 from data_synth.physical import shadow_reach, sky_visibility, sky_visibility_map, sun_visibility
 from data_synth.receivers import PlaneReceiver, bank_terrain
 from softshadow.meshes import builtin_mesh
 
-MITSUBA = Path(__file__).resolve().parents[2] / "shared" / "data" / "mitsuba" / "pillar-yaw30-topdown"
-if not MITSUBA.exists():
-    MITSUBA = Path("/work/shared/data/mitsuba/pillar-yaw30-topdown")
+MITSUBA = MITSUBA_DIR / "pillar-yaw30-topdown"
 
 H = 1.0  # height of the plate's lower face
 
@@ -154,7 +152,6 @@ def test_bank_sky_visibility_sees_its_own_slope():
     assert flat > 0.97 and foot < flat - 0.02
 
 
-@pytest.mark.skipif(not MITSUBA.exists(), reason="shared Mitsuba renders (../shared/data/mitsuba) are absent")
 def test_matches_independent_mitsuba_render_of_the_same_scene():
     import cv2
     from softshadow.camera import GroundGrid
