@@ -2,8 +2,8 @@
 them has changed.
 
 A group's record is reused when its **key** matches: a SHA-256 over the group's photos (names
-and file contents), the whole scene (scene.toml as read, plus the contents of a mesh file it
-names), the fit options that change a result, how photos are decoded (``half_size``) and the
+and file contents), the whole scene (scene.toml as read, plus the contents of every file it
+names: meshes, range images, ignore masks; and a photo's ``<stem>.ignore.png``), the fit options that change a result, how photos are decoded (``half_size``) and the
 versions of softshadow, JAX and optimistix. Replacing a photo by another file of the same
 name, editing scene.toml, changing ``--profile`` or upgrading the software therefore refits
 the group instead of reporting stale values. Records are written atomically (a temporary file,
@@ -29,24 +29,40 @@ RESULT_OPTIONS = ("profiles", "blur", "rule", "range_k_max", "max_samples_per_ph
                   "max_steps", "seed", "sky_occlusion")
 
 
+def _file_sha256(path: Path) -> str:
+    with open(path, "rb") as fh:
+        return hashlib.file_digest(fh, "sha256").hexdigest()
+
+
 def photo_digest(photo) -> str:
-    """SHA-256 of a photo's file (``Photo.path``), or of its decoded pixels when it has no file."""
+    """SHA-256 of a photo's file (``Photo.path``) and of the ignore mask beside it, or of its
+    decoded pixels when it has no file."""
     path = getattr(photo, "path", None)
     if path is not None and Path(path).is_file():
-        with open(path, "rb") as fh:
-            return hashlib.file_digest(fh, "sha256").hexdigest()
+        digest = _file_sha256(Path(path))
+        beside = Path(path).with_name(Path(path).stem + ".ignore.png")
+        return digest + (":" + _file_sha256(beside) if beside.is_file() else "")
     return hashlib.sha256(photo.linear.tobytes()).hexdigest()
 
 
+def _scene_files(scene: SceneSpec) -> list[str]:
+    """Every file the scene names: the object's and the receiver's meshes, range images and
+    ignore masks (relative to the folder; built-in mesh names are not files)."""
+    names = [scene.object.mesh if scene.object is not None else None,
+             scene.receiver.mesh, scene.receiver.depth]
+    for entry in scene.photos.values():
+        names += [entry.depth, entry.ignore]
+    return sorted({n for n in names if n})
+
+
 def _scene_part(scene: SceneSpec | None) -> dict:
+    """The scene as read, with the contents of every file it names (not only their names)."""
     if scene is None:
         return {}
     part = scene_to_dict(scene)
-    if scene.object is not None and scene.base_dir is not None:
-        mesh = Path(scene.base_dir) / scene.object.mesh
-        if mesh.is_file():  # a mesh file's contents, not only its name
-            with open(mesh, "rb") as fh:
-                part["_mesh_sha256"] = hashlib.file_digest(fh, "sha256").hexdigest()
+    if scene.base_dir is not None:
+        files = {name: Path(scene.base_dir) / name for name in _scene_files(scene)}
+        part["_file_sha256"] = {name: _file_sha256(path) for name, path in files.items() if path.is_file()}
     return part
 
 

@@ -403,3 +403,35 @@ def test_markers_folder_at_800x600_registers_or_warns(table2, tmp_path):
         assert warning.startswith(f"the board cannot be registered in {failed} of 9 photos")
     else:
         assert warning is None
+
+
+def test_resume_key_covers_the_files_the_scene_names(tmp_path):
+    """Editing a receiver mesh, a range image or an ignore mask (named in scene.toml or beside
+    the photo) changes the key; the file's name alone would not."""
+    from scene import scene_from_dict
+    from fitting import FitOptions
+    from fitting.resume import group_key, photo_digest
+
+    photo = tmp_path / "a.jpg"
+    photo.write_bytes(b"photo")
+    files = {"steps.ply": b"mesh", "a.depth.npy": b"depth", "b.ignore.png": b"mask"}
+    for name, data in files.items():
+        (tmp_path / name).write_bytes(data)
+    scene = scene_from_dict({"object": {"mesh": "pillar"},
+                             "receiver": {"kind": "mesh", "mesh": "steps.ply"},
+                             "photos": {"a.jpg": {"depth": "a.depth.npy", "ignore": "b.ignore.png"}}},
+                            base_dir=tmp_path)
+
+    class Photo:
+        path = photo
+
+    def key():
+        return group_key({"a.jpg": photo_digest(Photo)}, scene, FitOptions(), {})
+
+    seen = {key()}
+    for name in files:
+        (tmp_path / name).write_bytes(b"edited " + files[name])
+        seen.add(key())
+    (tmp_path / "a.ignore.png").write_bytes(b"a mask beside the photo")
+    seen.add(key())
+    assert len(seen) == len(files) + 2
