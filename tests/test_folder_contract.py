@@ -253,7 +253,20 @@ def test_interrupted_force_run_leaves_consistent_outputs(one_group, tmp_path):
 
 def test_ctrl_c_prints_one_line_and_resumes(one_group, tmp_path):
     out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "softshadow_cli", "fit", str(one_group), "--out", str(out), "--no-plots"]
+    # A real SIGINT while a group is being fitted: the group's fit first says so and waits, so
+    # that a fast fit (a warm compilation cache) cannot finish before the signal arrives.
+    driver = (
+        "import sys, time\n"
+        "import fitting.api as api\n"
+        "fit_group = api.fit_group\n"
+        "def waiting_fit_group(*args, **kwargs):\n"
+        "    print('test: fitting a group', file=sys.stderr, flush=True)\n"
+        "    time.sleep(120)\n"
+        "    return fit_group(*args, **kwargs)\n"
+        "api.fit_group = waiting_fit_group\n"
+        "from softshadow_cli.main import main\n"
+        "sys.exit(main(sys.argv[1:]))\n")
+    cmd = [sys.executable, "-c", driver, "fit", str(one_group), "--out", str(out), "--no-plots"]
     env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
     err = bytearray()
@@ -265,7 +278,7 @@ def test_ctrl_c_prints_one_line_and_resumes(one_group, tmp_path):
     reader = threading.Thread(target=read, daemon=True)
     reader.start()
     deadline = time.monotonic() + 120
-    while b"fitting" not in err and time.monotonic() < deadline and proc.poll() is None:
+    while b"test: fitting a group" not in err and time.monotonic() < deadline and proc.poll() is None:
         time.sleep(0.2)
     proc.send_signal(signal.SIGINT)
     proc.wait(timeout=60)
