@@ -127,6 +127,13 @@ def _raster_for(posed: PosedOccluder, region_lo, region_hi, pixel_m, pad_m):
 BACKENDS = ("auto", "ground", "light")
 
 
+def _empty_plan_arrays(size: int):
+    """A plan's per-point arrays for ``size`` (padded) points: edge_id (size, K) int32, hard
+    (size,), active (size,) bool, near_boundary (size,); points beyond the real ones stay lit."""
+    return (np.zeros((size, N_CANDIDATES), np.int32), np.zeros(size), np.zeros(size, bool),
+            np.zeros(size))
+
+
 def plan_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k_max: float,
                 rule: str = "edge", pixel_m: float | None = None,
                 margin_px: float = 2.5, pad_to: int | None = None, normals: np.ndarray | None = None,
@@ -166,11 +173,7 @@ def plan_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k
     sil, light = posed.silhouette, posed.light
     a, b, direction = posed.edge_geometry(rule)
     n = len(points)
-    size = pad_to or bucket_size(n)
-    edge_id = np.zeros((size, N_CANDIDATES), np.int32)
-    hard = np.zeros(size)
-    active = np.zeros(size, bool)
-    near_boundary = np.zeros(size)
+    edge_id, hard, active, near_boundary = _empty_plan_arrays(pad_to or bucket_size(n))
     if n and len(sil.vertex_ids):
         widths = edge_band_widths(a, b, direction, light, range_k_max)
         lo, hi = points[:, :2].min(0), points[:, :2].max(0)
@@ -214,11 +217,7 @@ def _plan_points_light(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, 
     posed = PosedOccluder.make(occ, pose, sun)
     sil, light, world = posed.silhouette, posed.light, posed.world
     n = len(points)
-    size = pad_to or bucket_size(n)
-    edge_id = np.zeros((size, N_CANDIDATES), np.int32)
-    hard = np.zeros(size)
-    active = np.zeros(size, bool)
-    near_boundary = np.zeros(size)
+    edge_id, hard, active, near_boundary = _empty_plan_arrays(pad_to or bucket_size(n))
     attached = np.zeros(n, bool) if normals is None else faces_away(normals, light)
     hard[:n] = attached
     edges = EdgeSet(*_pack_edges(occ, sil))
