@@ -256,7 +256,10 @@ def test_ctrl_c_prints_one_line_and_resumes(one_group, tmp_path):
     # A real SIGINT while a group is being fitted: the group's fit first says so and waits, so
     # that a fast fit (a warm compilation cache) cannot finish before the signal arrives.
     driver = (
-        "import sys, time\n"
+        "import signal, sys, time\n"
+        # A child inherits an ignored SIGINT from its parent (the test runner may run with one),
+        # and Python then never raises KeyboardInterrupt: start as a shell would start it.
+        "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
         "import fitting.api as api\n"
         "fit_group = api.fit_group\n"
         "def waiting_fit_group(*args, **kwargs):\n"
