@@ -313,28 +313,26 @@ def _fit_photos(photos, scene, options, half_size, progress, store, on_group, jo
 
     ordered: dict[int, GroupResult] = {}
     bar = progress(groups) if progress else None
+
+    def collect(i: int, result: GroupResult, more: list[dict]) -> None:
+        """One finished group: its place in the order, its skipped photos, hook and progress."""
+        ordered[i] = result
+        skipped.extend(more)
+        if on_group:
+            on_group(result)
+        if bar is not None:
+            bar.update(1)
+
     try:
         if jobs > 1 and len(groups) > 1:
             # Threads: XLA releases the GIL, and the compiled solver is shared between them.
             with concurrent.futures.ThreadPoolExecutor(max_workers=jobs) as pool:
                 futures = {pool.submit(_in_float64, fit_one, g): i for i, g in enumerate(groups)}
                 for future in concurrent.futures.as_completed(futures):
-                    result, more = future.result()
-                    ordered[futures[future]] = result
-                    skipped += more
-                    if on_group:
-                        on_group(result)
-                    if bar is not None:
-                        bar.update(1)
+                    collect(futures[future], *future.result())
         else:
             for i, group in enumerate(groups):
-                result, more = fit_one(group)
-                ordered[i] = result
-                skipped += more
-                if on_group:
-                    on_group(result)
-                if bar is not None:
-                    bar.update(1)
+                collect(i, *fit_one(group))
     finally:
         if bar is not None:  # also when interrupted: the next line starts on a line of its own
             bar.close()
