@@ -75,33 +75,53 @@ def compare_solvers(problem, k_truth: float, rho_truth: float, repeats: int = 3)
     return out
 
 
-def bench_fit_baseline(photos_per_group=(1, 3), seeds: int = 3, max_samples_per_photo: int = 1300,
-                       repeats: int = 3) -> dict:
-    """Both solvers on ``seeds`` groups of each size in ``photos_per_group``; per group and summed
-    up (medians over the groups, and the RMS of the k and rho errors)."""
+def _summary(rows: list[dict]) -> dict:
+    out = {solver: {"median_ms": float(np.median([r[solver]["median_ms"] for r in rows])),
+                    "k_rel_rms": float(np.sqrt(np.mean([r[solver]["error"]["k_rel"] ** 2 for r in rows]))),
+                    "rho_abs_rms": float(np.sqrt(np.mean([r[solver]["error"]["rho_abs"] ** 2 for r in rows]))),
+                    "peak_extra_mb": max((r[solver]["peak_extra_mb"] or 0.0) for r in rows)}
+           for solver in ("autodiff", "finite_differences")}
+    out["samples"] = int(np.median([r["samples"] for r in rows]))
+    out["parameters"] = rows[0]["parameters"]
+    out["groups"] = len(rows)
+    out["time_ratio_fd_over_autodiff"] = float(np.median([r["time_ratio_fd_over_autodiff"] for r in rows]))
+    out["k_fd_minus_autodiff_max_rel"] = float(max(
+        abs(r["finite_differences"]["range_k"] - r["autodiff"]["range_k"]) / TRUTH_K for r in rows))
+    return out
+
+
+def bench_fit_baseline(photos_per_group=(1, 2, 4, 8), caps=(150, 400, 1300, 4000), seeds: int = 3,
+                       repeats: int = 3, cap_for_photos: int | None = None) -> dict:
+    """Both solvers on ``seeds`` groups of each size in ``photos_per_group`` (samples per photo
+    capped at ``cap_for_photos``, default the cap nearest the fitter's default), and on
+    one-photo groups at each cap in ``caps``. Per group, summed up per size (medians over the
+    groups, RMS of the k and rho errors), and the log-log slopes of time against photos per group
+    and against samples."""
     from fitting import FitOptions, group_problem
-    options = FitOptions(profiles=("disk",), blur=(False,), robust=False, sky_occlusion=False, plots=False,
-                         max_samples_per_photo=int(max_samples_per_photo))
+    from .scaling import loglog_slope
+    default_cap = FitOptions().max_samples_per_photo
+    cap_for_photos = cap_for_photos or min(caps, key=lambda c: abs(c - default_cap))
+    runs = sorted({(n, cap_for_photos) for n in photos_per_group} | {(1, c) for c in caps})
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        for n in photos_per_group:
+        for n, cap in runs:
+            options = FitOptions(profiles=("disk",), blur=(False,), robust=False, sky_occlusion=False, plots=False,
+                                 max_samples_per_photo=int(cap))
             for seed in range(seeds):
                 model, pose, views = same_model_views(Path(tmp), n, seed)
                 problem = group_problem(model, pose, views, options)
-                rows.append({"photos": n, "seed": seed, "samples": problem.n_samples,
+                rows.append({"photos": n, "cap": int(cap), "seed": seed, "samples": problem.n_samples,
                              "parameters": int(len(problem.x0)),
                              **compare_solvers(problem, TRUTH_K, TRUTH_RHO, repeats)})
-    summary = {}
-    for n in photos_per_group:
-        sel = [r for r in rows if r["photos"] == n]
-        summary[str(n)] = {
-            solver: {"median_ms": float(np.median([r[solver]["median_ms"] for r in sel])),
-                     "k_rel_rms": float(np.sqrt(np.mean([r[solver]["error"]["k_rel"] ** 2 for r in sel]))),
-                     "rho_abs_rms": float(np.sqrt(np.mean([r[solver]["error"]["rho_abs"] ** 2 for r in sel])))}
-            for solver in ("autodiff", "finite_differences")}
-        summary[str(n)]["time_ratio_fd_over_autodiff"] = float(np.median([r["time_ratio_fd_over_autodiff"]
-                                                                           for r in sel]))
-        summary[str(n)]["k_fd_minus_autodiff_max_rel"] = float(max(
-            abs(r["finite_differences"]["range_k"] - r["autodiff"]["range_k"]) / TRUTH_K for r in sel))
+    by_photos = {str(n): _summary([r for r in rows if r["photos"] == n and r["cap"] == cap_for_photos])
+                 for n in photos_per_group}
+    by_cap = {str(c): _summary([r for r in rows if r["photos"] == 1 and r["cap"] == c]) for c in caps}
+
+    def slope(summary, x_key):
+        return {solver: loglog_slope([v[x_key] if x_key != "photos" else int(n) for n, v in summary.items()],
+                                     [v[solver]["median_ms"] for v in summary.values()])
+                for solver in ("autodiff", "finite_differences")}
+
     return {"truth": {"range_k": TRUTH_K, "rho": TRUTH_RHO, "noise_sigma": NOISE},
-            "max_samples_per_photo": int(max_samples_per_photo), "groups": rows, "by_photos": summary}
+            "cap_for_photos": int(cap_for_photos), "groups": rows, "by_photos": by_photos, "by_cap": by_cap,
+            "slope_vs_photos": slope(by_photos, "photos"), "slope_vs_samples": slope(by_cap, "samples")}
