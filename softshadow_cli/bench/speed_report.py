@@ -217,6 +217,31 @@ def _mitsuba_section(mitsuba: dict) -> list[str]:
     return L
 
 
+def fit_scaling_plot(fb: dict, path: Path) -> None:
+    """The fit's time against photos per group and against samples (log-log), both solvers."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4.0))
+    for solver, style in (("autodiff", "o-"), ("finite_differences", "s--")):
+        ph = sorted(fb["by_photos"].items(), key=lambda kv: int(kv[0]))
+        axes[0].plot([int(n) for n, _ in ph], [v[solver]["median_ms"] for _, v in ph], style, label=solver)
+        cp = sorted(fb["by_cap"].values(), key=lambda v: v["samples"])
+        axes[1].plot([v["samples"] for v in cp], [v[solver]["median_ms"] for v in cp], style, label=solver)
+    axes[0].set_xlabel(f"photos per group ({fb['cap_for_photos']} samples per photo at most)")
+    axes[1].set_xlabel("samples (one photo)")
+    for ax in axes:
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_ylabel("median ms per solve")
+        ax.grid(True, which="both", lw=0.3)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def _fit_baseline_section(fb: dict) -> list[str]:
     t = fb["truth"]
     L = ["## The same fit without autodiff (baseline 6)", "",
@@ -244,7 +269,8 @@ def _fit_baseline_section(fb: dict) -> list[str]:
     L += ["", f"Log-log slopes of time: against photos per group, autodiff {_f(sp['autodiff'], '{:.2f}')}, "
           f"finite differences {_f(sp['finite_differences'], '{:.2f}')}; against samples (one photo), "
           f"autodiff {_f(ss['autodiff'], '{:.2f}')}, finite differences {_f(ss['finite_differences'], '{:.2f}')}. "
-          "Finite differences need p + 1 residual evaluations per Jacobian (p = 5 + 4 x photos parameters)."]
+          "Finite differences need p + 1 residual evaluations per Jacobian (p = 5 + 4 x photos parameters).",
+          "", "![fit scaling](img/speed_vs_error_fit.png)"]
     return L
 
 
@@ -389,6 +415,7 @@ def write_report(result: dict, md_path: Path, json_name: str | None = None) -> N
                      f"{k['bias_over_crb']:+.2f} | {rho['std']:.2e} | {rho['crb']:.2e} | {rho['std_over_crb']:.2f} | "
                      f"{r['group_seconds_after_compile']['median']:.2f} |")
     if result.get("fit_baseline"):
+        fit_scaling_plot(result["fit_baseline"], md_path.parent / "img" / "speed_vs_error_fit.png")
         L += [""] + _fit_baseline_section(result["fit_baseline"])
     if "paper" in result:
         L += [""] + _paper_sections(result["paper"])
