@@ -198,13 +198,16 @@ def _mitsuba_section(mitsuba: dict) -> list[str]:
           "ground, a uniform sun disk (a far disk light subtending the sun's radius) and a uniform sky (a "
           "constant emitter), direct light only (`direct` integrator), an orthographic top-down camera over "
           "the same square with a box pixel filter and a low-discrepancy sampler, at the truth's size. Time is "
-          "the median wall time of a render after a warm-up render at the same samples per pixel (spp), its "
-          "kernel compiled; error against the same converged physical truth as every other case.", "",
+          "the wall time of a render after a warm-up render at the same samples per pixel (spp), its "
+          "kernel compiled, except where the table says \"first\" (high spp: the first render at that spp, "
+          "its kernel compilation of a second or two included); error against the same converged physical "
+          "truth as every other case.", "",
           "| mesh | spp | pixels | time (ms) | RMS | RMS band | max abs |", "|---|---:|---:|---:|---:|---:|---:|"]
     for name, run in mitsuba.items():
         for c in run["cases"]:
             e = c["error"]
-            L.append(f"| {name} | {c['spp']} | {c['pixels']} | {c['median_ms']:.0f} | {_f(e['rms'])} | "
+            first = "" if c.get("warmed_up", True) else " (first)"
+            L.append(f"| {name} | {c['spp']} | {c['pixels']} | {c['median_ms']:.0f}{first} | {_f(e['rms'])} | "
                      f"{_f(e['rms_band'])} | {_f(e['max_abs'], '{:.3f}')} |")
     L += ["", "The time Mitsuba needs to reach this renderer's error on the same mesh and map (log-log "
           "interpolation between the measured spp, or past the last one with Monte Carlo's error ~ time^-1/2):",
