@@ -155,7 +155,8 @@ def main(argv=None) -> int:
     try:
         _use_compilation_cache()
         from softshadow import one_blas_thread
-        with one_blas_thread():
+        from .interrupts import ctrl_c_never_swallowed
+        with ctrl_c_never_swallowed(), one_blas_thread():
             return int(args.func(args) or 0)
     except KeyboardInterrupt:
         return _fail(args.command, "interrupted", 130)
