@@ -78,6 +78,7 @@ class SweepSettings:
         s.table1_pixels, s.table1_samples = 16, 16
         s.mitsuba_spps = (1,)
         s.fit_photos, s.fit_caps, s.fit_baseline_seeds = (1,), (150,), 1
+        s.scaling_pixels = (32,)
         return s
 
 @functools.lru_cache(maxsize=None)
