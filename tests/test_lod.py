@@ -116,3 +116,14 @@ def test_noise_lets_a_coarser_level_through(ball_folder, tmp_path):
     assert noisy.faces < quiet.faces
     for choice in (quiet, noisy):
         assert all((c.worst <= 1.0) == (c.faces >= choice.faces) for c in choice.checks)
+
+
+def test_cli_reports_the_level_in_results_and_table(ball_folder, tmp_path):
+    import json
+
+    from softshadow_cli.main import main
+    out = tmp_path / "out"
+    assert main(["fit", str(ball_folder), "--out", str(out), "--no-plots", "--lod", "640"]) == 0
+    (group,) = json.loads((out / "results.json").read_text())["groups"]
+    assert group["mesh_faces"] == 5120 and abs(group["lod_faces"] - 640) <= 10
+    assert f"level of detail of {group['lod_faces']:,} of the mesh's 5,120 faces" in (out / "table2.md").read_text()
