@@ -75,10 +75,7 @@ def render_scene_file(args):
     cam = scene.camera_for(name) if name else scene.camera
     w, h = (int(v) for v in (args.size or DEFAULT_SIZE).lower().split("x"))
     if cam is not None and cam.kind == "explicit":
-        K = np.asarray(cam.K)  # without --size, the image the principal point is the centre of
-        width = int(round(2 * (K[0, 2] + 0.5))) if args.size is None else w
-        height = int(round(2 * (K[1, 2] + 0.5))) if args.size is None else h
-        camera = PinholeCamera(K, cam.R, cam.t, width, height, cam.dist)
+        camera = _explicit_camera(cam, args.size, w, h)
         rendered = model.camera_image(params, sun, pose, camera)
         shading = np.asarray(rendered.shading)
         alpha = (1 - shading) / max(1 - rho, 1e-9)
@@ -94,6 +91,15 @@ def render_scene_file(args):
     if args.silhouettes:
         image = draw_outlines(image, alpha)
     return image, shading
+
+
+def _explicit_camera(cam, size, w: int, h: int) -> PinholeCamera:
+    """The scene's explicit camera at --size (w x h), or without --size at the image size its
+    principal point is the centre of."""
+    K = np.asarray(cam.K)
+    width = int(round(2 * (K[0, 2] + 0.5))) if size is None else w
+    height = int(round(2 * (K[1, 2] + 0.5))) if size is None else h
+    return PinholeCamera(K, cam.R, cam.t, width, height, cam.dist)
 
 
 def _default_grid(model, pose, sun, w, h, pixel_m):
@@ -163,10 +169,7 @@ def _scene_camera(args, scene, name, model, pose):
                               _xyz(args.camera_target, "--camera-target"), w, h, fov)
     cam = scene.camera_for(name) if name else scene.camera
     if cam is not None and cam.kind == "explicit":
-        K = np.asarray(cam.K)
-        width = int(round(2 * (K[0, 2] + 0.5))) if args.size is None else w
-        height = int(round(2 * (K[1, 2] + 0.5))) if args.size is None else h
-        return PinholeCamera(K, cam.R, cam.t, width, height, cam.dist)
+        return _explicit_camera(cam, args.size, w, h)
     if cam is not None and cam.kind == "topdown":
         return cam.grid(w, h)
     world, _ = posed_vertices(model.occluder, pose)

@@ -171,3 +171,20 @@ def test_render_a_scene_toml_with_a_projector_a_mesh_receiver_and_the_sun(tmp_pa
     assert img.shape == (60, 80, 3) and np.all(np.isfinite(img))
     # Lit floor: ambient rho 0.3 + sun 0.7 + the projector's light on its brightest cells.
     assert img.max() > 0.85 * 1.5 and img.min() >= 0.0
+
+
+def test_scene_image_through_the_scene_toml_camera(tmp_path, capsys):
+    (tmp_path / "scene.toml").write_text(
+        '[object]\nmesh = "ball"\n[camera]\nkind = "explicit"\n'
+        'K = [[60.0, 0.0, 31.5], [0.0, 60.0, 23.5], [0.0, 0.0, 1.0]]\n'
+        'R = [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]]\nt = [0.0, 0.0, 6.0]\n'
+        '[[projector]]\nposition = [0.0, 0.0, 5.0]\ndirection = [0.0, 0.0, -1.0]\nfov_deg = 20\n')
+    npy = tmp_path / "s.npy"
+    code = main(["render", "--scene", str(tmp_path / "scene.toml"), "--out", str(tmp_path / "s.png"), "--npy",
+                 str(npy), "--no-sun", "--ambient", "0"])
+    assert code == 0, capsys.readouterr().err
+    img = np.load(npy)
+    assert img.shape == (48, 64, 3)  # the image the principal point is the centre of
+    # Looking straight down on the ball under a projector straight above: its top is lit, the
+    # ground around it is in its shadow out to the beam's edge, and beyond the beam all is dark.
+    assert img[24, 32, 0] > 0.01 and img[24, 2, 0] == 0.0 and img[2, 32, 0] == 0.0
