@@ -181,6 +181,23 @@ def _scene_camera(args, scene, name, model, pose):
     return look_at_camera(centre + distance * direction, centre, w, h, fov)
 
 
+def _depth_surface(scene, name) -> Surface | None:
+    """The photo's range image as a triangle mesh (every other pixel, no triangles across depth
+    jumps), placed by the photo's explicit camera; None without one."""
+    from fitting.receiver_points import depth_mesh, depth_points, read_depth
+    path = (scene.photo(name).depth if name else None) or scene.receiver.depth
+    cam = scene.camera_for(name) if name else scene.camera
+    if path is None:
+        raise ValueError("[receiver] kind = \"depth\" names no range image for this photo")
+    if cam is None or cam.kind != "explicit":
+        return None
+    camera = _explicit_camera(cam, None, 0, 0)
+    full = path if scene.base_dir is None else scene.base_dir / path
+    points = depth_points(read_depth(full, (camera.height, camera.width)), camera)
+    mesh = depth_mesh(points, step=2, centre=camera.centre)
+    return Surface(mesh.vertices, mesh.faces, PAPER_ALBEDO, "receiver")
+
+
 def _render_lit_scene(args, scene, model, pose, sun, projectors, name, k=0.01, rho=0.3):
     """(sRGB image (H, W, 3) uint8, linear radiance (H, W, 3)) of the whole scene."""
     if args.silhouettes:
@@ -194,8 +211,13 @@ def _render_lit_scene(args, scene, model, pose, sun, projectors, name, k=0.01, r
                                               rec.scale, PAPER_ALBEDO, "receiver"))
         ground = None  # the mesh is the receiver (it holds its own ground where it has one)
     elif rec.kind == "depth":
-        print("softshadow render: a range-image receiver is drawn as the ground plane z = 0 in a scene image",
-              file=sys.stderr)
+        surface = _depth_surface(scene, name)
+        if surface is None:
+            print("softshadow render: the range image needs the photo's explicit camera; the receiver is "
+                  "drawn as the ground plane z = 0", file=sys.stderr)
+        else:
+            receivers.append(surface)
+            ground = None
     if sun is not None:
         lights = SceneLights.from_rho(sun, k, rho)
         if args.ambient is not None:
