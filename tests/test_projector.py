@@ -243,6 +243,21 @@ def test_visible_points_lie_on_the_faces_they_name_and_match_the_object_mask():
     np.testing.assert_allclose(vis.albedo[ground], 0.3)
 
 
+def test_smooth_normals_follow_the_sphere_better_than_flat_faces():
+    model = model_of("ball")
+    surf = Surface(ss.posed_vertices(model.occluder, Pose())[0], model.occluder.faces)
+    cam = look_at_camera((3.0, -3.0, 3.0), (0.0, 0.0, 1.5), 96, 72, 30.0)
+    errors = {}
+    for smooth in (False, True):
+        vis = visible_surfaces(cam, [surf], None, smooth=smooth)
+        true = vis.points - np.array([0.0, 0.0, 1.5])
+        true /= np.linalg.norm(true, axis=1, keepdims=True)
+        errors[smooth] = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", vis.normals, true), -1, 1)))
+    assert len(errors[True]) > 1000
+    np.testing.assert_allclose(np.linalg.norm(vis.normals, axis=1), 1.0)
+    assert np.median(errors[True]) < 0.5 * np.median(errors[False]) and errors[True].max() < 5.0
+
+
 def test_top_down_visibility_sees_the_top_of_the_object_and_nothing_beyond_the_horizon():
     model = model_of("pillar")
     surf = Surface(ss.posed_vertices(model.occluder, Pose())[0], model.occluder.faces)
