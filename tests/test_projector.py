@@ -74,6 +74,30 @@ def test_projector_shadow_on_a_plane_agrees_with_ray_casting(mesh, rotation, pos
     assert differ < 0.1 * truth.sum()
 
 
+def test_projector_shadow_in_a_camera_image_agrees_with_ray_casting():
+    """The whole pipeline: the camera's z-buffer, the projector's light with a clear slide; the
+    ground pixels it leaves dark against rays from the same ground points to the projector."""
+    model = model_of("dragon")
+    cam = look_at_camera((2.5, -4.0, 3.0), (0.0, 0.5, 0.3), 160, 120, 50.0)
+    proj = Projector((-2.0, -2.5, 3.5), (0.0, 0.0, 0.4), np.ones((64, 64, 3)), fov_deg=80.0, shadow_px=768)
+    setup = prepare_scene(cam, model, Pose(), None, [proj])
+    vis = setup.visible
+    ground = (vis.surface.ravel()[vis.pixel] == GROUND)
+    dark = np.zeros(vis.shape, bool)
+    dark.ravel()[vis.pixel[ground]] = setup.projector_light[ground, 0] == 0
+    tm = trimesh.Trimesh(*(np.asarray(a) for a in (ss.posed_vertices(model.occluder, Pose())[0],
+                                                   model.occluder.faces)), process=False)
+    p = vis.points[ground]
+    truth = np.zeros(vis.shape, bool)
+    truth.ravel()[vis.pixel[ground]] = tm.ray.intersects_any(p + 1e-7 * (proj.position - p), proj.position - p)
+    on_ground = np.zeros(vis.shape, bool)  # ground inside the projector's beam
+    on_ground.ravel()[vis.pixel[ground]] = proj.slide_colour(p)[:, 0] > 0
+    assert truth.sum() > 300 and on_ground.sum() > 0.5 * ground.sum()
+    differ, far = _within_a_pixel(dark & on_ground, truth & on_ground)
+    assert far == 0, f"{far} of {differ} differing ground pixels lie farther than a pixel from the outline"
+    assert differ < 0.1 * truth.sum()
+
+
 def test_projector_lit_side_of_a_ball_has_no_acne_and_its_far_side_is_dark():
     mesh = builtin_mesh("ball")
     surf = Surface.from_trimesh(mesh)
