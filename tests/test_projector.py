@@ -328,6 +328,33 @@ def test_projector_adds_its_slide_times_the_albedo():
     np.testing.assert_allclose(np.asarray(base.image).reshape(-1, 3)[vis.pixel], 0.2 * vis.albedo)
 
 
+@pytest.mark.parametrize("view", ["pinhole", "topdown"])
+def test_supersampling_averages_the_finer_image(view):
+    model = model_of("pillar")
+    if view == "pinhole":
+        cam = look_at_camera((3.0, -4.0, 3.0), (0.0, 0.0, 1.0), 32, 24, 50.0)
+    else:
+        cam = GroundGrid.around((0.0, 0.0), 1.2, 24)
+    proj = Projector((-2.0, -2.0, 4.0), (0.0, 0.0, 0.5), sine_slide(4.0, 1.0, 64), fov_deg=50.0)
+    one = render_scene(cam, model, lights=SceneLights(0.2), projectors=[proj])
+    three = render_scene(cam, model, lights=SceneLights(0.2), projectors=[proj], supersample=3)
+    assert three.image.shape == one.image.shape
+    assert three.setup.visible.shape == (3 * cam.height, 3 * cam.width)
+    # The centre sub-pixel of each 3 x 3 block is the pixel's own centre.
+    if view == "pinhole":
+        fine_cam = cam.with_size(96, 72)
+    else:
+        third = cam.pixel_m / 3
+        fine_cam = GroundGrid(third, (cam.origin_m[0] - third, cam.origin_m[1] + third), 72, 72)
+    fine = render_scene(fine_cam, model, lights=SceneLights(0.2), projectors=[proj])
+    np.testing.assert_allclose(np.asarray(fine.image)[1::3, 1::3], np.asarray(one.image), atol=1e-9)
+    np.testing.assert_allclose(np.asarray(three.image),
+                               np.asarray(fine.image).reshape(cam.height, 3, cam.width, 3, 3).mean((1, 3)),
+                               atol=1e-12)
+    with pytest.raises(ValueError, match="supersample"):
+        render_scene(cam, model, supersample=0)
+
+
 def _gradient_scene():
     model = model_of("pillar")
     cam = look_at_camera((-5.0, -1.0, 4.0), (-1.0, 2.0, 0.0), 64, 56, 60.0)  # sees the sun shadow from the side
