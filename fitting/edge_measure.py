@@ -231,7 +231,7 @@ def measure_shadow_edges(linear_gray: np.ndarray, mask: np.ndarray | None = None
     rho = float(np.exp(np.median(log_rho)))
     rho_stderr = _block_bootstrap_median_stderr(np.exp(log_rho), positions, rng)
     q25, q50, q75 = np.percentile(widths, [25, 50, 75])
-    warnings, reliable = reliability(shadow_like_log_rho, positions, gray.shape, np.log(RHO_MIN))
+    warnings, reliable = reliability(shadow_like_log_rho, positions, gray.shape, np.log(RHO_MIN), log_rho)
     return EdgeMeasurement(rho=rho, rho_stderr=rho_stderr, penumbra_px=float(q50), penumbra_px_iqr=float(q75 - q25),
                            penumbra_m=None if pixel_m is None else float(q50 * pixel_m), n_profiles=len(kept),
                            edges_found=True, profiles=profiles, reason=None, warnings=tuple(warnings),
