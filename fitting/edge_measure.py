@@ -520,13 +520,14 @@ def _drop_textured_outlines(profiles: list[EdgeProfile], shape: tuple[int, int])
         return profiles
     labels = edge_structures(np.array([profiles[i].position_uv for i in idx]), shape)
     ratios = np.array([profiles[i].texture_ratio for i in idx])
-    drop = textured_outlines(ratios, labels)
+    rho = np.array([profiles[i].rho for i in idx])
+    drop = textured_outlines(ratios, rho, labels)
     out = list(profiles)
     for j, i in enumerate(idx):
         if drop[j]:
-            median = np.nanmedian(ratios[labels == labels[j]])
-            out[i] = _with_reason(profiles[i], f"the texture changes across this whole outline (dark/lit median "
-                                               f"{median:.2f}): a border between two materials, not a shadow")
+            median = np.nanmedian((ratios * np.sqrt(rho))[labels == labels[j]])
+            out[i] = _with_reason(profiles[i], f"the texture changes across this whole outline (dark/lit x sqrt(rho) "
+                                               f"median {median:.2f}): a border between two materials, not a shadow")
     return out
 
 

@@ -50,13 +50,15 @@ SECOND_MODE_SHARE = 0.25
 SECOND_MODE_MIN = 8
 RELIABLE_MIN_PROFILES = 10     # fewer kept profiles than this: too little evidence
 # A shadow does not change the fine texture of the ground: along a shadow
-# outline the dark/lit ratio of the high-pass log texture has a median near 1
-# (0.34-1.56 over the outlines of the street preset's shadows, DSC_0569 and
-# p21_1). Across a kerb (smooth concrete against asphalt) each profile is
-# noisy (1.7-7) but the outline's median is 3.1-3.4. An outline of at least
-# OUTLINE_TEXTURE_MIN_PROFILES profiles whose median is above this is two
-# materials, not a shadow.
-OUTLINE_TEXTURE_MAX = 2.0
+# outline the dark/lit ratio of the high-pass log texture stays near 1, or
+# grows to 1 / sqrt(rho) where shot noise dominates a smooth surface (the
+# darker side is noisier). So the ratio times sqrt(rho) is compared: its
+# median over an outline was 0.18-0.87 on the shadows of the street preset,
+# DSC_0569 and p21_1, and 1.56-1.78 across the street preset's kerbs (smooth
+# concrete against asphalt; per profile 1.7-7 before the sqrt(rho)). An
+# outline of at least OUTLINE_TEXTURE_MIN_PROFILES measured profiles whose
+# median is above this is two materials, not a shadow.
+OUTLINE_TEXTURE_MAX = 1.35
 OUTLINE_TEXTURE_MIN_PROFILES = 3
 # One sun and one sky give every shadow outline on the ground the same step:
 # separate outlines (structures) of at least OUTLINE_MIN_PROFILES kept
@@ -163,14 +165,15 @@ def reliability(shadow_like_log_rho: np.ndarray, kept_positions_uv: np.ndarray, 
     return warnings, not warnings
 
 
-def textured_outlines(texture_ratio: np.ndarray, labels: np.ndarray) -> np.ndarray:
-    """(N,) bool: the profiles on outlines whose median texture ratio (dark/lit) exceeds OUTLINE_TEXTURE_MAX.
+def textured_outlines(texture_ratio: np.ndarray, rho: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """(N,) bool: the profiles on outlines whose median texture ratio (dark/lit) times sqrt(rho) exceeds
+    OUTLINE_TEXTURE_MAX.
 
     texture_ratio: (N,) per profile (NaN: not measured, e.g. both sides smooth);
-    labels: (N,) their outlines (``edge_structures``). Outlines with fewer than
-    OUTLINE_TEXTURE_MIN_PROFILES measured ratios are not judged.
+    rho: (N,) their steps; labels: (N,) their outlines (``edge_structures``).
+    Outlines with fewer than OUTLINE_TEXTURE_MIN_PROFILES measured ratios are not judged.
     """
-    r = np.asarray(texture_ratio, float)
+    r = np.asarray(texture_ratio, float) * np.sqrt(np.asarray(rho, float))
     out = np.zeros(r.size, bool)
     for k in np.unique(labels):
         member = labels == k

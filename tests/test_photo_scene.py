@@ -163,11 +163,13 @@ def test_an_outline_whose_texture_changes_across_it_is_two_materials():
     """Per profile the texture ratio is noisy (a kerb's ranged 1.7-7); the outline's median decides."""
     from fitting.shadow_cues import textured_outlines
 
-    labels = np.array([1] * 6 + [2] * 6 + [3] * 2)
-    ratios = np.array([3.1, 1.7, 6.9, 2.4, 4.0, np.nan,       # a kerb: median 3.1
+    labels = np.array([1] * 6 + [2] * 6 + [3] * 2 + [4] * 3)
+    ratios = np.array([3.1, 1.7, 6.9, 2.4, 4.0, np.nan,       # a kerb: median 3.1, x sqrt(0.27) = 1.6
                        0.5, 1.0, 1.9, 0.8, 1.2, 1.0,           # a shadow on one surface: median 1
-                       5.0, 6.0])                              # too few to judge
-    assert textured_outlines(ratios, labels).tolist() == [True] * 6 + [False] * 8
+                       5.0, 6.0,                               # too few to judge
+                       2.9, 3.0, 3.1])                         # a dark shadow on smooth ground: noise, 1 / sqrt(rho)
+    rho = np.array([0.27] * 14 + [0.11] * 3)
+    assert textured_outlines(ratios, rho, labels).tolist() == [True] * 6 + [False] * 11
 
 
 # ----------------------------------------------------------------------------- ignore masks
