@@ -64,6 +64,11 @@ class FitOptions:
     plots: bool = True
     overlays: str = "first"  # overlay plots for the "first" photo of each group, or "all"
     verbose: bool = False
+    # Level of detail of the object's mesh (``fitting.lod``): "auto" (the coarsest level that moves
+    # k and rho by at most lod_tolerance of their standard errors), "off" (the mesh as it is), or
+    # a face count (that level, decimated).
+    lod: str | int = "auto"
+    lod_tolerance: float = 0.1
 
 
 def _group_arrays(samples: list[PhotoSamples], views: list[PhotoView]) -> GroupArrays:

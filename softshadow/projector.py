@@ -35,6 +35,7 @@ projector's plane or behind it are not drawn (they cannot be projected).
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numpy as np
 from scipy import ndimage
@@ -174,6 +175,11 @@ class ProjectorShadowMap:
     pixel_tan: float
     scale: float
 
+    @functools.cached_property
+    def near_cover(self) -> np.ndarray:
+        """Map pixels (H, W) bool with a covered pixel among their 3 x 3."""
+        return ndimage.binary_dilation(self.smap.face_id >= 0, np.ones((3, 3), bool))
+
     def occluded(self, points, normals=None) -> np.ndarray:
         """Whether an occluder lies between the projector and each point (N,) bool, or (given unit
         normals (N, 3)) the point's surface faces away from the projector (attached shadow).
@@ -194,6 +200,10 @@ class ProjectorShadowMap:
         cr = g.to_pixel(uv)
         test = np.flatnonzero((z > NEAR_M) & (cr[:, 0] >= -0.5) & (cr[:, 0] <= g.width - 0.5)
                               & (cr[:, 1] >= -0.5) & (cr[:, 1] <= g.height - 0.5))
+        # Only points with a covered map pixel among their 3 x 3 can be occluded (the lookup's
+        # reach): the others (most of a lit floor) skip it.
+        rc = np.clip(np.rint(cr[test]).astype(np.int64), 0, [g.width - 1, g.height - 1])
+        test = test[self.near_cover[rc[:, 1], rc[:, 0]]]
         if not len(test):
             return out
         best, face_slope, exact = self.smap.occluder_depth(uv[test])

@@ -122,6 +122,19 @@ def test_sweep_tiny_writes_json_report_and_plot(tmp_path, monkeypatch, capsys):
     law = sc["cost_model"]  # six timed cases: both laws fitted, residuals reported
     assert law["points"] == 6 and law["pixels_plus_edges"]["rms_rel_residual"] >= 0
     assert "fit_samples" not in result and "fit_baseline" not in result  # fit=False
+
+    def timed_renderers(node):
+        if isinstance(node, dict):
+            if "renderer" in node and "median_ms" in node:
+                yield node
+            for v in node.values():
+                yield from timed_renderers(v)
+        elif isinstance(node, list):
+            for v in node:
+                yield from timed_renderers(v)
+
+    timed = list(timed_renderers(result))
+    assert len(timed) >= 12 and all("rms" in c["error"] for c in timed)  # every timed renderer has its error
     env = result["environment"]
     assert env["versions"]["jax"] and len(env["machine"]["load_average_1_5_15_min"]) == 3
     assert len(env["load_average_at_end"]) == 3

@@ -25,6 +25,7 @@ import numpy as np
 __all__ = ["mitsuba_available", "mitsuba_variant", "render_mitsuba", "bench_mitsuba", "time_to_reach"]
 
 ALBEDO, SUN_DISTANCE_M = 0.8, 1000.0
+WARMUP_SPP = 64  # above this, the timed render is the first at its spp (kernel compilation included)
 _VARIANT: list[str] = []
 
 
@@ -146,7 +147,11 @@ def bench_mitsuba(scene, spps, repeats: int = 1, targets: dict | None = None) ->
     load_s = time.perf_counter() - t0
     cases = []
     for spp in spps:
-        timing = timed(lambda: ms.render(spp), repeats)
+        # Each spp compiles its own kernel (about 1-2 s here): a warm-up render first, except above
+        # WARMUP_SPP, where a render takes a minute or more, the compilation is a few per cent of
+        # it and a second render would double the run.
+        timing = timed(lambda: ms.render(spp), repeats, warmup=1 if spp <= WARMUP_SPP else 0)
+        timing["warmed_up"] = spp <= WARMUP_SPP
         image = ms.render(spp)
         cases.append({"renderer": "mitsuba", "mesh": scene.name, "spp": int(spp), "pixels": grid.width,
                       "faces": scene.faces, **timing,

@@ -198,13 +198,16 @@ def _mitsuba_section(mitsuba: dict) -> list[str]:
           "ground, a uniform sun disk (a far disk light subtending the sun's radius) and a uniform sky (a "
           "constant emitter), direct light only (`direct` integrator), an orthographic top-down camera over "
           "the same square with a box pixel filter and a low-discrepancy sampler, at the truth's size. Time is "
-          "the median wall time of a render after a warm-up render at the same samples per pixel (spp), its "
-          "kernel compiled; error against the same converged physical truth as every other case.", "",
+          "the wall time of a render after a warm-up render at the same samples per pixel (spp), its "
+          "kernel compiled, except where the table says \"first\" (high spp: the first render at that spp, "
+          "its kernel compilation of a second or two included); error against the same converged physical "
+          "truth as every other case.", "",
           "| mesh | spp | pixels | time (ms) | RMS | RMS band | max abs |", "|---|---:|---:|---:|---:|---:|---:|"]
     for name, run in mitsuba.items():
         for c in run["cases"]:
             e = c["error"]
-            L.append(f"| {name} | {c['spp']} | {c['pixels']} | {c['median_ms']:.0f} | {_f(e['rms'])} | "
+            first = "" if c.get("warmed_up", True) else " (first)"
+            L.append(f"| {name} | {c['spp']} | {c['pixels']} | {c['median_ms']:.0f}{first} | {_f(e['rms'])} | "
                      f"{_f(e['rms_band'])} | {_f(e['max_abs'], '{:.3f}')} |")
     L += ["", "The time Mitsuba needs to reach this renderer's error on the same mesh and map (log-log "
           "interpolation between the measured spp, or past the last one with Monte Carlo's error ~ time^-1/2):",
@@ -215,6 +218,31 @@ def _mitsuba_section(mitsuba: dict) -> list[str]:
             L.append(f"| {name} | {'whole map' if metric == 'rms' else 'penumbra band'} | {r['target']:.4f} | "
                      f"{r['softshadow_ms']:.1f} | {r['mitsuba_ms']:.0f} | {r['how']} | {r['ratio']:.0f} |")
     return L
+
+
+def fit_scaling_plot(fb: dict, path: Path) -> None:
+    """The fit's time against photos per group and against samples (log-log), both solvers."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4.0))
+    for solver, style in (("autodiff", "o-"), ("finite_differences", "s--")):
+        ph = sorted(fb["by_photos"].items(), key=lambda kv: int(kv[0]))
+        axes[0].plot([int(n) for n, _ in ph], [v[solver]["median_ms"] for _, v in ph], style, label=solver)
+        cp = sorted(fb["by_cap"].values(), key=lambda v: v["samples"])
+        axes[1].plot([v["samples"] for v in cp], [v[solver]["median_ms"] for v in cp], style, label=solver)
+    axes[0].set_xlabel(f"photos per group ({fb['cap_for_photos']} samples per photo at most)")
+    axes[1].set_xlabel("samples (one photo)")
+    for ax in axes:
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_ylabel("median ms per solve")
+        ax.grid(True, which="both", lw=0.3)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 def _fit_baseline_section(fb: dict) -> list[str]:
@@ -244,7 +272,8 @@ def _fit_baseline_section(fb: dict) -> list[str]:
     L += ["", f"Log-log slopes of time: against photos per group, autodiff {_f(sp['autodiff'], '{:.2f}')}, "
           f"finite differences {_f(sp['finite_differences'], '{:.2f}')}; against samples (one photo), "
           f"autodiff {_f(ss['autodiff'], '{:.2f}')}, finite differences {_f(ss['finite_differences'], '{:.2f}')}. "
-          "Finite differences need p + 1 residual evaluations per Jacobian (p = 5 + 4 x photos parameters)."]
+          "Finite differences need p + 1 residual evaluations per Jacobian (p = 5 + 4 x photos parameters).",
+          "", "![fit scaling](img/speed_vs_error_fit.png)"]
     return L
 
 
@@ -389,6 +418,7 @@ def write_report(result: dict, md_path: Path, json_name: str | None = None) -> N
                      f"{k['bias_over_crb']:+.2f} | {rho['std']:.2e} | {rho['crb']:.2e} | {rho['std_over_crb']:.2f} | "
                      f"{r['group_seconds_after_compile']['median']:.2f} |")
     if result.get("fit_baseline"):
+        fit_scaling_plot(result["fit_baseline"], md_path.parent / "img" / "speed_vs_error_fit.png")
         L += [""] + _fit_baseline_section(result["fit_baseline"])
     if "paper" in result:
         L += [""] + _paper_sections(result["paper"])
