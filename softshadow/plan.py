@@ -225,8 +225,8 @@ def _plan_points_light(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, 
         return PointPlan(edges, edge_id, hard, active, near_boundary)
     frame = LightFrame.of_light(light, 0.5 * (world.min(0) + world.max(0)))
     # In ``dtype`` (float32 rounds as a float32 pipeline would), the rest in float64.
-    uv_v, d_v = (a.astype(np.float64) for a in frame.project(world, dtype))
-    uv_all, d_all = (a.astype(np.float64) for a in frame.project(points, dtype))
+    uv_v, d_v = (a.astype(np.float64, copy=False) for a in frame.project(world, dtype))
+    uv_all, d_all = (a.astype(np.float64, copy=False) for a in frame.project(points, dtype))
     ids = sil.vertex_ids
     edge_depth = np.minimum(d_v[ids[:, 0]], d_v[ids[:, 1]])  # the edge's end nearer the sun
     # The region the shadow can reach: the occluder's view padded by the widest wedge any
@@ -242,7 +242,9 @@ def _plan_points_light(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, 
     if not len(cand):
         return PointPlan(edges, edge_id, hard, active, near_boundary)
     uv_p, d_p, pts = uv_all[cand], d_all[cand], points[cand]
-    lo_pts, hi_pts = uv_p.min(0), uv_p.max(0)
+    att = attached[cand]
+    lo_pts = np.array([uv_p[:, 0].min(), uv_p[:, 1].min()])  # per column: (N, 2).min(0) is slow
+    hi_pts = np.array([uv_p[:, 0].max(), uv_p[:, 1].max()])
     if pixel_m is None:
         # About the points' own spacing in the sun's view (finer buys nothing but time), within
         # [extent / 2048, extent / 512].
@@ -262,14 +264,15 @@ def _plan_points_light(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, 
     # silhouette region, labels and distances to its outline.
     raster = rasterise_shadow(grid, world, light, sil, uv_v)
     in_view, label, dist = raster.lookup(uv_p)
-    near = np.flatnonzero(dist <= 2.0 * pixel_m)
+    # Points in attached shadow are hard whatever the occluder does: no side, no depth test.
+    near = np.flatnonzero((dist <= 2.0 * pixel_m) & ~att)
     if len(near):  # a raster pixel is too coarse for the side near the outline: test exactly
         in_view[near] = posed.hard_shadow_at(uv_p[near], projected=uv_v)
     # The depth test where the occluder is in the sun's way. The nearest faces to the sun are
     # lit ones for a closed mesh, any face for an open one.
     faces = occ.faces[sil.lit] if occ.watertight else occ.faces
     behind = np.zeros(len(cand), bool)
-    test = np.flatnonzero(in_view > 0)
+    test = np.flatnonzero((in_view > 0) & ~att)
     # Farther from the sun than the whole occluder: behind it wherever it is in the way, no
     # lookup needed (most of a cast shadow). The others go to the shadow map.
     far = d_p[test] > d_v[faces].max(initial=-np.inf) + 0.5 * pixel_m
@@ -286,7 +289,6 @@ def _plan_points_light(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, 
         scale = max(smap.scale, float(np.abs(pts[test]).max()), float(np.abs(world).max()))
         bias = depth_bias(pixel_m, face_slope, recv_slope, scale, dtype, exact, receiver_tolerance_m)
         behind[test] = d_p[test].astype(dtype) > occ_depth + bias
-    att = attached[cand]
     hard[cand] = behind | att
     ok = label >= 0
     widths = light_band_widths(d_p - edge_depth[np.maximum(label, 0)], range_k_max)
