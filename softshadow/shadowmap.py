@@ -110,9 +110,24 @@ def faces_away(normals: np.ndarray, light: np.ndarray) -> np.ndarray:
     away from the sun (n . L >= 0, the sun at or below its horizon; within FACING_TOL, so a
     face exactly edge-on to the light counts whatever the rounding), so the sun does not
     light it."""
-    n = np.asarray(normals, np.float64).reshape(-1, 3)
-    light = np.asarray(light, np.float64)
-    return n[:, 0] * light[0] + n[:, 1] * light[1] + n[:, 2] * light[2] >= -FACING_TOL
+    n = np.ascontiguousarray(np.asarray(normals).reshape(-1, 3), np.float64)
+    out = np.empty(len(n), bool)
+    _facing_kernel()(n, np.asarray(light, np.float64), -FACING_TOL, out)
+    return out
+
+
+@functools.cache
+def _facing_kernel():
+    """The compiled loop of ``faces_away`` (numba): one pass over the normals, where NumPy's
+    column products cost more than the rest of a plan's per-point work."""
+    import numba
+
+    @numba.njit(cache=True, nogil=True)
+    def kernel(n, light, tol, out):
+        for i in range(n.shape[0]):
+            out[i] = n[i, 0] * light[0] + n[i, 1] * light[1] + n[i, 2] * light[2] >= tol
+
+    return kernel
 
 
 def rasterise_depth(xy: np.ndarray, depth: np.ndarray, faces: np.ndarray,
@@ -134,7 +149,7 @@ def rasterise_depth(xy: np.ndarray, depth: np.ndarray, faces: np.ndarray,
     fid = np.full(h * w, -1, np.int32)
     if len(faces):
         _zbuffer_kernel()(np.ascontiguousarray(xy, np.float64), np.ascontiguousarray(depth, np.float64),
-                          np.ascontiguousarray(faces, np.int64), zbuf, fid, h, w)
+                          np.ascontiguousarray(faces, np.int64), zbuf, fid, h, w, dtype == np.float32)
     return zbuf.reshape(h, w), fid.reshape(h, w)
 
 
@@ -146,8 +161,7 @@ def _zbuffer_kernel():
     import numba
 
     @numba.njit(cache=True, nogil=True)
-    def kernel(xy, depth, faces, zbuf, fid, h, w):
-        scratch = zbuf[:1].copy()  # rounds a depth to the buffer's own float type
+    def kernel(xy, depth, faces, zbuf, fid, h, w, single):
         tri = np.empty((3, 2))
         tz = np.empty(3)
         for i in range(faces.shape[0]):
@@ -189,10 +203,13 @@ def _zbuffer_kernel():
                 c0 = int(min(max(np.ceil(lo - 1e-9), 0.0), w))  # clipped as floats: no overflow
                 c1 = int(min(max(np.floor(hi + 1e-9), -1.0), w - 1))
                 base = row * w
+                z_row = tz[0] + gy * (row - y0)
                 for col in range(c0, c1 + 1):
-                    scratch[0] = tz[0] + gx * (col - x0) + gy * (row - y0)
-                    if scratch[0] < zbuf[base + col]:
-                        zbuf[base + col] = scratch[0]
+                    z = z_row + gx * (col - x0)
+                    if single:  # round as the buffer's float type would
+                        z = np.float64(np.float32(z))
+                    if z < zbuf[base + col]:
+                        zbuf[base + col] = z
                         fid[base + col] = i
 
     return kernel

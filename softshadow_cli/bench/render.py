@@ -133,8 +133,9 @@ def bench_depth_receiver(size: int = 512, mesh: str = "dragon", repeats: int = 7
     beside the ground back end on a ``size``^2 top-down map, in the same run.
 
     ``light_ms``: plan plus evaluation at every range-image point (``at_points`` with
-    normals); ``ground_ms``: ``ground_map`` on a map framing the shadow; ``ratio`` =
-    light_ms / ground_ms.
+    normals); ``ground_ms``: ``ground_map`` on a map framing the shadow (medians, the two
+    calls alternating); ``ratio`` = light_ms / ground_ms; ``ratio_of_pairs``: the median of
+    each light call's time over the ground call's after it.
     """
     import numpy as np
 
@@ -155,9 +156,19 @@ def bench_depth_receiver(size: int = 512, mesh: str = "dragon", repeats: int = 7
         model.ground_map(params, sun, pose, grid).block_until_ready()
 
     plan = model.plan_points(sun, pose, points, 0.01, normals)
-    light_ms = _median_ms(light, repeats)
-    ground_ms = _median_ms(ground, repeats)
+    # Interleaved, so that both see the same load on a shared machine (one after the other, a
+    # change of load between the two batches moved the ratio by half).
+    light(), ground()  # compile / warm up
+    times = {"light": [], "ground": []}
+    for _ in range(repeats):
+        for name, fn in (("light", light), ("ground", ground)):
+            t = time.perf_counter()
+            fn()
+            times[name].append(time.perf_counter() - t)
+    light_ms, ground_ms = (1000.0 * statistics.median(times[k]) for k in ("light", "ground"))
+    pair = statistics.median(a / b for a, b in zip(times["light"], times["ground"]))
     n = len(points)
     return {"points": int(n), "band_points": int(plan.active[:n].sum()),
             "hard_points": int(plan.hard[:n].sum()), "light_ms": round(light_ms, 2),
-            "ground_ms": round(ground_ms, 2), "ratio": round(light_ms / ground_ms, 3)}
+            "ground_ms": round(ground_ms, 2), "ratio": round(light_ms / ground_ms, 3),
+            "ratio_of_pairs": round(pair, 3), "repeats": repeats}
