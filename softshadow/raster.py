@@ -351,20 +351,22 @@ def _winding_kernel():
                 count[k + 1] += 1
         for k in range(n_bins):
             count[k + 1] += count[k]
+        # Each bin's segments stored contiguously (6 values each), read in order below.
         fill = count[:-1].copy()
-        members = np.empty(count[n_bins], np.int64)
+        seg = np.empty((count[n_bins], 6))
         for s in range(len(x0)):
             for k in range(first[s], last[s] + 1):
-                members[fill[k]] = s
+                seg[fill[k], 0], seg[fill[k], 1], seg[fill[k], 2] = ymin[s], ymax[s], x0[s]
+                seg[fill[k], 3], seg[fill[k], 4], seg[fill[k], 5] = y0[s], slope[s], dirw[s]
                 fill[k] += 1
         for i in range(len(points)):
             px, py = points[i, 0], points[i, 1]
             k = int(min(max(np.floor((py - lo) / height), 0.0), n_bins - 1))
             total = 0.0
             for j in range(count[k], count[k + 1]):
-                s = members[j]
-                if py >= ymin[s] and py < ymax[s] and x0[s] + (py - y0[s]) * slope[s] <= px:
-                    total += dirw[s]
+                # Without branches: which segments count is unpredictable.
+                crosses = (py >= seg[j, 0]) & (py < seg[j, 1]) & (seg[j, 2] + (py - seg[j, 3]) * seg[j, 4] <= px)
+                total += seg[j, 5] * crosses
             out[i] = abs(total) > 0.5
 
     return kernel
