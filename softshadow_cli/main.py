@@ -61,6 +61,10 @@ def _add_render(sub):
     g.add_argument("--camera-position", metavar="X,Y,Z", help="a look-at camera's position (with --camera-target)")
     g.add_argument("--camera-target", metavar="X,Y,Z", help="the point the camera looks at")
     g.add_argument("--camera-fov", type=float, metavar="DEG", help="its horizontal field of view (default 50)")
+    g.add_argument("--smooth", action="store_true",
+                   help="interpolate vertex normals (default: flat faces, which show a mesh's facets)")
+    g.add_argument("--supersample", type=int, default=1, metavar="S",
+                   help="S x S samples per pixel, averaged (anti-aliasing; default 1)")
     g.add_argument("--exposure", type=float, default=1.0, help="scale the linear image before sRGB encoding "
                                                                 "(default 1; values above 1 clip)")
     p.set_defaults(func=_run_render)
