@@ -23,7 +23,7 @@ from scipy.cluster.hierarchy import fcluster, linkage
 from scipy.signal import find_peaks
 
 __all__ = ["bluer_umbrae", "log_rho_modes", "edge_structures", "reliability", "mode_of_log_rho",
-           "disagreement_warning"]
+           "disagreement_warning", "few_profiles_warning"]
 
 # Skylit umbrae are bluer: on the real photo DSC_0569 the blue step minus the
 # red step was about 0.8 (log) across shadow edges, about 0 across paint; the
@@ -106,6 +106,12 @@ def edge_structures(positions_uv: np.ndarray, image_shape: tuple[int, int]) -> n
     return fcluster(linkage(pts, method="single"), t=link, criterion="distance")
 
 
+def few_profiles_warning(n_profiles: int) -> str | None:
+    """The warning for a measurement that rests on fewer than RELIABLE_MIN_PROFILES profiles
+    (with or without geometry), or None."""
+    return f"only {n_profiles} shadow-edge profiles" if n_profiles < RELIABLE_MIN_PROFILES else None
+
+
 def disagreement_warning(modes: list[tuple[float, int]], measured_log: float) -> str:
     """The one "edges disagree" warning: the mode the reported rho comes from (the highest
     density, ``mode_of_log_rho``: ``measured_log``) named first as "measured", then the fullest
@@ -132,8 +138,8 @@ def reliability(shadow_like_log_rho: np.ndarray, kept_positions_uv: np.ndarray, 
     if len(modes) > 1 and modes[1][1] >= max(SECOND_MODE_SHARE * modes[0][1], SECOND_MODE_MIN):
         warnings.append(disagreement_warning(modes, mode_of_log_rho(shadow_like_log_rho, lowest_log)))
     n = int(np.asarray(kept_positions_uv).reshape(-1, 2).shape[0])
-    if n < RELIABLE_MIN_PROFILES:
-        warnings.append(f"only {n} shadow-edge profiles")
+    if few_profiles_warning(n):
+        warnings.append(few_profiles_warning(n))
     if n:
         n_struct = int(np.unique(edge_structures(kept_positions_uv, image_shape)).size)
         if n_struct > max(2, n / PROFILES_PER_STRUCTURE):

@@ -31,6 +31,7 @@ from .overlay import fitted_alpha_image
 from .receiver_light import shadow_factor
 from .results import GroupResult, OverlayPlotData, ProfilePlotData
 from .samples import NoShadowInView, PhotoSamples, select_samples
+from .shadow_cues import few_profiles_warning
 from .uncertainty import cluster_covariance, combine_errors, edge_clusters
 from .views import PhotoView
 
@@ -481,5 +482,9 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
                                 for i in range(len(samples)) if options.overlays == "all" or i == 0]
     if not sol.converged:
         result.warnings.append("the solver stopped before converging")
+    if few_profiles_warning(result.n_profiles):
+        # Too little of the outline in view: one stretch of edge decides k and rho.
+        result.warnings.append(few_profiles_warning(result.n_profiles))
+        result.reliable = False
     result.seconds = _time.perf_counter() - start
     return result

@@ -50,7 +50,7 @@ class SystematicFloor(NamedTuple):
 
 #: Calibrated on held-out physical data_synth folders (see docs/uncertainty.md: the
 #: calibration seeds are never the coverage seeds).
-CALIBRATED_FLOOR = SystematicFloor(k_rel=0.0, k_rel_px=0.0, rho_abs=0.0, rho_rel=0.0)
+CALIBRATED_FLOOR = SystematicFloor(k_rel=0.08, k_rel_px=0.06, rho_abs=0.002, rho_rel=0.0)
 
 
 class Uncertainty(NamedTuple):
