@@ -157,6 +157,37 @@ def test_few_profiles_on_scattered_structures_are_unreliable():
     assert not reliable and any(w.startswith("only 6") for w in warnings)
 
 
+def test_separate_outlines_with_different_steps_make_the_measurement_unreliable():
+    """A kerb's long outline at 0.27 beside two shadow outlines at 0.32 (the street preset's seeds 7 and 10):
+    each outline is consistent, and they are within one mode, but one of them is not a shadow."""
+    rng = np.random.default_rng(1)
+    kerb = np.stack([np.linspace(100, 300, 25), np.full(25, 700.0)], axis=1)
+    shadow_a = np.stack([np.full(20, 600.0), np.linspace(100, 300, 20)], axis=1)
+    shadow_b = np.stack([np.linspace(700, 900, 20), np.full(20, 300.0)], axis=1)
+    specks = np.array([[50.0, 50.0], [52.0, 50.0], [54.0, 50.0], [56.0, 50.0]])   # a small outline, far off
+    positions = np.concatenate([kerb, shadow_a, shadow_b])
+    log_rho = np.concatenate([np.log(0.27) + 0.02 * rng.normal(size=25), np.log(0.32) + 0.02 * rng.normal(size=40)])
+    warnings, reliable = reliability(log_rho, positions, (1000, 1000), np.log(0.005), log_rho)
+    assert not reliable and any(w.startswith("shadow outlines disagree") for w in warnings)
+    # the same outlines all at one step agree; a small outline (under a fifth of the profiles) far off is not compared
+    same = np.concatenate([np.log(0.32) + 0.02 * rng.normal(size=65), np.log(0.2) * np.ones(4)])
+    warnings, reliable = reliability(same, np.concatenate([positions, specks]), (1000, 1000), np.log(0.005), same)
+    assert not any(w.startswith("shadow outlines disagree") for w in warnings)
+
+
+def test_an_outline_whose_texture_changes_across_it_is_two_materials():
+    """Per profile the texture ratio is noisy (a kerb's ranged 1.7-7); the outline's median decides."""
+    from fitting.shadow_cues import textured_outlines
+
+    labels = np.array([1] * 6 + [2] * 6 + [3] * 2 + [4] * 3)
+    ratios = np.array([3.1, 1.7, 6.9, 2.4, 4.0, np.nan,       # a kerb: median 3.1, x sqrt(0.27) = 1.6
+                       0.5, 1.0, 1.9, 0.8, 1.2, 1.0,           # a shadow on one surface: median 1
+                       5.0, 6.0,                               # too few to judge
+                       2.9, 3.0, 3.1])                         # a dark shadow on smooth ground: noise, 1 / sqrt(rho)
+    rho = np.array([0.27] * 14 + [0.11] * 3)
+    assert textured_outlines(ratios, rho, labels).tolist() == [True] * 6 + [False] * 11
+
+
 # ----------------------------------------------------------------------------- ignore masks
 
 def _write_png(path, array):
