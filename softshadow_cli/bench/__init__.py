@@ -52,6 +52,21 @@ def run_bench(args) -> int:
                                   json_path=args.json_path, report_path=getattr(args, "report", None))
         print(json.dumps(result, indent=1))
         return 0
+    if args.what in ("lod", "lod-grid"):
+        from .environment import environment
+        result = {"environment": environment(), **result}
+        if args.what == "lod":
+            from .lod import bench_lod
+            result["lod"] = bench_lod(quick=args.quick, progress=_progress)
+        else:
+            from .lod_grid import lod_grid
+            result["lod_grid"] = lod_grid(quick=args.quick, report_path=getattr(args, "report", None),
+                                          progress=_progress)
+        text = json.dumps(result, indent=1)
+        print(text)
+        if args.json_path:
+            Path(args.json_path).write_text(text + "\n")
+        return 0
     sizes = (256, 512) if args.quick else (256, 512, 1024)
     if args.what in ("render", "all"):
         from .render import bench_render
