@@ -78,7 +78,9 @@ def test_automatic_choice_follows_the_tolerance(ball_folder):
     fixed = _fit(ball_folder, lod=1000)
     assert abs(fixed.lod_faces - 1000) <= 10
     # The coarsest level really changes the fit, so the strict choice kept the detail for a reason.
-    assert abs(loose.range_k - off.range_k) > off.range_stderr
+    # (Against the statistical error, the one lod's tolerance is measured in: the stated error adds
+    # the systematic floor of fitting.uncertainty.)
+    assert abs(loose.range_k - off.range_k) > off.range_stderr_stat
     doc = off.to_json()
     assert doc["lod_faces"] == 5120 and doc["mesh_faces"] == 5120
 
