@@ -29,7 +29,7 @@ from scipy.cluster.hierarchy import fcluster, linkage
 from scipy.signal import find_peaks
 
 __all__ = ["bluer_umbrae", "log_rho_modes", "edge_structures", "reliability", "mode_of_log_rho",
-           "outline_disagreement", "textured_outlines"]
+           "disagreement_warning", "few_profiles_warning", "outline_disagreement", "textured_outlines"]
 
 # Skylit umbrae are bluer: on the real photo DSC_0569 the blue step minus the
 # red step was about 0.8 (log) across shadow edges, about 0 across paint; the
@@ -135,6 +135,25 @@ def edge_structures(positions_uv: np.ndarray, image_shape: tuple[int, int]) -> n
     return fcluster(linkage(pts, method="single"), t=link, criterion="distance")
 
 
+def few_profiles_warning(n_profiles: int) -> str | None:
+    """The warning for a measurement that rests on fewer than RELIABLE_MIN_PROFILES profiles
+    (with or without geometry), or None."""
+    return f"only {n_profiles} shadow-edge profiles" if n_profiles < RELIABLE_MIN_PROFILES else None
+
+
+def disagreement_warning(modes: list[tuple[float, int]], measured_log: float) -> str:
+    """The one "edges disagree" warning: the mode the reported rho comes from (the highest
+    density, ``mode_of_log_rho``: ``measured_log``) named first as "measured", then the fullest
+    other mode. Modes are (log peak, profiles) as ``log_rho_modes`` gives them, two or more.
+    Named this way, the warning, the table's value and results.json's rho always agree on
+    which mode was measured (ordering by profile count alone named the other one first when
+    the denser mode held fewer profiles)."""
+    i = int(np.argmin([abs(peak - measured_log) for peak, _ in modes]))
+    other = next(m for j, m in enumerate(modes) if j != i)
+    return (f"edges disagree: measured rho {np.exp(modes[i][0]):.3f} ({modes[i][1]} profiles), "
+            f"another mode at rho {np.exp(other[0]):.3f} ({other[1]} profiles)")
+
+
 def reliability(shadow_like_log_rho: np.ndarray, kept_positions_uv: np.ndarray, image_shape: tuple[int, int],
                 lowest_log: float, kept_log_rho: np.ndarray | None = None) -> tuple[list[str], bool]:
     """(warnings, reliable) of a single-photo measurement.
@@ -147,11 +166,10 @@ def reliability(shadow_like_log_rho: np.ndarray, kept_positions_uv: np.ndarray, 
     warnings: list[str] = []
     modes = log_rho_modes(shadow_like_log_rho, lowest_log)
     if len(modes) > 1 and modes[1][1] >= max(SECOND_MODE_SHARE * modes[0][1], SECOND_MODE_MIN):
-        warnings.append(f"edges disagree: rho {np.exp(modes[0][0]):.3f} ({modes[0][1]} profiles) and "
-                        f"{np.exp(modes[1][0]):.3f} ({modes[1][1]} profiles)")
+        warnings.append(disagreement_warning(modes, mode_of_log_rho(shadow_like_log_rho, lowest_log)))
     n = int(np.asarray(kept_positions_uv).reshape(-1, 2).shape[0])
-    if n < RELIABLE_MIN_PROFILES:
-        warnings.append(f"only {n} shadow-edge profiles")
+    if few_profiles_warning(n):
+        warnings.append(few_profiles_warning(n))
     if n:
         labels = edge_structures(kept_positions_uv, image_shape)
         n_struct = int(np.unique(labels).size)

@@ -19,7 +19,7 @@ from fitting.edge_measure import measure_shadow_edges
 from fitting.ground_region import ground_region
 from fitting.ignore_masks import IgnoreMaskError, ignore_mask_path, is_auxiliary, read_ignore_mask
 from fitting.photos import list_photos
-from fitting.shadow_cues import bluer_umbrae, log_rho_modes, reliability
+from fitting.shadow_cues import bluer_umbrae, log_rho_modes, mode_of_log_rho, reliability
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 SUN = np.array([1.0, 0.97, 0.9])
@@ -130,6 +130,22 @@ def test_two_well_filled_modes_make_the_measurement_unreliable():
     assert not reliable and warnings[0].startswith("edges disagree")
     warnings, reliable = reliability(np.concatenate([one, two[:5]]), line, (800, 1000), np.log(0.005))
     assert reliable and warnings == []
+
+
+def test_edges_disagree_names_the_measured_mode_first_even_when_it_holds_fewer_profiles():
+    """A tight mode (the shadows, 30 profiles) is denser than a spread one (a kerb, 45 profiles):
+    the measurement takes the densest mode, and the warning must name that one as measured."""
+    rng = np.random.default_rng(1)
+    tight = np.log(0.2) + 0.01 * rng.normal(size=30)
+    spread = np.log(0.5) + 0.08 * rng.normal(size=45)
+    log_rho = np.concatenate([tight, spread])
+    measured = np.exp(mode_of_log_rho(log_rho, np.log(0.005)))
+    assert abs(measured - 0.2) < 0.01
+    line = np.stack([np.linspace(100, 600, 75), np.full(75, 500.0)], axis=1)
+    warnings, reliable = reliability(log_rho, line, (800, 1000), np.log(0.005))
+    assert not reliable
+    assert warnings[0].startswith(f"edges disagree: measured rho {measured:.3f} (")
+    assert "another mode at rho 0.4" in warnings[0] or "another mode at rho 0.5" in warnings[0]
 
 
 def test_few_profiles_on_scattered_structures_are_unreliable():
