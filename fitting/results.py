@@ -64,6 +64,12 @@ class GroupResult:
     range_stderr: float | None = None
     rho: float | None = None
     rho_stderr: float | None = None
+    # The stated *_stderr split into its statistical and systematic parts (fitting.uncertainty);
+    # stated = hypot(stat, sys).
+    range_stderr_stat: float | None = None
+    rho_stderr_stat: float | None = None
+    range_stderr_sys: float | None = None
+    rho_stderr_sys: float | None = None
     sun_azimuth_deg: float | None = None
     sun_elevation_deg: float | None = None
     sun_source: str | None = None  # "given", "time+site", "fitted"
@@ -80,6 +86,8 @@ class GroupResult:
     penumbra_px_iqr: float | None = None
     penumbra_m: float | None = None
     reprojection_error_px: float | None = None
+    lod_faces: int | None = None  # faces of the level of detail fitted (``fitting.lod``)
+    mesh_faces: int | None = None  # faces of the object's mesh as given
     warnings: list[str] = dataclasses.field(default_factory=list)
     reliable: bool = True
     error: str | None = None
@@ -112,12 +120,15 @@ class GroupResult:
             "seconds": round(float(self.seconds), 3),
             "warnings": list(self.warnings), "reliable": bool(self.reliable),
         }
-        optional = {"sun_source": self.sun_source, "profile": self.profile,
+        optional = {"range_stderr_stat": _num(self.range_stderr_stat), "rho_stderr_stat": _num(self.rho_stderr_stat),
+                    "range_stderr_sys": _num(self.range_stderr_sys), "rho_stderr_sys": _num(self.rho_stderr_sys),
+                    "sun_source": self.sun_source, "profile": self.profile,
                     "blur_px": _num(self.blur_px), "n_samples": self.n_samples or None,
                     "penumbra_px": _num(self.penumbra_px),
                     "penumbra_px_iqr": _num(self.penumbra_px_iqr),
                     "penumbra_m": _num(self.penumbra_m),
                     "reprojection_error_px": _num(self.reprojection_error_px),
+                    "lod_faces": self.lod_faces, "mesh_faces": self.mesh_faces,
                     "solve_seconds": None if self.solve_seconds is None else round(float(self.solve_seconds), 3),
                     "error": self.error}
         out.update({k: v for k, v in optional.items() if v is not None})

@@ -11,6 +11,7 @@ from .colour import linear_to_srgb, srgb_to_linear
 from .compilation_cache import default_cache_dir, use_compilation_cache
 from .camera import GroundGrid, PinholeCamera, look_at_camera
 from .evaluate import plan_alpha, plan_alpha_jit, plan_coordinate, plan_coordinate_light
+from .lod import PAPER_FACE_COUNTS, LodLevel, decimate, lod_series
 from .meshes import BUILTIN_MESHES, MeshError, builtin_mesh, load_mesh
 from .occluder import Occluder, Silhouette
 from .params import (Pose, ShadowParams, Sun, brightness_to_paper, paper_to_range_k, paper_to_rho,
@@ -37,6 +38,7 @@ __all__ = [
     "SceneLights", "SceneRender", "SceneSetup", "prepare_scene", "render_scene", "shade_scene",
     "BACKENDS", "BIAS_PX", "LightFrame", "ShadowMap", "depth_bias", "faces_away", "light_band_widths",
     "rasterise_depth", "shadow_map",
+    "PAPER_FACE_COUNTS", "LodLevel", "decimate", "lod_series",
     "BUILTIN_MESHES", "CameraRender", "GridPlan", "GroundGrid", "MeshError", "Occluder", "PROFILES",
     "PinholeCamera", "PointPlan", "Pose", "PosedOccluder", "RULES", "ShadowParams", "Silhouette",
     "SoftShadowModel", "Sun", "SunBelowHorizonError", "blurred_profile_alpha", "brightness_to_paper",

@@ -98,16 +98,17 @@ def _object_surface(model: SoftShadowModel, pose: Pose, albedo) -> Surface:
 def prepare_scene(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pose: Pose,
                   sun: Sun | None = None, projectors: Sequence[Projector] = (),
                   receivers: Sequence[Surface] = (), object_albedo=0.8, ground_albedo=0.8,
-                  range_k_max: float = 0.03) -> SceneSetup:
+                  range_k_max: float = 0.03, smooth: bool = False) -> SceneSetup:
     """The visible surfaces, the projectors' light and the sun's plan (NumPy).
 
     receivers: further meshes (a wall, steps); ground_albedo None leaves out the ground plane.
     Every mesh casts shadows from the projectors (unless its ``casts_shadows`` is False); from
     the sun only the object does (as in the fitter). range_k_max: the largest k ``shade_scene``
-    will be given (it sizes the sun's penumbra bands).
+    will be given (it sizes the sun's penumbra bands). smooth: interpolated vertex normals instead
+    of flat faces (``visible_surfaces``).
     """
     surfaces = [_object_surface(model, pose, object_albedo), *receivers]
-    visible = visible_surfaces(camera, surfaces, ground_albedo)
+    visible = visible_surfaces(camera, surfaces, ground_albedo, smooth)
     light = np.zeros((len(visible.pixel), 3))
     casters = [s for s in surfaces if s.casts_shadows]
     if projectors and casters:
@@ -151,16 +152,35 @@ def render_scene(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
                  lights: SceneLights | None = None, sun: Sun | None = None,
                  projectors: Sequence[Projector] = (), receivers: Sequence[Surface] = (),
                  object_albedo=0.8, ground_albedo=0.8, range_k_max: float | None = None,
-                 background=0.0) -> SceneRender:
+                 background=0.0, smooth: bool = False, supersample: int = 1) -> SceneRender:
     """``prepare_scene`` then ``shade_scene``: the scene's image (H, W, 3) in linear radiance.
 
     lights: default ``SceneLights()`` (ambient 0.3, sun 1, k 0.01); sun None: no sun (ambient
-    and projectors only, the Dowling paper's set-up); range_k_max: default max(lights' k, 0.03).
+    and projectors only, the Dowling paper's set-up); range_k_max: default max(lights' k, 0.03);
+    supersample s: render s x s samples per pixel (a camera of s times the size) and average
+    them (anti-aliasing: outlines and facets then cover fractions of pixels); ``setup`` is then
+    the fine image's.
     """
     pose = Pose() if pose is None else pose
     lights = SceneLights() if lights is None else lights
     if range_k_max is None:
         range_k_max = max(float(lights.range_k), 0.03)
-    setup = prepare_scene(camera, model, pose, sun, projectors, receivers, object_albedo, ground_albedo,
-                          range_k_max)
-    return SceneRender(shade_scene(setup, model, lights, sun, pose, background), setup)
+    s = int(supersample)
+    if s < 1:
+        raise ValueError(f"supersample must be a whole number >= 1, got {supersample!r}")
+    fine = camera if s == 1 else _finer(camera, s)
+    setup = prepare_scene(fine, model, pose, sun, projectors, receivers, object_albedo, ground_albedo,
+                          range_k_max, smooth)
+    image = shade_scene(setup, model, lights, sun, pose, background)
+    if s > 1:
+        image = image.reshape(camera.height, s, camera.width, s, 3).mean(axis=(1, 3))
+    return SceneRender(image, setup)
+
+
+def _finer(camera: PinholeCamera | GroundGrid, s: int) -> PinholeCamera | GroundGrid:
+    """The same view with s x s pixels for each of camera's (pixel centres at the sub-pixels')."""
+    if isinstance(camera, GroundGrid):
+        shift = 0.5 * (s - 1) / s * camera.pixel_m  # the first sub-pixel's centre from the pixel's
+        return GroundGrid(camera.pixel_m / s, (camera.origin_m[0] - shift, camera.origin_m[1] + shift),
+                          camera.width * s, camera.height * s)
+    return camera.with_size(camera.width * s, camera.height * s)

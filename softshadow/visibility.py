@@ -8,12 +8,12 @@ pixel over a planar triangle) or -z_world for a top-down map (orthographic, seen
 above), and keeps per pixel the nearest of that face and the ground. Each visible pixel's
 point is where its ray meets the winning face's plane (exact, not interpolated) and its
 normal is the face's own (flat shading: a coarse mesh shows its facets, which is what a
-level-of-detail comparison must see), turned towards the camera so an open mesh is lit
-on the side the camera sees.
+level-of-detail comparison must see; ``smooth=True`` interpolates vertex normals instead),
+turned towards the camera so an open mesh is lit on the side the camera sees.
 
 A camera with lens distortion is drawn in undistorted pixel coordinates of its K, and
-each pixel takes the face at its undistorted position (nearest). Faces with a corner
-within ``NEAR_M`` of the camera's plane or behind it are not drawn.
+each pixel takes the face at its undistorted position (nearest). Faces are cut at
+``NEAR_M`` in front of the camera's plane (``clip.clip_near``).
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ import numpy as np
 import trimesh
 
 from .camera import GroundGrid, PinholeCamera
+from .clip import clip_near
 from .posed import pose_matrix
 from .shadowmap import rasterise_depth
 
@@ -74,6 +75,16 @@ class Surface:
         return cls(v + np.asarray(position, np.float64), np.asarray(mesh.faces), albedo, name, casts_shadows)
 
     @property
+    def vertex_normals(self) -> np.ndarray:
+        """Unit normals (V, 3) at the vertices: the area-weighted mean of their faces' normals."""
+        t = self.vertices[self.faces]
+        n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])  # length: twice the area
+        acc = np.zeros_like(self.vertices)
+        for corner in range(3):
+            np.add.at(acc, self.faces[:, corner], n)
+        return acc / np.maximum(np.linalg.norm(acc, axis=1, keepdims=True), 1e-300)
+
+    @property
     def face_normals(self) -> np.ndarray:
         """Unit normals (F, 3) from the winding (zero for degenerate faces)."""
         t = self.vertices[self.faces]
@@ -86,7 +97,7 @@ class VisibleSurfaces:
     """The surface each pixel sees.
 
     shape (H, W); pixel (N,) flat indices of the pixels that see something; points (N, 3)
-    world metres; normals (N, 3) unit, towards the camera; albedo (N, 3); surface (H, W)
+    world metres; normals (N, 3) unit, on the camera's side of their face; albedo (N, 3); surface (H, W)
     int: index into the surfaces, ``GROUND`` or ``NOTHING``; face (H, W) int: the face
     within its surface (-1 for the ground and nothing).
     """
@@ -111,11 +122,13 @@ def _camera_rays(camera, h: int, w: int, top: float) -> tuple[np.ndarray, np.nda
     return np.broadcast_to(camera.centre, d.shape), d
 
 
-def visible_surfaces(camera: PinholeCamera | GroundGrid, surfaces=(), ground_albedo=None) -> VisibleSurfaces:
+def visible_surfaces(camera: PinholeCamera | GroundGrid, surfaces=(), ground_albedo=None,
+                     smooth: bool = False) -> VisibleSurfaces:
     """The nearest surface at every pixel of ``camera`` (see the module docstring).
 
     surfaces: a sequence of ``Surface``; ground_albedo: the ground plane z = 0's albedo (one or
-    three numbers), None for no ground.
+    three numbers), None for no ground; smooth: normals interpolated from the vertex normals
+    (Gouraud/Phong-like, barycentric at the point) instead of the faces' own (flat, the default).
     """
     h, w = camera.height, camera.width
     surfaces = list(surfaces)
@@ -127,17 +140,17 @@ def visible_surfaces(camera: PinholeCamera | GroundGrid, surfaces=(), ground_alb
     origin, direction = _camera_rays(camera, h, w, float(max(verts[:, 2].max(initial=0.0), 0.0)) + 1.0)
     if isinstance(camera, GroundGrid):
         xy, depth = camera.to_pixel(verts), -verts[:, 2]
-        drawn = np.arange(len(faces))
+        drawn, source = faces, np.arange(len(faces))
         lookup = np.arange(h * w)
     else:
-        z = verts @ camera.R[2] + camera.t[2]
-        pc = verts @ camera.R.T + camera.t
-        zs = np.where(z > NEAR_M, z, 1.0)
+        # Faces cut at the near plane (a floor passing under and behind the camera stays whole in view).
+        cut, drawn, source = clip_near(verts, verts @ camera.R[2] + camera.t[2], faces, NEAR_M)
+        pc = cut @ camera.R.T + camera.t
+        zs = np.maximum(pc[:, 2], NEAR_M)  # the originals behind the plane are no longer used
         K = camera.K
         a, b = pc[:, 0] / zs, pc[:, 1] / zs
         xy = np.column_stack([K[0, 0] * a + K[0, 1] * b + K[0, 2], K[1, 1] * b + K[1, 2]])
         depth = -1.0 / zs
-        drawn = np.flatnonzero(np.all(z[faces] > NEAR_M, axis=1)) if len(faces) else np.zeros(0, np.int64)
         if camera.dist is not None and np.any(camera.dist):
             import cv2
             rows, cols = np.mgrid[0:h, 0:w]
@@ -150,10 +163,10 @@ def visible_surfaces(camera: PinholeCamera | GroundGrid, surfaces=(), ground_alb
             lookup = np.arange(h * w)
     fid = np.full(h * w, -1, np.int64)
     if len(drawn):
-        _, f_img = rasterise_depth(xy, depth, faces[drawn], (h, w))
+        _, f_img = rasterise_depth(xy, depth, drawn, (h, w))
         f_img = f_img.ravel()
         ok = lookup >= 0
-        fid[ok] = np.where(f_img[lookup[ok]] >= 0, drawn[np.maximum(f_img[lookup[ok]], 0)], -1)
+        fid[ok] = np.where(f_img[lookup[ok]] >= 0, source[np.maximum(f_img[lookup[ok]], 0)], -1)
     # The ray's distance to the face's plane (exact), and to the ground.
     all_normals = (np.vstack([s.face_normals for s in surfaces]) if surfaces else np.zeros((0, 3)))
     t_mesh = np.full(h * w, np.inf)
@@ -181,6 +194,13 @@ def visible_surfaces(camera: PinholeCamera | GroundGrid, surfaces=(), ground_alb
     # Towards the camera: the side the camera sees is the lit side of an open surface.
     flip = np.einsum("ij,ij->i", normals, direction[pixel]) > 0
     normals[flip] *= -1
+    if smooth and on_mesh.any():
+        # Turned as the face is (by the face's side, not the interpolated normal's: near an outline
+        # that one may lean away from the camera while the face does not).
+        vn = np.vstack([s.vertex_normals for s in surfaces])
+        f = faces[fid[pixel[on_mesh]]]
+        sign = np.where(flip[on_mesh], -1.0, 1.0)[:, None]
+        normals[on_mesh] = sign * _interpolate(points[on_mesh], verts[f], vn[f])
     surface = np.full(h * w, NOTHING, np.int64)
     face = np.full(h * w, -1, np.int64)
     which = np.searchsorted(offsets, fid[pixel[on_mesh]], side="right") - 1
@@ -192,3 +212,17 @@ def visible_surfaces(camera: PinholeCamera | GroundGrid, surfaces=(), ground_alb
     albedo[on_mesh] = albedos[which] if len(which) else np.zeros((0, 3))
     albedo[~on_mesh] = _albedo(ground_albedo) if ground_albedo is not None else 0.0
     return VisibleSurfaces((h, w), pixel, points, normals, albedo, surface.reshape(h, w), face.reshape(h, w))
+
+
+def _interpolate(points: np.ndarray, tri: np.ndarray, corner_normals: np.ndarray) -> np.ndarray:
+    """Unit normals (N, 3) at points (N, 3) in triangles (N, 3, 3) from their corners' normals
+    (N, 3, 3), barycentric."""
+    e1, e2, d = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0], points - tri[:, 0]
+    d11, d12, d22 = (np.einsum("ij,ij->i", a, b) for a, b in ((e1, e1), (e1, e2), (e2, e2)))
+    d1, d2 = np.einsum("ij,ij->i", d, e1), np.einsum("ij,ij->i", d, e2)
+    det = np.where(np.abs(d11 * d22 - d12 * d12) > 1e-300, d11 * d22 - d12 * d12, 1.0)
+    b1 = np.clip((d22 * d1 - d12 * d2) / det, 0.0, 1.0)
+    b2 = np.clip((d11 * d2 - d12 * d1) / det, 0.0, 1.0)
+    b0 = np.clip(1.0 - b1 - b2, 0.0, 1.0)
+    n = b0[:, None] * corner_normals[:, 0] + b1[:, None] * corner_normals[:, 1] + b2[:, None] * corner_normals[:, 2]
+    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)

@@ -61,6 +61,10 @@ def _add_render(sub):
     g.add_argument("--camera-position", metavar="X,Y,Z", help="a look-at camera's position (with --camera-target)")
     g.add_argument("--camera-target", metavar="X,Y,Z", help="the point the camera looks at")
     g.add_argument("--camera-fov", type=float, metavar="DEG", help="its horizontal field of view (default 50)")
+    g.add_argument("--smooth", action="store_true",
+                   help="interpolate vertex normals (default: flat faces, which show a mesh's facets)")
+    g.add_argument("--supersample", type=int, default=1, metavar="S",
+                   help="S x S samples per pixel, averaged (anti-aliasing; default 1)")
     g.add_argument("--exposure", type=float, default=1.0, help="scale the linear image before sRGB encoding "
                                                                 "(default 1; values above 1 clip)")
     p.set_defaults(func=_run_render)
@@ -109,7 +113,27 @@ def _add_fit(sub):
     p.add_argument("--overlays", default="first", choices=("first", "all"),
                    help="overlay plots of the fitted shadow for the first photo of each group "
                         "(default) or for every photo")
+    p.add_argument("--lod", default="auto", type=_lod_value, metavar="auto|off|FACES",
+                   help="level of detail of the object's mesh: auto (default: the coarsest level that "
+                        "moves k and rho by at most --lod-tolerance of their standard errors), off "
+                        "(the mesh as given), or a face count to decimate to")
+    p.add_argument("--lod-tolerance", type=float, default=0.1, metavar="SE",
+                   help="with --lod auto: the largest shift of k or rho allowed, in their standard "
+                        "errors (default 0.1)")
     p.set_defaults(func=_run_fit)
+
+
+def _lod_value(text: str):
+    """--lod: "auto", "off" or a face count (at least 4)."""
+    if text in ("auto", "off"):
+        return text
+    try:
+        faces = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected auto, off or a face count, got {text!r}") from None
+    if faces < 4:
+        raise argparse.ArgumentTypeError(f"a level of detail needs at least 4 faces, got {faces}")
+    return faces
 
 
 def _run_fit(args) -> int:
@@ -147,13 +171,16 @@ def _add_bench(sub):
     p.add_argument("--json", dest="json_path", help="also write the JSON here")
     p.add_argument("--quick", action="store_true", help="fewer repeats and sizes")
     p.add_argument("--what", default="render",
-                   choices=("render", "fit", "all", "sweep", "receiver", "precision"),
+                   choices=("render", "fit", "all", "sweep", "receiver", "precision", "lod", "lod-grid"),
                    help="render / fit benchmarks, both (all), or the speed-against-error sweep with its "
                         "image and parameter errors against a known truth (sweep); the light-space back "
                         "end on a 512x512 range image beside the ground map (receiver, also in render); "
-                        "the shadow map's depth in float32 against float64 (precision)")
-    p.add_argument("--report", help="with --what sweep: also write the Markdown report here (and its plot "
-                                    "in img/ beside it), e.g. docs/speed_vs_error.md")
+                        "the shadow map's depth in float32 against float64 (precision); the fit on the "
+                        "real 41k-face dragon at each level of detail (lod); the Dowling paper's grid of "
+                        "levels of detail under its slides with the SSIM masking table (lod-grid)")
+    p.add_argument("--report", help="with --what sweep or lod-grid: also write the Markdown report here (and "
+                                    "its images in img/ beside it), e.g. docs/speed_vs_error.md, "
+                                    "docs/lod_masking.md")
     p.add_argument("--no-fit", dest="fit", action="store_false",
                    help="with --what sweep: leave out the fits (images only)")
     p.set_defaults(func=_run_bench)

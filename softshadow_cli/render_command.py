@@ -75,10 +75,7 @@ def render_scene_file(args):
     cam = scene.camera_for(name) if name else scene.camera
     w, h = (int(v) for v in (args.size or DEFAULT_SIZE).lower().split("x"))
     if cam is not None and cam.kind == "explicit":
-        K = np.asarray(cam.K)  # without --size, the image the principal point is the centre of
-        width = int(round(2 * (K[0, 2] + 0.5))) if args.size is None else w
-        height = int(round(2 * (K[1, 2] + 0.5))) if args.size is None else h
-        camera = PinholeCamera(K, cam.R, cam.t, width, height, cam.dist)
+        camera = _explicit_camera(cam, args.size, w, h)
         rendered = model.camera_image(params, sun, pose, camera)
         shading = np.asarray(rendered.shading)
         alpha = (1 - shading) / max(1 - rho, 1e-9)
@@ -94,6 +91,15 @@ def render_scene_file(args):
     if args.silhouettes:
         image = draw_outlines(image, alpha)
     return image, shading
+
+
+def _explicit_camera(cam, size, w: int, h: int) -> PinholeCamera:
+    """The scene's explicit camera at --size (w x h), or without --size at the image size its
+    principal point is the centre of."""
+    K = np.asarray(cam.K)
+    width = int(round(2 * (K[0, 2] + 0.5))) if size is None else w
+    height = int(round(2 * (K[1, 2] + 0.5))) if size is None else h
+    return PinholeCamera(K, cam.R, cam.t, width, height, cam.dist)
 
 
 def _default_grid(model, pose, sun, w, h, pixel_m):
@@ -163,10 +169,7 @@ def _scene_camera(args, scene, name, model, pose):
                               _xyz(args.camera_target, "--camera-target"), w, h, fov)
     cam = scene.camera_for(name) if name else scene.camera
     if cam is not None and cam.kind == "explicit":
-        K = np.asarray(cam.K)
-        width = int(round(2 * (K[0, 2] + 0.5))) if args.size is None else w
-        height = int(round(2 * (K[1, 2] + 0.5))) if args.size is None else h
-        return PinholeCamera(K, cam.R, cam.t, width, height, cam.dist)
+        return _explicit_camera(cam, args.size, w, h)
     if cam is not None and cam.kind == "topdown":
         return cam.grid(w, h)
     world, _ = posed_vertices(model.occluder, pose)
@@ -176,6 +179,23 @@ def _scene_camera(args, scene, name, model, pose):
     direction = np.array([np.sin(az) * np.cos(el), np.cos(az) * np.cos(el), np.sin(el)])
     distance = 2.5 * radius / np.tan(np.deg2rad(fov) / 2)
     return look_at_camera(centre + distance * direction, centre, w, h, fov)
+
+
+def _depth_surface(scene, name) -> Surface | None:
+    """The photo's range image as a triangle mesh (every other pixel, no triangles across depth
+    jumps), placed by the photo's explicit camera; None without one."""
+    from fitting.receiver_points import depth_mesh, depth_points, read_depth
+    path = (scene.photo(name).depth if name else None) or scene.receiver.depth
+    cam = scene.camera_for(name) if name else scene.camera
+    if path is None:
+        raise ValueError("[receiver] kind = \"depth\" names no range image for this photo")
+    if cam is None or cam.kind != "explicit":
+        return None
+    camera = _explicit_camera(cam, None, 0, 0)
+    full = path if scene.base_dir is None else scene.base_dir / path
+    points = depth_points(read_depth(full, (camera.height, camera.width)), camera)
+    mesh = depth_mesh(points, step=2, centre=camera.centre)
+    return Surface(mesh.vertices, mesh.faces, PAPER_ALBEDO, "receiver")
 
 
 def _render_lit_scene(args, scene, model, pose, sun, projectors, name, k=0.01, rho=0.3):
@@ -191,8 +211,13 @@ def _render_lit_scene(args, scene, model, pose, sun, projectors, name, k=0.01, r
                                               rec.scale, PAPER_ALBEDO, "receiver"))
         ground = None  # the mesh is the receiver (it holds its own ground where it has one)
     elif rec.kind == "depth":
-        print("softshadow render: a range-image receiver is drawn as the ground plane z = 0 in a scene image",
-              file=sys.stderr)
+        surface = _depth_surface(scene, name)
+        if surface is None:
+            print("softshadow render: the range image needs the photo's explicit camera; the receiver is "
+                  "drawn as the ground plane z = 0", file=sys.stderr)
+        else:
+            receivers.append(surface)
+            ground = None
     if sun is not None:
         lights = SceneLights.from_rho(sun, k, rho)
         if args.ambient is not None:
@@ -200,7 +225,8 @@ def _render_lit_scene(args, scene, model, pose, sun, projectors, name, k=0.01, r
     else:
         lights = SceneLights(0.3 if args.ambient is None else args.ambient, 0.0, k)
     rendered = render_scene(camera, model, pose, lights, sun, projectors, receivers, object_albedo=PAPER_ALBEDO,
-                            ground_albedo=ground, range_k_max=max(k, 0.03))
+                            ground_albedo=ground, range_k_max=max(k, 0.03), smooth=args.smooth,
+                            supersample=args.supersample)
     radiance = np.asarray(rendered.image, np.float64)
     exposed = np.clip(radiance * args.exposure, 0.0, 1.0)
     return np.rint(linear_to_srgb(exposed) * 255).astype(np.uint8), radiance

@@ -74,6 +74,30 @@ def test_projector_shadow_on_a_plane_agrees_with_ray_casting(mesh, rotation, pos
     assert differ < 0.1 * truth.sum()
 
 
+def test_projector_shadow_in_a_camera_image_agrees_with_ray_casting():
+    """The whole pipeline: the camera's z-buffer, the projector's light with a clear slide; the
+    ground pixels it leaves dark against rays from the same ground points to the projector."""
+    model = model_of("dragon")
+    cam = look_at_camera((2.5, -4.0, 3.0), (0.0, 0.5, 0.3), 160, 120, 50.0)
+    proj = Projector((-2.0, -2.5, 3.5), (0.0, 0.0, 0.4), np.ones((64, 64, 3)), fov_deg=80.0, shadow_px=768)
+    setup = prepare_scene(cam, model, Pose(), None, [proj])
+    vis = setup.visible
+    ground = (vis.surface.ravel()[vis.pixel] == GROUND)
+    dark = np.zeros(vis.shape, bool)
+    dark.ravel()[vis.pixel[ground]] = setup.projector_light[ground, 0] == 0
+    tm = trimesh.Trimesh(*(np.asarray(a) for a in (ss.posed_vertices(model.occluder, Pose())[0],
+                                                   model.occluder.faces)), process=False)
+    p = vis.points[ground]
+    truth = np.zeros(vis.shape, bool)
+    truth.ravel()[vis.pixel[ground]] = tm.ray.intersects_any(p + 1e-7 * (proj.position - p), proj.position - p)
+    on_ground = np.zeros(vis.shape, bool)  # ground inside the projector's beam
+    on_ground.ravel()[vis.pixel[ground]] = proj.slide_colour(p)[:, 0] > 0
+    assert truth.sum() > 300 and on_ground.sum() > 0.5 * ground.sum()
+    differ, far = _within_a_pixel(dark & on_ground, truth & on_ground)
+    assert far == 0, f"{far} of {differ} differing ground pixels lie farther than a pixel from the outline"
+    assert differ < 0.1 * truth.sum()
+
+
 def test_projector_lit_side_of_a_ball_has_no_acne_and_its_far_side_is_dark():
     mesh = builtin_mesh("ball")
     surf = Surface.from_trimesh(mesh)
@@ -243,6 +267,40 @@ def test_visible_points_lie_on_the_faces_they_name_and_match_the_object_mask():
     np.testing.assert_allclose(vis.albedo[ground], 0.3)
 
 
+def test_near_plane_clipping_keeps_a_floor_that_passes_behind_the_camera():
+    """A floor mesh of two huge triangles under a camera looking down at 45 degrees: every pixel
+    below the horizon sees it (its faces reach behind the camera and are cut, not dropped), at the
+    same points as the analytic ground. ``clip_near`` keeps the area and the winding."""
+    floor = Surface(np.array([[-50.0, -50, 0], [50, -50, 0], [50, 50, 0], [-50, 50, 0]]),
+                    np.array([[0, 1, 2], [0, 2, 3]]), 0.5, "floor")
+    cam = look_at_camera((0.0, 0.0, 2.0), (0.0, 4.0, 0.0), 48, 36, 60.0)
+    mesh = visible_surfaces(cam, [floor], None)
+    plane = visible_surfaces(cam, [], 0.5)
+    np.testing.assert_array_equal(mesh.surface == 0, plane.surface == GROUND)
+    np.testing.assert_allclose(mesh.points, plane.points, atol=1e-9)
+    from softshadow.clip import clip_near
+    v, f, src = clip_near(floor.vertices, floor.vertices[:, 1] + 1.0, floor.faces, 0.0)  # keep y > -1
+    assert set(src.tolist()) == {0, 1} and np.all(v[f][..., 1] >= -1.0 - 1e-12)
+    area = 0.5 * np.linalg.norm(np.cross(v[f][:, 1] - v[f][:, 0], v[f][:, 2] - v[f][:, 0]), axis=1).sum()
+    np.testing.assert_allclose(area, 100.0 * 51.0)
+    assert np.all(np.cross(v[f][:, 1] - v[f][:, 0], v[f][:, 2] - v[f][:, 0])[:, 2] > 0), "winding kept"
+
+
+def test_smooth_normals_follow_the_sphere_better_than_flat_faces():
+    model = model_of("ball")
+    surf = Surface(ss.posed_vertices(model.occluder, Pose())[0], model.occluder.faces)
+    cam = look_at_camera((3.0, -3.0, 3.0), (0.0, 0.0, 1.5), 96, 72, 30.0)
+    errors = {}
+    for smooth in (False, True):
+        vis = visible_surfaces(cam, [surf], None, smooth=smooth)
+        true = vis.points - np.array([0.0, 0.0, 1.5])
+        true /= np.linalg.norm(true, axis=1, keepdims=True)
+        errors[smooth] = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", vis.normals, true), -1, 1)))
+    assert len(errors[True]) > 1000
+    np.testing.assert_allclose(np.linalg.norm(vis.normals, axis=1), 1.0)
+    assert np.median(errors[True]) < 0.5 * np.median(errors[False]) and errors[True].max() < 5.0
+
+
 def test_top_down_visibility_sees_the_top_of_the_object_and_nothing_beyond_the_horizon():
     model = model_of("pillar")
     surf = Surface(ss.posed_vertices(model.occluder, Pose())[0], model.occluder.faces)
@@ -289,6 +347,33 @@ def test_projector_adds_its_slide_times_the_albedo():
     np.testing.assert_allclose(np.asarray(base.image).reshape(-1, 3)[vis.pixel], 0.2 * vis.albedo)
 
 
+@pytest.mark.parametrize("view", ["pinhole", "topdown"])
+def test_supersampling_averages_the_finer_image(view):
+    model = model_of("pillar")
+    if view == "pinhole":
+        cam = look_at_camera((3.0, -4.0, 3.0), (0.0, 0.0, 1.0), 32, 24, 50.0)
+    else:
+        cam = GroundGrid.around((0.0, 0.0), 1.2, 24)
+    proj = Projector((-2.0, -2.0, 4.0), (0.0, 0.0, 0.5), sine_slide(4.0, 1.0, 64), fov_deg=50.0)
+    one = render_scene(cam, model, lights=SceneLights(0.2), projectors=[proj])
+    three = render_scene(cam, model, lights=SceneLights(0.2), projectors=[proj], supersample=3)
+    assert three.image.shape == one.image.shape
+    assert three.setup.visible.shape == (3 * cam.height, 3 * cam.width)
+    # The centre sub-pixel of each 3 x 3 block is the pixel's own centre.
+    if view == "pinhole":
+        fine_cam = cam.with_size(96, 72)
+    else:
+        third = cam.pixel_m / 3
+        fine_cam = GroundGrid(third, (cam.origin_m[0] - third, cam.origin_m[1] + third), 72, 72)
+    fine = render_scene(fine_cam, model, lights=SceneLights(0.2), projectors=[proj])
+    np.testing.assert_allclose(np.asarray(fine.image)[1::3, 1::3], np.asarray(one.image), atol=1e-9)
+    np.testing.assert_allclose(np.asarray(three.image),
+                               np.asarray(fine.image).reshape(cam.height, 3, cam.width, 3, 3).mean((1, 3)),
+                               atol=1e-12)
+    with pytest.raises(ValueError, match="supersample"):
+        render_scene(cam, model, supersample=0)
+
+
 def _gradient_scene():
     model = model_of("pillar")
     cam = look_at_camera((-5.0, -1.0, 4.0), (-1.0, 2.0, 0.0), 64, 56, 60.0)  # sees the sun shadow from the side
@@ -296,7 +381,7 @@ def _gradient_scene():
     return model, cam, proj
 
 
-@settings(max_examples=10)  # each example plans and renders 11 images: keeps the file within ~60 s
+@settings(max_examples=6)  # each example plans and renders 11 images: keeps the file within ~60 s
 @given(k=st.floats(0.015, 0.035), elevation=st.floats(35.0, 55.0), azimuth=st.floats(130.0, 160.0),
        ambient=st.floats(0.1, 0.5), sun_irradiance=st.floats(0.5, 2.0))
 def test_scene_gradients_match_central_differences(k, elevation, azimuth, ambient, sun_irradiance):
@@ -326,6 +411,27 @@ def test_scene_gradients_match_central_differences(k, elevation, azimuth, ambien
         np.testing.assert_allclose(jac[smooth, i], central[smooth], atol=2e-4 * scale, rtol=1e-4,
                                    err_msg=f"parameter {i}")
     assert np.abs(jac[:, 2]).max() > 1e-2, "k moves the penumbra pixels"
+
+
+@pytest.mark.parametrize("k, azimuth, elevation", [
+    (0.0, 150.0, 40.0),    # no penumbra at all
+    (0.02, 150.0, 1.0),    # the sun at the horizon: grazing on the ground, long shadow
+    (0.02, 180.0, 40.0),   # the pillar's faces exactly edge-on to the sun (n . s = 0)
+])
+def test_scene_gradients_are_finite_at_hard_cases(k, azimuth, elevation):
+    model, cam, proj = _gradient_scene()
+    sun, pose = Sun(azimuth, elevation), Pose()
+    setup = prepare_scene(cam, model, pose, sun, [proj], range_k_max=0.03)
+
+    def image(theta):
+        return shade_scene(setup, model, SceneLights(theta[0], theta[1], theta[2]), Sun(theta[3], theta[4]), pose)
+
+    # Forward mode, as the property test: the same compiled programs.
+    jac = np.asarray(jax.jacfwd(image)(jnp.asarray([0.3, 1.0, k, azimuth, elevation], jnp.float64)))
+    assert np.all(np.isfinite(jac))
+    grad = jac.reshape(-1, 5).sum(0)
+    assert np.all(np.isfinite(grad)), grad
+    assert grad[0] > 0 and grad[1] > 0  # more light, a brighter image
 
 
 def test_scene_float32_path_is_close_to_float64():

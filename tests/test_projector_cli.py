@@ -165,9 +165,53 @@ def test_render_a_scene_toml_with_a_projector_a_mesh_receiver_and_the_sun(tmp_pa
         'slide = "sine"\nfrequency = 4\n')
     npy = tmp_path / "scene.npy"
     code = main(["render", "--scene", str(tmp_path / "scene.toml"), "--out", str(tmp_path / "s.png"), "--npy",
-                 str(npy), "--sun-azimuth", "200", "--sun-elevation", "45", "--size", "80x60"])
+                 str(npy), "--sun-azimuth", "200", "--sun-elevation", "45", "--size", "80x60", "--smooth",
+                 "--supersample", "2"])
     assert code == 0, capsys.readouterr().err
     img = np.load(npy)
     assert img.shape == (60, 80, 3) and np.all(np.isfinite(img))
     # Lit floor: ambient rho 0.3 + sun 0.7 + the projector's light on its brightest cells.
     assert img.max() > 0.85 * 1.5 and img.min() >= 0.0
+
+
+def test_scene_image_through_the_scene_toml_camera(tmp_path, capsys):
+    (tmp_path / "scene.toml").write_text(
+        '[object]\nmesh = "ball"\n[camera]\nkind = "explicit"\n'
+        'K = [[60.0, 0.0, 31.5], [0.0, 60.0, 23.5], [0.0, 0.0, 1.0]]\n'
+        'R = [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]]\nt = [0.0, 0.0, 6.0]\n'
+        '[[projector]]\nposition = [0.0, 0.0, 5.0]\ndirection = [0.0, 0.0, -1.0]\nfov_deg = 20\n')
+    npy = tmp_path / "s.npy"
+    code = main(["render", "--scene", str(tmp_path / "scene.toml"), "--out", str(tmp_path / "s.png"), "--npy",
+                 str(npy), "--no-sun", "--ambient", "0"])
+    assert code == 0, capsys.readouterr().err
+    img = np.load(npy)
+    assert img.shape == (48, 64, 3)  # the image the principal point is the centre of
+    # Looking straight down on the ball under a projector straight above: its top is lit, the
+    # ground around it is in its shadow out to the beam's edge, and beyond the beam all is dark.
+    assert img[24, 32, 0] > 0.01 and img[24, 2, 0] == 0.0 and img[2, 32, 0] == 0.0
+
+
+def test_a_range_image_receiver_is_drawn_as_its_surface(tmp_path, capsys):
+    """A range image of the ground with a 0.5 m step, seen straight down: the scene image sees the
+    step's top 0.5 m nearer the projector above, so brighter by the inverse square."""
+    K = [[60.0, 0.0, 31.5], [0.0, 60.0, 23.5], [0.0, 0.0, 1.0]]
+    depth = np.full((48, 64), 6.0, np.float32)
+    depth[:, 40:] = 5.5  # x > ~0.85 m is a step 0.5 m high
+    np.save(tmp_path / "bg.depth.npy", depth)
+    (tmp_path / "scene.toml").write_text(
+        '[object]\nmesh = "ball"\nposition = [-1.5, 0.0, -1.0]\n[receiver]\nkind = "depth"\n'
+        'depth = "bg.depth.npy"\n[camera]\nkind = "explicit"\n'
+        f'K = {K}\nR = [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]]\nt = [0.0, 0.0, 6.0]\n'
+        '[[projector]]\nposition = [0.0, 0.0, 3.0]\ntarget = [0.0, 0.0, 0.0]\nfov_deg = 120\n'
+        'falloff = "inverse-square"\n')
+    npy = tmp_path / "s.npy"
+    code = main(["render", "--scene", str(tmp_path / "scene.toml"), "--out", str(tmp_path / "s.png"), "--npy",
+                 str(npy), "--no-sun", "--ambient", "0"])
+    err = capsys.readouterr().err
+    assert code == 0 and "ground plane" not in err, err
+    img = np.load(npy)[..., 0]
+    floor, step = img[24, 30], img[24, 50]
+    x_floor, x_step = (30 - 31.5) / 60 * 6.0, (50 - 31.5) / 60 * 5.5
+    cos_floor, cos_step = 3.0 / np.hypot(x_floor, 3.0), 2.5 / np.hypot(x_step, 2.5)
+    expected = (cos_step / (x_step ** 2 + 2.5 ** 2)) / (cos_floor / (x_floor ** 2 + 3.0 ** 2))
+    np.testing.assert_allclose(step / floor, expected, rtol=0.02)
