@@ -43,6 +43,10 @@ def run_bench(args) -> int:
     if args.what in ("fit", "all"):
         from .fit import bench_fit
         result["fit"] = bench_fit(quick=args.quick)
+    if args.what == "floor":
+        from .floor import bench_floor
+        result["floor"] = bench_floor(quick=args.quick,
+                                      progress=lambda msg: print(msg, file=sys.stderr, flush=True))
     if args.what == "sweep":
         result = _sweep(args, result)
     text = json.dumps(result, indent=1)
