@@ -20,7 +20,8 @@ import numpy as np
 import trimesh
 
 from scene import CameraSpec, ObjectSpec, PhotoSpec, ReceiverSpec, SceneSpec, SiteSpec, dump_scene
-from softshadow import GroundGrid, PinholeCamera, brightness_to_paper, builtin_mesh, one_blas_thread, pose_matrix
+from softshadow import (GroundGrid, PinholeCamera, brightness_to_paper, builtin_mesh, load_mesh, one_blas_thread,
+                        pose_matrix)
 
 from .camera_pipeline import camera_pipeline, fit_handheld_camera, topdown_grid
 from .image_io import EXTENSIONS, FORMATS, PhotoMetadata, write_corrupt_jpeg, write_photo
@@ -37,16 +38,18 @@ class OutputExistsError(FileExistsError):
     """The output folder is not empty and overwriting was not allowed."""
 
 
-def posed_mesh(name: str, position, rotation_deg, scale: float) -> trimesh.Trimesh:
-    """A built-in mesh placed in the world as softshadow.Pose does:
+def posed_mesh(name: str | trimesh.Trimesh, position, rotation_deg, scale: float) -> trimesh.Trimesh:
+    """A built-in mesh (by name) or a trimesh placed in the world as softshadow.Pose does:
     x_world = R(rotation_deg) (scale x_mesh) + position."""
-    mesh = builtin_mesh(name)
+    mesh = name if isinstance(name, trimesh.Trimesh) else builtin_mesh(name)
     R = pose_matrix(rotation_deg)
     v = (float(scale) * np.asarray(mesh.vertices)) @ R.T + np.asarray(position, dtype=np.float64)
     return trimesh.Trimesh(v, np.asarray(mesh.faces), process=False)
 
 
 RECEIVER_MESH_FILE = "receiver.ply"
+#: The object's mesh, written into the folder when ``synthesize`` is given one (``object_mesh``).
+OBJECT_MESH_FILE = "object.ply"
 
 
 def _receiver(plan: PresetPlan):
@@ -139,7 +142,8 @@ def synthesize(out_dir, preset: str = "table2", seed: int = 0, renderer: str = "
                size: tuple[int, int] | None = None, fmt: str | None = None, quality: int = 92,
                progress: bool = True, force: bool = False, write_sun: bool | None = None,
                cameras: str = "explicit", render_quality: RenderQuality | None = None,
-               noise: bool = True) -> Path:
+               noise: bool = True, object_mesh: trimesh.Trimesh | str | Path | None = None,
+               sun_radius_deg: float | None = None) -> Path:
     """Render preset ``preset`` into ``out_dir`` and return its path.
 
     renderer: 'physical' (ray-cast sun disk + sky) or 'model' (the project's model).
@@ -149,14 +153,19 @@ def synthesize(out_dir, preset: str = "table2", seed: int = 0, renderer: str = "
     scene.toml (default: the preset's choice; table2 leaves it to time + site).
     cameras: 'explicit' writes K, R, t per photo; 'markers' leaves registration to the
     printed board ([camera] kind = "markers"). noise: sensor noise on/off.
+    object_mesh: a mesh (a trimesh, or a file trimesh reads) in its own frame (metres, z up, on
+    the ground at its origin) in place of the preset's built-in object, posed as the preset
+    poses it; it is written into the folder as ``object.ply`` and named in scene.toml.
+    sun_radius_deg: every photo's sun disk radius in degrees in place of the preset's (a hazy
+    day widens the penumbra); the truth's range_k follows it.
     """
     with one_blas_thread():  # an entry point (softshadow.one_blas_thread)
         return _synthesize(out_dir, preset, seed, renderer, size, fmt, quality, progress, force, write_sun,
-                           cameras, render_quality, noise)
+                           cameras, render_quality, noise, object_mesh, sun_radius_deg)
 
 
 def _synthesize(out_dir, preset, seed, renderer, size, fmt, quality, progress, force, write_sun, cameras,
-                render_quality, noise) -> Path:
+                render_quality, noise, object_mesh=None, sun_radius_deg=None) -> Path:
     t_start = time.perf_counter()
     if renderer not in RENDERERS:
         raise ValueError(f"unknown renderer {renderer!r}; choose one of {RENDERERS}")
@@ -164,13 +173,21 @@ def _synthesize(out_dir, preset, seed, renderer, size, fmt, quality, progress, f
         raise ValueError(f"cameras must be 'explicit' or 'markers', got {cameras!r}")
     if not 1 <= int(quality) <= 100:
         raise ValueError(f"JPEG quality must be 1..100, got {quality}")
+    if object_mesh is not None and not isinstance(object_mesh, trimesh.Trimesh):
+        object_mesh = load_mesh(object_mesh)  # MeshError with the reason when it cannot be read
     if preset == "street":
+        if object_mesh is not None or sun_radius_deg is not None:
+            raise ValueError("preset 'street' has its own objects and light: it takes no object mesh or sun radius")
         if renderer != "physical":
             raise ValueError("preset 'street' is rendered by the physical renderer only")
         from .street import synthesize_street
         _prepare_out_dir(Path(out_dir), force)
         return synthesize_street(out_dir, seed, size, fmt or "jpg", quality, render_quality, noise)
     plan: PresetPlan = build_preset(preset, seed, size)
+    if sun_radius_deg is not None:
+        plan = dataclasses.replace(plan, photos=tuple(
+            dataclasses.replace(p, light=dataclasses.replace(p.light, radius_deg=float(sun_radius_deg)))
+            for p in plan.photos))
     fmt = fmt or plan.fmt
     if fmt not in FORMATS:
         raise ValueError(f"unknown image format {fmt!r}; choose one of {FORMATS}")
@@ -178,19 +195,25 @@ def _synthesize(out_dir, preset, seed, renderer, size, fmt, quality, progress, f
     _prepare_out_dir(out, force)
     write_sun = plan.write_sun if write_sun is None else bool(write_sun)
 
-    mesh = posed_mesh(plan.mesh, plan.position, plan.rotation_deg, plan.scale)
+    mesh = posed_mesh(plan.mesh if object_mesh is None else object_mesh, plan.position, plan.rotation_deg,
+                      plan.scale)
     receiver = _receiver(plan)
     scene = SynthScene(mesh, plan.object_albedo, receiver)
     quality_settings = render_quality or RenderQuality()
     rend = make_renderer(renderer, scene, quality_settings, seed)
     textures: dict[str, np.ndarray] = {}
 
-    spec = SceneSpec(object=ObjectSpec(plan.mesh, tuple(plan.position), tuple(plan.rotation_deg), plan.scale))
+    files: list[str] = []
+    object_file = plan.mesh
+    if object_mesh is not None:
+        object_file = OBJECT_MESH_FILE
+        object_mesh.export(out / object_file)
+        files.append(object_file)
+    spec = SceneSpec(object=ObjectSpec(object_file, tuple(plan.position), tuple(plan.rotation_deg), plan.scale))
     if plan.site is not None:
         spec.site = SiteSpec(plan.site["latitude"], plan.site["longitude"], plan.site.get("timezone"))
     if plan.receiver == "bank":
         spec.receiver = ReceiverSpec(kind="depth")
-    files: list[str] = []
     if isinstance(receiver, MeshReceiver):
         # The receiver's mesh goes into the folder (world metres, placed as is).
         mesh_name = RECEIVER_MESH_FILE

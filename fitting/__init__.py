@@ -16,6 +16,7 @@ from .grouping import NO_TIME_REASON, PhotoGroup, group_photos, photo_time
 from .many import DONE_MARKER, SUMMARY_COLUMNS, find_photo_folders, fit_many, write_summary
 from .markers import (Registration, RegistrationError, board_from_spec, board_outline_world,
                       board_world_points, register_board)
+from .problem import GroupProblem, SolveOutcome, group_problem
 from .photos import (IMAGE_EXTENSIONS, RAW_EXTENSIONS, Photo, PhotoError, linear_to_srgb, list_photos,
                      read_photo, srgb_to_linear)
 from .report import PAPER_TABLE2, format_table, write_report, write_results_json, write_table2
@@ -30,7 +31,7 @@ __all__ = [
     "NO_TIME_REASON", "NoShadowInView", "PAPER_TABLE2", "Photo", "PhotoError", "PhotoGroup",
     "PhotoView", "RAW_EXTENSIONS", "Registration", "RegistrationError", "board_from_spec",
     "board_outline_world", "board_world_points", "find_photo_folders", "fit_folder", "fit_group", "fit_many",
-    "fit_photos",
+    "fit_photos", "GroupProblem", "group_problem", "SolveOutcome",
     "format_table", "group_photos", "intrinsics_from_exif", "linear_to_srgb", "list_photos",
     "measure_shadow_edges", "photo_time", "photo_time_from_exif", "read_exif", "read_photo",
     "register_board", "srgb_to_linear", "SUMMARY_COLUMNS", "write_report", "write_results_json", "write_summary",

@@ -14,6 +14,7 @@ import dataclasses
 import datetime as _dt
 import json
 import re
+import threading
 import time as _time
 from pathlib import Path
 from typing import Callable
@@ -23,11 +24,12 @@ import jax
 import numpy as np
 
 from scene import CameraSpec, SceneError, SceneSpec, load_scene, photo_sun
-from softshadow import (MeshError, Pose, SoftShadowModel, SunBelowHorizonError, check_sun_above_horizon,
+from softshadow import (MeshError, Pose, SoftShadowModel, SunBelowHorizonError, check_sun_above_horizon, load_mesh,
                         one_blas_thread)
 
 from .files import software_versions
 from .grouping import PhotoGroup, group_photos, photo_time
+from .lod import LevelsOfDetail
 from .ignore_masks import IgnoreMaskError, ignore_mask_path, read_ignore_mask
 from .photo_check import judge, photo_agreement
 from .photos import Photo, PhotoError, list_photos, read_photo
@@ -264,9 +266,12 @@ def _fit_photos(photos, scene, options, half_size, progress, store, on_group, jo
         except ReceiverError as exc:
             raise FolderError(str(exc)) from exc
     try:
-        model = SoftShadowModel.from_mesh(scene.object.mesh, rule=options.rule, base_dir=scene.base_dir)
+        mesh = load_mesh(scene.object.mesh, scene.base_dir)
+        model = SoftShadowModel.from_mesh(mesh, rule=options.rule)
     except MeshError as exc:
         raise FolderError(f"cannot use the mesh: {exc}") from exc
+    lods = LevelsOfDetail(mesh, model)  # decimated once, when a group first needs a level
+    lod_lock = threading.Lock()
     pose = Pose(scene.object.position, scene.object.rotation_deg, scene.object.scale)
     timed = {n: times[n] for n in times}
     explicit = {n: scene.photo(n).group for n in timed if scene.photo(n).group}
@@ -301,8 +306,21 @@ def _fit_photos(photos, scene, options, half_size, progress, store, on_group, jo
             result = GroupResult(group.label, group.time, group.photos,
                                  error="no usable photo in this group (see skipped)")
         else:
+            lod_start = _time.perf_counter()
             try:
-                result, left_out = _fit_checked(model, pose, views, group, options)
+                with lod_lock:
+                    group_model, faces = lods.for_group(pose, views, options)
+                lod_note = None
+            except Exception as exc:  # a failed choice costs the saving, never the group
+                group_model, faces = model, lods.full_faces
+                lod_note = f"level of detail not chosen ({type(exc).__name__}: {exc}); the full mesh is used"
+            lod_seconds = _time.perf_counter() - lod_start
+            try:
+                result, left_out = _fit_checked(group_model, pose, views, group, options)
+                result.seconds += lod_seconds
+                result.lod_faces, result.mesh_faces = faces, lods.full_faces
+                if lod_note:
+                    result.warnings.append(lod_note.splitlines()[0])
                 group_skipped += left_out
             except Exception as exc:  # a failed group must not lose the others
                 result = GroupResult(group.label, group.time, [v.name for v in views],

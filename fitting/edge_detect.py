@@ -15,9 +15,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import cv2
 from scipy import ndimage
 from skimage import feature, measure
-from skimage.measure import block_reduce
 
 __all__ = ["EdgeCandidates", "LogImage", "ProfileSamples", "WorkImage", "log_image", "detect_edge_candidates",
            "sample_profiles", "sample_strips", "high_pass_log", "max_half_span_inside", "to_work_scale"]
@@ -81,22 +81,30 @@ def to_work_scale(gray: np.ndarray, rgb: np.ndarray | None, bad: np.ndarray, max
     Averaging is done in linear units over the good pixels of each block only
     (a clipped pebble does not darken its block), so plateau ratios, and hence
     rho, are unchanged; a ramp of w px becomes one of w / f working pixels.
-    Rows and columns beyond a multiple of f are dropped.
+    Rows and columns beyond a multiple of f are dropped. The working images
+    are float64 whatever the input's float type.
     """
     f = max(1, int(np.ceil(max(gray.shape) / float(max_side_px))))
     if f == 1:
-        return WorkImage(gray, rgb, bad, 1)
+        return WorkImage(gray.astype(np.float64), None if rgb is None else rgb.astype(np.float64), bad, 1)
     h, w = gray.shape[0] // f * f, gray.shape[1] // f * f
-    good = (~bad[:h, :w]).astype(np.float64)
-    n_good = block_reduce(good, (f, f), np.sum)
+    size = (w // f, h // f)
+    good = ~bad[:h, :w]
+    # cv2's INTER_AREA at an integer factor is the exact block mean (and fast on
+    # a 4000x3000 photo); the mean over good pixels is mean(x good) / mean(good).
+    frac_good = cv2.resize(good.astype(np.float32), size, interpolation=cv2.INTER_AREA).astype(np.float64)
+
+    any_bad = not good.all()
 
     def mean(x):
-        x = np.where(good > 0, x[:h, :w], 0.0)
-        return block_reduce(x, (f, f), np.sum) / np.maximum(n_good, 1.0)
+        zeroed = np.array(x[:h, :w], dtype=np.float32)      # a copy: the caller's photo is not touched
+        if any_bad:
+            zeroed[~good] = 0.0
+        m = cv2.resize(zeroed, size, interpolation=cv2.INTER_AREA).astype(np.float64)
+        scale = np.maximum(frac_good, 1e-12)
+        return m / (scale[..., None] if m.ndim == 3 else scale)
 
-    g = mean(gray)
-    c = None if rgb is None else np.stack([mean(rgb[..., i]) for i in range(rgb.shape[2])], axis=-1)
-    return WorkImage(g, c, n_good * 2 <= f * f, f)
+    return WorkImage(mean(gray), None if rgb is None else mean(rgb), frac_good * 2 <= 1.0 + 1e-6, f)
 
 
 @dataclass(frozen=True)
@@ -123,17 +131,20 @@ class EdgeCandidates:
 class ProfileSamples:
     """Profiles across edges, averaged over a short strip along the edge.
 
-    offsets_px: (S,) float, signed distance along the normal (towards the lit side).
+    offsets_px: (S,) float, signed distance along the normal (towards the lit
+        side), shared by all profiles (the longest profile's).
     values: (N, S) float, mean linear value over the strip; (N, S, C) for a
-        (H, W, C) image.
+        (H, W, C) image. 0 where a profile has no good line, or no sample.
     usable: (N,) bool, False where, at some position along the profile, half or
         more of the strip's lines fell outside the image or on invalid pixels
         (values average the good lines only).
+    present: (N, S) bool, the samples within each profile's own half-span.
     """
 
     offsets_px: np.ndarray
     values: np.ndarray
     usable: np.ndarray
+    present: np.ndarray
 
 
 def log_image(linear: np.ndarray, ignore: np.ndarray | None = None) -> LogImage:
@@ -211,17 +222,18 @@ def detect_edge_candidates(img: LogImage, max_points: int, rng: np.random.Genera
 
 
 def sample_profiles(linear: np.ndarray, valid: np.ndarray, points_uv: np.ndarray, normals_uv: np.ndarray,
-                    half_span_px: float, step_px: float = 0.5, half_width_px: int = 3) -> ProfileSamples:
+                    half_span_px, step_px: float = 0.5, half_width_px: int = 3) -> ProfileSamples:
     """Sample profiles across edges with bilinear interpolation (scipy map_coordinates).
 
     linear: (H, W) or (H, W, C) linear image; valid: (H, W) bool.
     points_uv, normals_uv: (N, 2) profile centres and unit normals (pixel units).
-    Each profile runs along its normal from -half_span_px to +half_span_px in
-    steps of step_px; every sample is the mean over the good ones of
-    2 * half_width_px + 1 parallel lines 1 px apart (along the edge), which
-    averages albedo texture and noise down.
+    half_span_px: a float, or (N,) per profile. Each profile runs along its
+    normal from -half_span_px to +half_span_px in steps of step_px (all on one
+    grid of offsets, padded to the longest); every sample is the mean over the
+    good ones of 2 * half_width_px + 1 parallel lines 1 px apart (along the
+    edge), which averages albedo texture and noise down.
     """
-    offsets, coords, shape = _strip_coords(points_uv, normals_uv, half_span_px, step_px, half_width_px)
+    offsets, coords, shape, present = _strip_coords(points_uv, normals_uv, half_span_px, step_px, half_width_px)
     h, w = valid.shape
     inside = (coords[0] >= 0) & (coords[0] <= h - 1) & (coords[1] >= 0) & (coords[1] <= w - 1)
     # A sample is good only if all four pixels it interpolates from are valid.
@@ -229,11 +241,12 @@ def sample_profiles(linear: np.ndarray, valid: np.ndarray, points_uv: np.ndarray
     r1 = np.minimum(rc[0] + 1, h - 1)
     c1 = np.minimum(rc[1] + 1, w - 1)
     good = (inside & valid[rc[0], rc[1]] & valid[r1, rc[1]] & valid[rc[0], c1] & valid[r1, c1]).reshape(shape)
+    good &= present[:, :, None]
     # Scattered bad pixels (a clipped pebble, a hot pixel) only thin the strip;
     # a profile is unusable where half its lines are bad at some position (it
     # runs into a masked object or off the image).
     n_good = good.sum(axis=2)
-    usable = (n_good * 2 > shape[2]).all(axis=1)
+    usable = ((n_good * 2 > shape[2]) | ~present).all(axis=1)
     weights = good / np.maximum(n_good, 1)[..., None]
 
     def strip_means(channel):
@@ -245,13 +258,17 @@ def sample_profiles(linear: np.ndarray, valid: np.ndarray, points_uv: np.ndarray
         values = strip_means(linear)
     else:
         values = np.stack([strip_means(linear[..., c]) for c in range(linear.shape[2])], axis=-1)
-    return ProfileSamples(offsets, values, usable)
+    return ProfileSamples(offsets, values, usable, present)
 
 
-def sample_strips(image: np.ndarray, points_uv: np.ndarray, normals_uv: np.ndarray, half_span_px: float,
+def sample_strips(image: np.ndarray, points_uv: np.ndarray, normals_uv: np.ndarray, half_span_px,
                   step_px: float = 0.5, half_width_px: int = 3) -> np.ndarray:
-    """The un-averaged strip grid of ``sample_profiles``: (N, S, 2 * half_width_px + 1) values of a (H, W) image."""
-    _, coords, shape = _strip_coords(points_uv, normals_uv, half_span_px, step_px, half_width_px)
+    """The un-averaged strip grid of ``sample_profiles``: (N, S, 2 * half_width_px + 1) values of a (H, W) image.
+
+    With per-profile half-spans, samples beyond a profile's own span (see
+    ``ProfileSamples.present``) hold whatever lies there.
+    """
+    _, coords, shape, _ = _strip_coords(points_uv, normals_uv, half_span_px, step_px, half_width_px)
     return ndimage.map_coordinates(image, coords, order=1, mode="nearest").reshape(shape)
 
 
@@ -267,39 +284,50 @@ def high_pass_log(img: LogImage, sigma_px: float = 1.0) -> np.ndarray:
 
 
 def max_half_span_inside(point_uv: np.ndarray, normal_uv: np.ndarray, shape: tuple[int, int],
-                         half_width_px: int = 3) -> float:
-    """Largest half-span (px) whose strip, centred at point_uv along normal_uv, stays inside the image."""
+                         half_width_px: int = 3):
+    """Largest half-span (px) whose strip, centred at point_uv along normal_uv, stays inside the image.
+
+    point_uv, normal_uv: (2,) (returns a float) or (N, 2) (returns (N,)).
+    """
+    pts = np.asarray(point_uv, float)
+    single = pts.ndim == 1
+    pts = pts.reshape(-1, 2)
+    nrm = np.asarray(normal_uv, float).reshape(-1, 2)
     h, w = shape
-    tangent = np.array([-normal_uv[1], normal_uv[0]])
-    best = np.inf
-    for corner in (point_uv + half_width_px * tangent, point_uv - half_width_px * tangent):
+    tangent = np.stack([-nrm[:, 1], nrm[:, 0]], axis=1)
+    best = np.full(pts.shape[0], np.inf)
+    for corner in (pts + half_width_px * tangent, pts - half_width_px * tangent):
         for axis, size in ((0, w), (1, h)):
-            d = normal_uv[axis]
-            if abs(d) < 1e-12:
-                if not 0 <= corner[axis] <= size - 1:
-                    return 0.0
-                continue
+            d = nrm[:, axis]
+            c = corner[:, axis]
+            flat = np.abs(d) < 1e-12
             # both directions +s and -s must stay inside [0, size - 1]
-            room = min((size - 1 - corner[axis]) / d if d > 0 else corner[axis] / -d,
-                       corner[axis] / d if d > 0 else (size - 1 - corner[axis]) / -d)
-            best = min(best, room)
-    return float(max(best, 0.0))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                room = np.where(d > 0, np.minimum((size - 1 - c) / d, c / d),
+                                np.minimum(c / -d, (size - 1 - c) / -d))
+            room = np.where(flat, np.where((c >= 0) & (c <= size - 1), np.inf, 0.0), room)
+            best = np.minimum(best, room)
+    best = np.maximum(best, 0.0)
+    return float(best[0]) if single else best
 
 
 def _strip_coords(points_uv, normals_uv, half_span_px, step_px, half_width_px):
-    """Offsets (S,), map_coordinates (row, col) coordinates (2, N*S*T) and the (N, S, T) shape of strips."""
+    """Offsets (S,), map_coordinates (row, col) coordinates (2, N*S*T), the (N, S, T) shape, present (N, S)."""
     points_uv = np.asarray(points_uv, float).reshape(-1, 2)
     normals_uv = np.asarray(normals_uv, float).reshape(-1, 2)
     n = points_uv.shape[0]
-    n_half = int(np.floor(half_span_px / step_px + 1e-9))
-    offsets = np.arange(-n_half, n_half + 1) * step_px
+    n_halves = np.floor(np.broadcast_to(np.asarray(half_span_px, float), (n,)) / step_px + 1e-9).astype(int)
+    n_half = int(n_halves.max()) if n else 0
+    k = np.arange(-n_half, n_half + 1)
+    offsets = k * step_px
+    present = np.abs(k)[None, :] <= n_halves[:, None]
     tangents = np.stack([-normals_uv[:, 1], normals_uv[:, 0]], axis=1)
     t_off = np.arange(-half_width_px, half_width_px + 1, dtype=float)
     s = offsets[None, :, None]
     t = t_off[None, None, :]
     u = points_uv[:, None, None, 0] + s * normals_uv[:, None, None, 0] + t * tangents[:, None, None, 0]
     v = points_uv[:, None, None, 1] + s * normals_uv[:, None, None, 1] + t * tangents[:, None, None, 1]
-    return offsets, np.stack([v.ravel(), u.ravel()]), (n, offsets.size, t_off.size)
+    return offsets, np.stack([v.ravel(), u.ravel()]), (n, offsets.size, t_off.size), present
 
 
 def _turn_deg(gx: np.ndarray, gy: np.ndarray, points_uv: np.ndarray, normals_uv: np.ndarray) -> np.ndarray:

@@ -20,13 +20,15 @@ the dominant log-rho mode). See docs/edge_measure.md.
 from __future__ import annotations
 
 import dataclasses
+import warnings as _warnings
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import optimize, special, stats
 
 from fitting.edge_detect import (MIN_CHAIN_PX, LogImage, detect_edge_candidates, high_pass_log, log_image, max_half_span_inside,
                                  sample_profiles, sample_strips, to_work_scale)
+from fitting.edge_ramp import (RHO_MIN, SAMPLING_BLUR_PX, RampFit, RampFits, fit_edge_profile, fit_edge_profiles,
+                               ramp_alpha, ramp_log_model, robust_std)
 from fitting.ground_region import ground_region
 from fitting.shadow_cues import MODE_WINDOW_LOG, bluer_umbrae, mode_of_log_rho, reliability
 
@@ -38,7 +40,6 @@ NO_EDGE_REASON = "no shadow edge found"
 STEP_PX = 0.5              # sample spacing along a profile
 STRIP_HALF_WIDTH_PX = 3    # each sample averages 7 lines 1 px apart along the edge
 RHO_MAX = 0.9              # a step shallower than this is not treated as a shadow
-RHO_MIN = 0.005
 MIN_HALF_SPAN_PX = 8.0
 MIN_PLATEAU_PX = 3.0       # flat ground needed on each side beyond the ramp ...
 PLATEAU_PER_WIDTH = 0.5    # ... and at least this many ramp widths
@@ -79,17 +80,10 @@ WORK_MAX_SIDE_PX = 1024
 MIN_CHAIN_PER_SIDE = 0.05
 NOT_GROUND_REASON = "not on the ground (sky, or above the horizon)"
 BOOTSTRAP_RESAMPLES = 400
-# Gaussian prior (log units per px) on the shading slope b. Free, b trades
-# against rho whenever the plateaus are short (a texture tilt reads as a
-# different step: per-profile rho scattered 3x more on synthetic paper and was
-# biased by +0.004 to +0.008); this prior lets b absorb only a gradient the
-# whole profile supports (vignetting, gentle shading are ~1e-4 per px).
-SLOPE_SIGMA_PER_PX = 3e-4
-# Profiles are read with bilinear interpolation, which blurs along the normal
-# with a triangle kernel of variance 1/6 px^2 whatever the direction; the model
-# includes it (as a Gaussian of that variance) so that w is the ramp's width
-# in the image. Without it a 4 px ramp read 4.3 px (w^2 grows by 12 x 1/6 = 2).
-SAMPLING_BLUR_PX = float(np.sqrt(1.0 / 6.0))
+# Candidates are fitted in chunks of this many, sorted by profile length: each
+# chunk is one batched sampling and one batched fit per pass, padded only to
+# the longest profile of the chunk.
+CHUNK_PROFILES = 256
 
 
 @dataclass(frozen=True)
@@ -160,107 +154,6 @@ class EdgeMeasurement:
     reliable: bool = True
 
 
-def ramp_alpha(s: np.ndarray, s0: float, w: float, blur_px: float = 0.0) -> np.ndarray:
-    """Linear ramp alpha(s) = clip(1/2 - (s - s0) / w, 0, 1), convolved with a Gaussian of std blur_px.
-
-    With G(z) = E[max(z + e, 0)], e ~ N(0, blur^2), = z Phi(z / blur) + blur phi(z / blur),
-    the blurred ramp is (G(w/2 - x) - G(-w/2 - x)) / w, x = s - s0 (closed form).
-    """
-    x = np.asarray(s, float) - s0
-    if blur_px <= 0.0:
-        return np.clip(0.5 - x / w, 0.0, 1.0)
-    return (_expected_ramp(0.5 * w - x, blur_px) - _expected_ramp(-0.5 * w - x, blur_px)) / w
-
-
-def ramp_log_model(s: np.ndarray, a: float, b: float, s0: float, w: float, rho: float,
-                   blur_px: float = 0.0) -> np.ndarray:
-    """log I(s) = a + b (s - s0) + log(1 - alpha(s) (1 - rho)), alpha the (blurred) linear ramp of ``ramp_alpha``."""
-    return a + b * (np.asarray(s, float) - s0) + np.log1p(-ramp_alpha(s, s0, w, blur_px) * (1.0 - rho))
-
-
-def _expected_ramp(z: np.ndarray, sigma: float) -> np.ndarray:
-    t = z / sigma
-    return z * special.ndtr(t) + sigma * np.exp(-0.5 * t * t) / np.sqrt(2.0 * np.pi)
-
-
-@dataclass(frozen=True)
-class RampFit:
-    """Fitted ramp_log_model parameters, the rms residual (log units) and the model at the samples."""
-
-    a: float
-    b: float
-    s0: float
-    w: float
-    rho: float
-    residual_rms: float
-    fitted: np.ndarray
-
-
-def fit_edge_profile(s: np.ndarray, y: np.ndarray, max_width_px: float,
-                     slope_sigma_per_px: float | None = SLOPE_SIGMA_PER_PX,
-                     blur_px: float = SAMPLING_BLUR_PX) -> RampFit | None:
-    """Robust least-squares fit of ``ramp_log_model`` to one log profile y(s) (s increasing towards lit).
-
-    s: (S,) increasing sample offsets (px); y: (S,) log values. slope_sigma_per_px:
-    std of the Gaussian prior on the slope b (None: free). blur_px: known
-    Gaussian blur of the samples along s (default: the bilinear resampling's).
-
-    Start from the plateaus (outer quarters of the span) and the extent of the
-    20-80 % part of the step; soft-L1 loss at the profile's noise level so that
-    a speck or a crack inside the span does not pull the fit. Returns None when
-    the data show no darker side.
-    """
-    span = s[-1] - s[0]
-    dark = y[s < s[0] + 0.25 * span]
-    lit = y[s > s[-1] - 0.25 * span]
-    a0 = float(np.median(lit))
-    d0 = float(np.median(dark)) - a0
-    if not d0 < 0:
-        return None
-    rho0 = float(np.clip(np.exp(d0), 0.02, 0.95))
-    frac = (np.exp(y - a0) - rho0) / (1.0 - rho0)       # 1 - alpha, in linear units
-    mid = (frac > 0.2) & (frac < 0.8)
-    ds = s[1] - s[0]
-    w0 = float(np.clip(mid.sum() * ds / 0.6, 1.0, max_width_px * 0.9))
-    s00 = float(np.median(s[mid])) if mid.any() else 0.0
-    s00 = float(np.clip(s00, s[0] + 0.3 * span, s[-1] - 0.3 * span))
-    noise = max(_robust_std(np.diff(y)) / np.sqrt(2.0), 1e-3)
-
-    prior = 0.0 if slope_sigma_per_px is None else noise / slope_sigma_per_px
-    blur = max(blur_px, 1e-3)      # the closed form needs blur > 0; 1e-3 px is a sharp ramp
-
-    def residual(p):
-        return np.append(ramp_log_model(s, *p, blur_px=blur) - y, prior * p[1])
-
-    def jacobian(p):
-        a, b, s0, w, rho = p
-        x = s - s0
-        alpha = ramp_alpha(s, s0, w, blur)
-        hi_edge = special.ndtr((0.5 * w - x) / blur)
-        lo_edge = special.ndtr((-0.5 * w - x) / blur)
-        dalpha_ds0 = (hi_edge - lo_edge) / w
-        dalpha_dw = 0.5 * (hi_edge + lo_edge) / w - alpha / w
-        g = 1.0 - alpha * (1.0 - rho)
-        dm_dalpha = -(1.0 - rho) / g
-        jac = np.zeros((s.size + 1, 5))
-        jac[:-1, 0] = 1.0
-        jac[:-1, 1] = x
-        jac[:-1, 2] = -b + dm_dalpha * dalpha_ds0
-        jac[:-1, 3] = dm_dalpha * dalpha_dw
-        jac[:-1, 4] = alpha / g
-        jac[-1, 1] = prior
-        return jac
-
-    lo = [-np.inf, -np.inf, s[0] + 0.2 * span, 0.3, RHO_MIN]
-    hi = [np.inf, np.inf, s[-1] - 0.2 * span, max_width_px, 0.999]
-    p0 = np.clip([a0, 0.0, s00, w0, rho0], np.add(lo, 1e-9), np.subtract(hi, 1e-9))
-    sol = optimize.least_squares(residual, p0, jac=jacobian, bounds=(lo, hi), loss="soft_l1",
-                                 f_scale=3.0 * noise, x_scale="jac", max_nfev=200)
-    a, b, s0, w, rho = (float(v) for v in sol.x)
-    fitted = ramp_log_model(s, a, b, s0, w, rho, blur_px=blur)
-    return RampFit(a, b, s0, w, rho, float(np.sqrt(np.mean((fitted - y) ** 2))), fitted)
-
-
 def measure_shadow_edges(linear_gray: np.ndarray, mask: np.ndarray | None = None, pixel_m: float | None = None,
                          max_profiles: int = 400, rng_seed: int = 0, *,
                          linear_rgb: np.ndarray | None = None,
@@ -296,12 +189,17 @@ def measure_shadow_edges(linear_gray: np.ndarray, mask: np.ndarray | None = None
     rng = np.random.default_rng(rng_seed)
 
     bad = np.zeros(gray.shape, bool) if ignore is None else ignore.copy()
+    # One pass over the channels (a 4000x3000 photo is 36 M values): NaN and
+    # inf propagate into the channel max or min, so a finite pair means three
+    # finite channels. (Element-wise over channel views: a reduction over the
+    # last axis of (H, W, 3) is about 8 times slower.)
+    top = None if rgb is None else np.maximum(np.maximum(rgb[..., 0], rgb[..., 1]), rgb[..., 2])
     if rgb is not None:
-        bad |= ~np.isfinite(rgb).all(axis=2)
+        bad |= ~(np.isfinite(top) & np.isfinite(np.minimum(np.minimum(rgb[..., 0], rgb[..., 1]), rgb[..., 2])))
     if saturation_level is not None:
         bad |= gray >= saturation_level
         if rgb is not None:
-            bad |= (rgb >= saturation_level).any(axis=2)
+            bad |= top >= saturation_level
     work = to_work_scale(gray, rgb, bad, WORK_MAX_SIDE_PX)
     img = log_image(work.gray, work.bad)
     if not img.valid.any():
@@ -351,163 +249,247 @@ class _Images:
 
 
 def _fit_candidates(images: _Images, candidates) -> list[EdgeProfile]:
-    """Sample, fit and screen every candidate (two passes: the second spans the fitted ramp)."""
-    max_half = max(MIN_HALF_SPAN_PX, 0.25 * min(images.gray.shape))
-    profiles: list[EdgeProfile] = []
-    for point, normal, sigma, turn in zip(candidates.points_uv, candidates.normals_uv, candidates.sigma_px,
-                                          candidates.turn_deg):
-        if turn > MAX_TURN_DEG:
-            profiles.append(_rejected(point, normal, f"edge bends {turn:.0f} deg within 10 px (a corner)"))
-            continue
-        room = max_half_span_inside(point, normal, images.gray.shape, STRIP_HALF_WIDTH_PX)
-        half1 = min(3.0 * sigma + 6.0, max_half, room)
-        first = _profile_fit(images, point, normal, half1)
-        if isinstance(first, str):
-            profiles.append(_rejected(point, normal, first))
-            continue
-        # Straighten the normal (the smoothed gradient leans near corners and in
-        # texture), re-centre on the fitted ramp and span enough plateau beyond it.
-        normal = _refined_normal(images, point, normal, first[1][-1], first[0])
-        centre = point + first[0].s0 * normal
-        room = max_half_span_inside(centre, normal, images.gray.shape, STRIP_HALF_WIDTH_PX)
-        half2 = min(first[0].w * (0.5 + PLATEAU_PER_WIDTH) + PLATEAU_EXTRA_PX, max_half, room)
-        second = _profile_fit(images, centre, normal, half2)
-        if isinstance(second, str):
-            profiles.append(_rejected(centre, normal, second))
-            continue
-        fit, s, y = second
-        half2 = float(s[-1])
-        reason, blue = _shadow_edge_test(images, centre, normal, half2, fit, s, y)
-        profiles.append(EdgeProfile(position_uv=centre + fit.s0 * normal, normal_uv=normal, rho=fit.rho,
-                                    width_px=fit.w, residual=fit.residual_rms, kept=reason is None,
-                                    reject_reason=reason, offsets_px=s - fit.s0, observed_log=y,
-                                    fitted_log=fit.fitted, blue_shift_log=blue))
+    """Sample, fit and screen every candidate (two passes: the second spans the fitted ramp).
+
+    Candidates go through in chunks of similar profile length, each chunk as
+    arrays (one batched sampling and one batched fit per pass), and come out
+    in their original order.
+    """
+    shape = images.gray.shape
+    max_half = max(MIN_HALF_SPAN_PX, 0.25 * min(shape))
+    points, normals = candidates.points_uv, candidates.normals_uv
+    profiles: list[EdgeProfile | None] = [None] * len(candidates)
+    for i in np.nonzero(candidates.turn_deg > MAX_TURN_DEG)[0]:
+        profiles[i] = _rejected(points[i], normals[i],
+                                f"edge bends {candidates.turn_deg[i]:.0f} deg within 10 px (a corner)")
+    room = max_half_span_inside(points, normals, shape, STRIP_HALF_WIDTH_PX)
+    half1 = np.minimum(np.minimum(3.0 * candidates.sigma_px + 6.0, max_half), room)
+    todo = np.nonzero(candidates.turn_deg <= MAX_TURN_DEG)[0]
+    todo = todo[np.argsort(half1[todo], kind="stable")]
+    for start in range(0, todo.size, CHUNK_PROFILES):
+        idx = todo[start:start + CHUNK_PROFILES]
+        for i, p in zip(idx, _fit_chunk(images, points[idx], normals[idx], half1[idx], max_half)):
+            profiles[i] = p
     return profiles
 
 
-def _refined_normal(images: _Images, point, normal, half_span_px: float, fit: RampFit) -> np.ndarray:
-    """The edge normal corrected by the tilt of the ramp across the strip's lines.
+def _fit_chunk(images: _Images, points, normals, half1, max_half) -> list[EdgeProfile]:
+    """Both passes and the shadow-edge tests for (N, 2) points and normals with first-pass half-spans (N,)."""
+    first = _sampled_fits(images, points, normals, half1)
+    out: list[EdgeProfile | None] = [None] * len(points)
+    for i in np.nonzero(first.reasons != None)[0]:    # noqa: E711 (element-wise)
+        out[i] = _rejected(points[i], normals[i], first.reasons[i])
+    ok = np.nonzero(first.reasons == None)[0]          # noqa: E711
+    if ok.size:
+        # Straighten the normal (the smoothed gradient leans near corners and in
+        # texture), re-centre on the fitted ramp and span enough plateau beyond it.
+        refined = _refined_normals(images, points[ok], normals[ok], first.half[ok], first.params(ok))
+        centres = points[ok] + first.fits.s0[ok, None] * refined
+        room = max_half_span_inside(centres, refined, images.gray.shape, STRIP_HALF_WIDTH_PX)
+        half2 = np.minimum(np.minimum(first.fits.w[ok] * (0.5 + PLATEAU_PER_WIDTH) + PLATEAU_EXTRA_PX, max_half), room)
+        second = _sampled_fits(images, centres, refined, half2)
+        passed = second.reasons == None                # noqa: E711
+        reasons, blue = _shadow_edge_tests(images, centres, refined, second, passed)
+        f = second.fits
+        for j, i in enumerate(ok):
+            if not passed[j]:
+                out[i] = _rejected(centres[j], refined[j], second.reasons[j])
+                continue
+            m = second.present[j]
+            out[i] = EdgeProfile(position_uv=centres[j] + f.s0[j] * refined[j], normal_uv=refined[j],
+                                 rho=float(f.rho[j]), width_px=float(f.w[j]), residual=float(f.residual_rms[j]),
+                                 kept=reasons[j] is None, reject_reason=reasons[j],
+                                 offsets_px=second.s[m] - f.s0[j], observed_log=second.y[j, m],
+                                 fitted_log=f.fitted[j, m], blue_shift_log=float(blue[j]))
+    return out
 
+
+@dataclass(frozen=True)
+class _Pass:
+    """One pass of sampled and fitted profiles (N of them, on one grid of S offsets).
+
+    s: (S,) offsets; y: (N, S) log strip means; present: (N, S) the samples of
+    each profile; half: (N,) each profile's half-span actually sampled (px);
+    fits: the batched ramp fits; reasons: (N,) object array, why a profile has
+    no fit (None: it has one).
+    """
+
+    s: np.ndarray
+    y: np.ndarray
+    present: np.ndarray
+    half: np.ndarray
+    fits: RampFits
+    reasons: np.ndarray
+
+    def params(self, idx) -> np.ndarray:
+        """(len(idx), 5) fitted (a, b, s0, w, rho)."""
+        f = self.fits
+        return np.stack([f.a[idx], f.b[idx], f.s0[idx], f.w[idx], f.rho[idx]], axis=1)
+
+
+def _sampled_fits(images: _Images, points, normals, halves) -> _Pass:
+    """Sample the profiles through points along normals (half-spans (N,)) and fit them all at once.
+
+    A profile that meets masked or clipped pixels is shortened (by 0.7, down to
+    MIN_HALF_SPAN_PX) before it is given up: the edge may run close to the object.
+    """
+    n = len(points)
+    half = np.asarray(halves, float).copy()
+    s = _offsets(half.max() if n else 0.0)
+    values = np.ones((n, s.size))
+    present = np.zeros((n, s.size), bool)
+    reasons = np.full(n, None, dtype=object)
+    todo = np.arange(n)
+    while todo.size:
+        short = half[todo] < MIN_HALF_SPAN_PX
+        reasons[todo[short]] = "too close to the image border or to masked/clipped pixels"
+        todo = todo[~short]
+        if not todo.size:
+            break
+        samples = sample_profiles(images.gray, images.valid, points[todo], normals[todo], half[todo],
+                                  step_px=STEP_PX, half_width_px=STRIP_HALF_WIDTH_PX)
+        lo = (s.size - samples.offsets_px.size) // 2        # the same grid, centred: a slice of s
+        good = todo[samples.usable]
+        values[good, lo:lo + samples.offsets_px.size] = samples.values[samples.usable]
+        present[good, lo:lo + samples.offsets_px.size] = samples.present[samples.usable]
+        todo = todo[~samples.usable]
+        half[todo] *= 0.7
+    y = np.log(np.maximum(values, 1e-300))
+    fits = fit_edge_profiles(s, y, present, 1.2 * half)
+    reasons[(reasons == None) & ~fits.ok] = "no darker side"      # noqa: E711
+    sampled = (np.abs(s)[None, :] * present).max(axis=1)
+    return _Pass(s, y, present, sampled, fits, reasons)
+
+
+def _offsets(half_span_px: float) -> np.ndarray:
+    """(S,) the sample offsets of a profile of this half-span (the grid of ``sample_profiles``)."""
+    k = int(np.floor(half_span_px / STEP_PX + 1e-9))
+    return np.arange(-k, k + 1) * STEP_PX
+
+
+def _refined_normals(images: _Images, points, normals, half_span_px, params) -> np.ndarray:
+    """(N, 2) edge normals corrected by the tilt of the ramp across each strip's lines.
+
+    params: (N, 5) fitted (a, b, s0, w, rho) of each profile at its half-span (N,).
     Each of the strip's 2 T + 1 lines is matched (least squares over a shift
     and an offset, so line-to-line albedo does not matter) to the fitted
     ramp; a straight line through the shifts against the lines' positions
     gives the edge's slope k relative to the tangent, and the normal becomes
     normalize(n - k t). With fewer than 4 usable lines the normal is kept.
     """
-    grid = sample_strips(images.gray, point[None], normal[None], half_span_px, STEP_PX, STRIP_HALF_WIDTH_PX)[0]
-    good = sample_strips(images.valid.astype(float), point[None], normal[None], half_span_px, STEP_PX,
-                         STRIP_HALF_WIDTH_PX)[0] > 0.999
-    lines = good.all(axis=0)                                                   # (T,)
-    if lines.sum() < 4:
-        return normal
-    s = np.arange(grid.shape[0]) * STEP_PX - half_span_px
-    logs = np.log(np.maximum(grid[:, lines], 1e-300)).T                        # (L, S)
+    s = _offsets(float(np.max(half_span_px)))
+    present = np.abs(s)[None, :] <= np.asarray(half_span_px, float)[:, None] + 1e-9          # (N, S)
+    grid = sample_strips(images.gray, points, normals, half_span_px, STEP_PX, STRIP_HALF_WIDTH_PX)  # (N, S, T)
+    good = sample_strips(images.valid.astype(float), points, normals, half_span_px, STEP_PX,
+                         STRIP_HALF_WIDTH_PX) > 0.999
+    lines = (good | ~present[:, :, None]).all(axis=1)                                       # (N, T)
+    # Samples outside a profile's span may lie on masked (NaN) pixels: zero them, never multiply NaN by 0.
+    logs = np.where(present[:, :, None], np.log(np.maximum(grid, 1e-300)), 0.0).transpose(0, 2, 1)  # (N, T, S)
     shifts = np.arange(-NORMAL_SHIFT_MAX_PX, NORMAL_SHIFT_MAX_PX + 1e-9, 0.1)
-    templates = np.stack([ramp_log_model(s - d, fit.a, fit.b, fit.s0, fit.w, fit.rho, SAMPLING_BLUR_PX)
-                          for d in shifts])                                     # (D, S)
-    diff = logs[:, None, :] - templates[None, :, :]                            # (L, D, S)
-    cost = diff.var(axis=2)                                                     # offset per line is free
-    best = shifts[np.argmin(cost, axis=1)]                                      # (L,)
-    t = np.arange(-STRIP_HALF_WIDTH_PX, STRIP_HALF_WIDTH_PX + 1, dtype=float)[lines]
-    (k, c), resid = np.polyfit(t, best, 1, full=True)[:2]
+    a, b, s0, w, rho = (params[:, i, None, None] for i in range(5))
+    templates = ramp_log_model(s[None, None, :] - shifts[None, :, None], a, b, s0, w, rho, SAMPLING_BLUR_PX)
+    # var over s of (line - template), offset free: var(x) + var(t) - 2 cov(x, t), on each profile's samples.
+    m = present[:, None, :].astype(float)
+    cnt = present.sum(axis=1)[:, None, None]
+    xc = (logs - (logs * m).sum(axis=2, keepdims=True) / cnt) * m                           # (N, T, S)
+    tc = (templates - (templates * m).sum(axis=2, keepdims=True) / cnt) * m                 # (N, D, S)
+    cost = ((xc ** 2).sum(axis=2)[:, :, None] + (tc ** 2).sum(axis=2)[:, None, :]
+            - 2.0 * np.einsum("nts,nds->ntd", xc, tc))                                      # (N, T, D)
+    best = shifts[np.argmin(cost, axis=2)]                                                  # (N, T)
+    t = np.arange(-STRIP_HALF_WIDTH_PX, STRIP_HALF_WIDTH_PX + 1, dtype=float)[None, :]
+    wl = lines.astype(float)
+    nl = np.maximum(wl.sum(axis=1), 1.0)
+    tm = (t * wl).sum(axis=1) / nl
+    bm = (best * wl).sum(axis=1) / nl
+    stt = (wl * (t - tm[:, None]) ** 2).sum(axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        k = (wl * (t - tm[:, None]) * (best - bm[:, None])).sum(axis=1) / stt
+        resid = (wl * (best - bm[:, None] - k[:, None] * (t - tm[:, None])) ** 2).sum(axis=1)
+        k_err = np.sqrt(resid / (nl - 2.0) / stt)
     # Texture makes single lines' shifts noisy: tilt only when the tilt is clear
     # (|k| over twice its standard error), else trust the smoothed gradient.
-    k_err = np.sqrt((resid[0] if resid.size else 0.0) / (t.size - 2) / np.sum((t - t.mean()) ** 2))
-    if abs(k) <= 2.0 * k_err:
-        return normal
-    tangent = np.array([-normal[1], normal[0]])
-    refined = normal - k * tangent
-    return refined / np.linalg.norm(refined)
+    tilt = (lines.sum(axis=1) >= 4) & (np.abs(k) > 2.0 * k_err)
+    tangent = np.stack([-normals[:, 1], normals[:, 0]], axis=1)
+    refined = normals - np.where(tilt, k, 0.0)[:, None] * tangent
+    return refined / np.linalg.norm(refined, axis=1, keepdims=True)
 
 
-def _profile_fit(images: _Images, point, normal, half_span_px: float):
-    """(fit, s, log profile) of the profile through point along normal, or the reason it has none.
+def _plateaus(s: np.ndarray, present: np.ndarray, s0: np.ndarray, w: np.ndarray, extra_px: float = 0.0):
+    """(N, S) boolean masks of the flat parts beyond each ramp (dark, lit), 1 px + extra_px clear of it."""
+    margin = (0.5 * w + 1.0 + extra_px)[:, None]
+    return present & (s[None] < s0[:, None] - margin), present & (s[None] > s0[:, None] + margin)
 
-    A profile that meets masked or clipped pixels is shortened (down to
-    MIN_HALF_SPAN_PX) before it is given up: the edge may run close to the object.
+
+def _shadow_edge_tests(images: _Images, centres, normals, fitted: _Pass, passed: np.ndarray):
+    """(reasons (N,) why each fitted profile is not a shadow edge on one surface or None, blue shifts (N,)).
+
+    Only the profiles with ``passed`` are tested (the others keep their pass's reason); blue is NaN
+    for a profile rejected before the colour test, or without colour.
     """
-    half = half_span_px
-    while True:
-        if half < MIN_HALF_SPAN_PX:
-            return "too close to the image border or to masked/clipped pixels"
-        samples = sample_profiles(images.gray, images.valid, point[None], normal[None], half, step_px=STEP_PX,
-                                  half_width_px=STRIP_HALF_WIDTH_PX)
-        if samples.usable[0]:
-            break
-        half *= 0.7
-    s = samples.offsets_px
-    y = np.log(np.maximum(samples.values[0], 1e-300))
-    fit = fit_edge_profile(s, y, max_width_px=1.2 * half)
-    if fit is None:
-        return "no darker side"
-    return fit, s, y
+    f, s, present = fitted.fits, fitted.s, fitted.present
+    n = len(centres)
+    reasons = np.full(n, None, dtype=object)
+    blue = np.full(n, np.nan)
+    rho = np.where(passed, f.rho, 0.5)
+    w, s0 = np.where(passed, f.w, 1.0), np.where(passed, f.s0, 0.0)
+    step = -np.log(rho)
+    dark, lit = _plateaus(s, present, s0, w)
+    need = np.maximum(MIN_PLATEAU_PX, PLATEAU_PER_WIDTH * w) / STEP_PX
+    ratio = _texture_ratios(images, centres, normals, fitted.half, s, present, s0, w)
+    colour = None if images.rgb is None else _colour_step_logs(images, centres, normals, fitted.half, s, dark, lit)
+    for i in np.nonzero(passed)[0]:
+        if rho[i] > RHO_MAX:
+            reasons[i] = f"step too shallow (rho {rho[i]:.2f} > {RHO_MAX})"
+        elif dark[i].sum() < need[i] or lit[i].sum() < need[i]:
+            reasons[i] = "ramp not inside the profile (too little plateau on one side)"
+        elif f.residual_rms[i] > MAX_RESIDUAL_PER_STEP * step[i]:
+            reasons[i] = (f"poor fit (residual {f.residual_rms[i]:.3f} > {MAX_RESIDUAL_PER_STEP} x step): texture "
+                          "or another edge")
+        elif abs(f.b[i]) * 2.0 * fitted.half[i] > MAX_SLOPE_STEP_FRACTION * step[i]:
+            reasons[i] = "shading slope comparable to the step: not a clean edge"
+        elif np.isfinite(ratio[i]) and not TEXTURE_RATIO_LOW <= ratio[i] <= TEXTURE_RATIO_HIGH / np.sqrt(rho[i]):
+            reasons[i] = f"texture differs across the edge (dark/lit {ratio[i]:.2f}): two surfaces, not a shadow"
+        elif colour is not None:
+            blue[i] = colour[i, 2] - colour[i, 0]
+            worst = np.max(np.abs(colour[i]))
+            if worst > COLOUR_TOL_LOG:
+                reasons[i] = f"colour changes across the edge (channel log ratios differ by {worst:.2f})"
+    return reasons, blue
 
 
-def _plateaus(s: np.ndarray, fit: RampFit, extra_px: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    """Boolean sample masks of the flat parts beyond the ramp (dark, lit), 1 px + extra_px clear of it."""
-    margin = 0.5 * fit.w + 1.0 + extra_px
-    return s < fit.s0 - margin, s > fit.s0 + margin
-
-
-def _shadow_edge_test(images: _Images, centre, normal, half_span_px: float, fit: RampFit, s: np.ndarray,
-                      y: np.ndarray) -> tuple[str | None, float]:
-    """(why this fitted profile is not a shadow edge on one surface or None, its blue shift (NaN: no colour))."""
-    nan = float("nan")
-    if fit.rho > RHO_MAX:
-        return f"step too shallow (rho {fit.rho:.2f} > {RHO_MAX})", nan
-    step = -np.log(fit.rho)
-    dark, lit = _plateaus(s, fit)
-    need = max(MIN_PLATEAU_PX, PLATEAU_PER_WIDTH * fit.w) / STEP_PX
-    if dark.sum() < need or lit.sum() < need:
-        return "ramp not inside the profile (too little plateau on one side)", nan
-    if fit.residual_rms > MAX_RESIDUAL_PER_STEP * step:
-        return (f"poor fit (residual {fit.residual_rms:.3f} > {MAX_RESIDUAL_PER_STEP} x step): texture or another "
-                "edge", nan)
-    if abs(fit.b) * (s[-1] - s[0]) > MAX_SLOPE_STEP_FRACTION * step:
-        return "shading slope comparable to the step: not a clean edge", nan
-    ratio = _texture_ratio(images, centre, normal, half_span_px, fit, s)
-    if ratio is not None and not TEXTURE_RATIO_LOW <= ratio <= TEXTURE_RATIO_HIGH / np.sqrt(fit.rho):
-        return f"texture differs across the edge (dark/lit {ratio:.2f}): two surfaces, not a shadow", nan
-    if images.rgb is None:
-        return None, nan
-    colour = _colour_step_logs(images, centre, normal, half_span_px, fit, s)
-    blue = float(colour[2] - colour[0])
-    if np.max(np.abs(colour)) > COLOUR_TOL_LOG:
-        return f"colour changes across the edge (channel log ratios differ by {np.max(np.abs(colour)):.2f})", blue
-    return None, blue
-
-
-def _texture_ratio(images: _Images, centre, normal, half_span_px, fit, s) -> float | None:
-    """Robust std of fine log texture on the dark plateau over that on the lit plateau (None: both smooth).
+def _texture_ratios(images: _Images, centres, normals, half, s, present, s0, w) -> np.ndarray:
+    """(N,) robust std of fine log texture on the dark plateau over that on the lit plateau (NaN: both smooth).
 
     Taken over the 2-D strip (every line, not the strip means) and clear of the
     ramp by the high-pass kernel's reach, so the edge itself does not count.
     """
-    strips = sample_strips(images.texture, centre[None], normal[None], half_span_px, STEP_PX,
-                           STRIP_HALF_WIDTH_PX)[0]                                # (S, T)
-    dark, lit = _plateaus(s, fit, extra_px=2.0 * TEXTURE_SIGMA_PX)
-    if dark.sum() < 2 or lit.sum() < 2:
-        return None
-    tex_dark = _robust_std(strips[dark].ravel())
-    tex_lit = _robust_std(strips[lit].ravel())
-    if max(tex_dark, tex_lit) < SMOOTH_TEXTURE_LOG:
-        return None
-    return max(tex_dark, SMOOTH_TEXTURE_LOG) / max(tex_lit, SMOOTH_TEXTURE_LOG)
+    strips = sample_strips(images.texture, centres, normals, half, STEP_PX, STRIP_HALF_WIDTH_PX)   # (N, S, T)
+    dark, lit = _plateaus(s, present, s0, w, extra_px=2.0 * TEXTURE_SIGMA_PX)
+    n = len(centres)
+    tex_dark = robust_std(np.where(dark[:, :, None], strips, np.nan).reshape(n, -1), axis=1)
+    tex_lit = robust_std(np.where(lit[:, :, None], strips, np.nan).reshape(n, -1), axis=1)
+    ratio = np.maximum(tex_dark, SMOOTH_TEXTURE_LOG) / np.maximum(tex_lit, SMOOTH_TEXTURE_LOG)
+    smooth = np.maximum(tex_dark, tex_lit) < SMOOTH_TEXTURE_LOG
+    return np.where((dark.sum(axis=1) < 2) | (lit.sum(axis=1) < 2) | smooth, np.nan, ratio)
 
 
-def _colour_step_logs(images: _Images, centre, normal, half_span_px, fit, s) -> np.ndarray:
-    """(3,) per-channel log(dark plateau / lit plateau) minus the same for the channel sum."""
-    samples = sample_profiles(images.rgb, images.valid, centre[None], normal[None], half_span_px, step_px=STEP_PX,
+def _colour_step_logs(images: _Images, centres, normals, half, s, dark, lit) -> np.ndarray:
+    """(N, 3) per-channel log(dark plateau / lit plateau) minus the same for the channel sum."""
+    samples = sample_profiles(images.rgb, images.valid, centres, normals, half, step_px=STEP_PX,
                               half_width_px=STRIP_HALF_WIDTH_PX)
-    vals = np.maximum(samples.values[0], 1e-300)          # (S, 3)
-    dark, lit = _plateaus(s, fit)
-    steps = np.log(np.median(vals[dark], axis=0)) - np.log(np.median(vals[lit], axis=0))
-    sum_step = np.log(np.median(vals[dark].sum(axis=1))) - np.log(np.median(vals[lit].sum(axis=1)))
-    return steps - sum_step
+    vals = np.maximum(samples.values, 1e-300)                                                  # (N, S, 3)
+    lo = (s.size - samples.offsets_px.size) // 2
+    dark, lit = dark[:, lo:lo + samples.offsets_px.size], lit[:, lo:lo + samples.offsets_px.size]
 
+    def median(x, where):
+        with np.errstate(all="ignore"), _warnings.catch_warnings():
+            _warnings.simplefilter("ignore", RuntimeWarning)
+            return np.nanmedian(np.where(where, x, np.nan), axis=1)
 
-def _robust_std(x: np.ndarray) -> float:
-    return float(stats.median_abs_deviation(x, scale="normal")) if x.size else 0.0
+    steps = np.log(median(vals, dark[..., None])) - np.log(median(vals, lit[..., None]))
+    total = vals.sum(axis=2)
+    sum_step = np.log(median(total, dark)) - np.log(median(total, lit))
+    return steps - sum_step[:, None]
 
 
 def _prefer_bluer_umbrae(profiles: list[EdgeProfile]) -> list[EdgeProfile]:
@@ -539,7 +521,7 @@ def _keep_dominant_mode(profiles: list[EdgeProfile]) -> list[EdgeProfile]:
     near = np.abs(log_rho - mode) <= MODE_WINDOW_LOG
     # Trim what is far from the median of the mode's members in units of their robust spread.
     centre = np.median(log_rho[near])
-    spread = max(_robust_std(log_rho[near]), 0.02)
+    spread = max(robust_std(log_rho[near]), 0.02)
     inlier = near & (np.abs(log_rho - centre) <= 3.0 * spread)
     out = list(profiles)
     for j, i in enumerate(idx):
@@ -603,7 +585,8 @@ def _checked_gray(linear_gray) -> np.ndarray:
         raise ValueError(f"linear_gray is too small to hold a shadow edge: shape {arr.shape}")
     if not np.issubdtype(arr.dtype, np.number) or np.issubdtype(arr.dtype, np.complexfloating):
         raise ValueError(f"linear_gray must hold real numbers, got dtype {arr.dtype}")
-    arr = arr.astype(np.float64)
+    # float32 stays float32 (no full-size copy): the working scale is float64.
+    arr = arr if arr.dtype in (np.float32, np.float64) else arr.astype(np.float64)
     if not np.isfinite(arr).any():
         raise ValueError("linear_gray has no finite pixel")
     return arr
@@ -621,7 +604,9 @@ def _checked_mask(mask, shape) -> np.ndarray | None:
 def _checked_rgb(rgb, shape) -> np.ndarray | None:
     if rgb is None:
         return None
-    arr = np.asarray(rgb, dtype=np.float64)
+    arr = np.asarray(rgb)
+    if arr.dtype not in (np.float32, np.float64):
+        arr = arr.astype(np.float64)
     if arr.shape != (*shape, 3):
         raise ValueError(f"linear_rgb must have shape {(*shape, 3)}, got {arr.shape}")
     return arr

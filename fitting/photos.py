@@ -324,7 +324,8 @@ def read_photo(path, half_size: bool = False, assume_16bit: str = "linear") -> P
 
     max_code = 255 if codes.dtype == np.uint8 else 65535
     at_max = codes == max_code
-    saturated = at_max.any(axis=2) if codes.ndim == 3 else at_max
+    # Channel views, not .any(axis=2): a reduction over the last axis of (H, W, 3) is several times slower.
+    saturated = (at_max[..., 0] | at_max[..., 1] | at_max[..., 2]) if codes.ndim == 3 else at_max
     if encoding == "srgb8":
         lin = _SRGB8_LUT[codes]
     elif encoding == "srgb16":
@@ -336,7 +337,8 @@ def read_photo(path, half_size: bool = False, assume_16bit: str = "linear") -> P
         gray = lin
         lin = np.repeat(lin[..., None], 3, axis=2)
     else:
-        gray = lin @ REC709_WEIGHTS
+        wr, wg, wb = REC709_WEIGHTS
+        gray = wr * lin[..., 0] + wg * lin[..., 1] + wb * lin[..., 2]
     if half_size and encoding != "raw":
         lin, gray = _half(lin), _half(gray)
         h, w = gray.shape

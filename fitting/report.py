@@ -124,6 +124,9 @@ def _group_notes(g: GroupResult) -> list[str]:
     if g.error is None and (g.warnings or not g.reliable):
         head = "NOT RELIABLE" if not g.reliable else "warning"
         notes.append(f"{g.label}: {head}: " + ("; ".join(g.warnings) or "a consistency check failed"))
+    if g.error is None and g.lod_faces and g.mesh_faces and g.lod_faces < g.mesh_faces:
+        notes.append(f"{g.label}: fitted with a level of detail of {g.lod_faces:,} of the mesh's "
+                     f"{g.mesh_faces:,} faces (--lod)")
     return notes
 
 

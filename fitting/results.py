@@ -80,6 +80,8 @@ class GroupResult:
     penumbra_px_iqr: float | None = None
     penumbra_m: float | None = None
     reprojection_error_px: float | None = None
+    lod_faces: int | None = None  # faces of the level of detail fitted (``fitting.lod``)
+    mesh_faces: int | None = None  # faces of the object's mesh as given
     warnings: list[str] = dataclasses.field(default_factory=list)
     reliable: bool = True
     error: str | None = None
@@ -118,6 +120,7 @@ class GroupResult:
                     "penumbra_px_iqr": _num(self.penumbra_px_iqr),
                     "penumbra_m": _num(self.penumbra_m),
                     "reprojection_error_px": _num(self.reprojection_error_px),
+                    "lod_faces": self.lod_faces, "mesh_faces": self.mesh_faces,
                     "solve_seconds": None if self.solve_seconds is None else round(float(self.solve_seconds), 3),
                     "error": self.error}
         out.update({k: v for k, v in optional.items() if v is not None})

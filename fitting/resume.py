@@ -26,7 +26,7 @@ __all__ = ["photo_digest", "group_key", "GroupStore", "RESULT_OPTIONS"]
 
 #: FitOptions fields that change a group's numbers (plots, overlays and verbosity do not).
 RESULT_OPTIONS = ("profiles", "blur", "rule", "range_k_max", "max_samples_per_photo", "robust",
-                  "max_steps", "seed", "sky_occlusion")
+                  "max_steps", "seed", "sky_occlusion", "lod", "lod_tolerance")
 
 
 def _file_sha256(path: Path) -> str:

@@ -134,10 +134,12 @@ def _boundary_ground_points(model: SoftShadowModel, pose: Pose, sun: Sun, spacin
 def select_samples(model: SoftShadowModel, pose: Pose, view: PhotoView, range_k_max: float = 0.03,
                    sun_margin_deg: float = 0.3, max_samples: int = 12000, seed: int = 0,
                    min_band_px: int = 5, max_band_px: int = 80,
-                   sky_occlusion: bool = True) -> PhotoSamples:
+                   sky_occlusion: bool = True, albedo: bool = True) -> PhotoSamples:
     """Pixels in a band around the predicted shadow boundary of one photo.
 
     sky_occlusion: also find, per sample, the sky fraction the object hides (else 0).
+    albedo: find the white sheet (``paper_mask``: two albedo classes, the sheet's border left
+    out); False: one class, faster (for a look at the shadow alone, ``fitting.lod``).
 
     Raises NoShadowInView when no usable boundary pixel is in the frame. A view whose
     receiver is not the plane is sampled on it (``fitting.receiver_samples``).
@@ -183,7 +185,7 @@ def select_samples(model: SoftShadowModel, pose: Pose, view: PhotoView, range_k_
         exclude |= view.ignore
     obj = object_mask(model.occluder, pose, view.camera if view.camera is not None else view.grid)
     exclude |= cv2.dilate(obj.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
-    paper = paper_mask(view.gray, exclude)
+    paper = paper_mask(view.gray, exclude) if albedo else None
     if paper is not None:
         # The sheet's own border (+-6 px): there the pixel mixes paper and ground (blur, JPEG
         # ringing) and fits neither class; +-3 px left enough of it to bias a group whose shadow

@@ -32,7 +32,7 @@ from .samples import NoShadowInView, PhotoSamples, select_samples
 from .views import PhotoView
 
 __all__ = ["FitOptions", "fit_group", "Solution", "Trial", "KRho", "Identifiability", "sample_views",
-           "initial_params", "plain_start", "choose_model", "covariance", "k_rho_with_errors",
+           "initial_params", "plain_config", "start_grid", "plain_start", "choose_model", "covariance", "k_rho_with_errors",
            "penumbra_width_px", "identifiability", "profile_plot_data"]
 
 #: Levenberg-Marquardt tolerances (relative, absolute) on the parameters and on each residual
@@ -64,6 +64,11 @@ class FitOptions:
     plots: bool = True
     overlays: str = "first"  # overlay plots for the "first" photo of each group, or "all"
     verbose: bool = False
+    # Level of detail of the object's mesh (``fitting.lod``): "auto" (the coarsest level that moves
+    # k and rho by at most lod_tolerance of their standard errors), "off" (the mesh as it is), or
+    # a face count (that level, decimated).
+    lod: str | int = "auto"
+    lod_tolerance: float = 0.1
 
 
 def _group_arrays(samples: list[PhotoSamples], views: list[PhotoView]) -> GroupArrays:
@@ -244,14 +249,24 @@ def robust_delta(r: np.ndarray, robust: bool) -> float:
     return float(max(3.0 * sigma, 1e-6)) if robust else 0.0
 
 
+def plain_config(options: FitOptions, fit_sun: bool) -> FitConfig:
+    """The first solve's configuration: the first candidate profile, blur free when allowed,
+    plain least squares (no robust loss)."""
+    return FitConfig.make(options.profiles[0], True in options.blur, fit_sun, 0.0, options.rule)
+
+
+def start_grid(options: FitOptions):
+    """The coarse log grid of raw_k (9,) the first solve starts from (its best point)."""
+    return jnp.asarray(raw_from_k(np.geomspace(5e-4, options.range_k_max, 9)))
+
+
 def plain_start(arrays: GroupArrays, pose: Pose, base: FitParams, options: FitOptions, fit_sun: bool
                 ) -> tuple[Solution, GroupArrays, float]:
     """Step 2b: a plain least-squares pass (blur free) from the best k of a coarse log grid
     (the loss is flat where the band misses the penumbra). Returns its solution, the arrays
     with their |dT/dpixel|, and the robust loss's scale it sets (``robust_delta``)."""
-    plain = FitConfig.make(options.profiles[0], True in options.blur, fit_sun, 0.0, options.rule)
-    grid = jnp.asarray(raw_from_k(np.geomspace(5e-4, options.range_k_max, 9)))
-    sol = _to_numpy(_solve(base, (arrays, pose, plain), options.max_steps, grid, jnp.asarray(True)))
+    sol = _to_numpy(_solve(base, (arrays, pose, plain_config(options, fit_sun)), options.max_steps,
+                           start_grid(options), jnp.asarray(True)))
     arrays = dataclasses.replace(arrays, grad_t_pixel=jnp.asarray(sol.grad_t_pixel))
     return sol, arrays, robust_delta(sol.residuals, options.robust)
 

@@ -15,9 +15,10 @@ from typing import Any
 
 import numpy as np
 
-from softshadow import GroundGrid, PinholeCamera
+from softshadow import FALLOFFS, GroundGrid, PinholeCamera, Projector, slide_from_text
 
-__all__ = ["NO_GEOMETRY", "TABLES", "SceneError", "SiteSpec", "ObjectSpec", "ReceiverSpec", "CameraSpec", "PhotoSpec", "SceneSpec",
+__all__ = ["NO_GEOMETRY", "TABLES", "SceneError", "SiteSpec", "ObjectSpec", "ReceiverSpec", "CameraSpec", "PhotoSpec",
+           "ProjectorSpec", "SceneSpec",
            "load_scene", "dump_scene", "scene_from_dict", "scene_to_dict"]
 
 CAMERA_KINDS = ("explicit", "topdown", "markers")
@@ -130,6 +131,63 @@ class PhotoSpec:
 
 
 @dataclasses.dataclass
+class ProjectorSpec:
+    """A ``[[projector]]`` table: a slide projector lighting the scene (``softshadow render``;
+    the fitter does not model projectors). See docs/projector.md.
+
+    position (3,) metres; target (3,) the point it looks at, or direction (3,) its axis (then
+    ``intensity`` is the irradiance at 1 m); up (3,); fov_deg: the full angle across the slide's
+    width; slide: "spot", "sine" (with frequency, cycles across the slide, and amplitude in
+    [0, 1]) or an image file (relative to the folder); intensity: irradiance at the target (linear,
+    clear slide, surface facing the projector); falloff: "inverse-square" or "none";
+    shadow_px: the shadow map's pixels across the slide's larger side.
+    """
+
+    position: tuple[float, float, float]
+    target: tuple[float, float, float] | None = None
+    direction: tuple[float, float, float] | None = None
+    up: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    fov_deg: float = 30.0
+    slide: str = "spot"
+    frequency: float | None = None
+    amplitude: float | None = None
+    intensity: float = 1.0
+    falloff: str = "inverse-square"
+    shadow_px: int = 1024
+
+    @property
+    def slide_text(self) -> str:
+        """The slide as ``softshadow.slide_from_text`` reads it."""
+        if self.slide == "sine":
+            return f"sine:{self.frequency:g}:{1.0 if self.amplitude is None else self.amplitude:g}"
+        return self.slide
+
+    def projector(self, base_dir=None) -> Projector:
+        """The ``softshadow.Projector`` (its slide made or read now; raises SlideError)."""
+        if self.target is not None:
+            target, reference = self.target, None
+        else:
+            d = np.asarray(self.direction, float)
+            target, reference = tuple(np.asarray(self.position) + d / np.linalg.norm(d)), 1.0
+        return Projector(self.position, target, slide_from_text(self.slide_text, base_dir), self.fov_deg,
+                         self.up, self.intensity, self.falloff, reference, self.shadow_px)
+
+    def to_toml(self) -> dict:
+        out: dict[str, Any] = {"position": list(self.position)}
+        if self.target is not None:
+            out["target"] = list(self.target)
+        else:
+            out["direction"] = list(self.direction)
+        out.update(up=list(self.up), fov_deg=self.fov_deg, slide=self.slide)
+        if self.slide == "sine":
+            out["frequency"] = self.frequency
+            if self.amplitude is not None:
+                out["amplitude"] = self.amplitude
+        out.update(intensity=self.intensity, falloff=self.falloff, shadow_px=self.shadow_px)
+        return out
+
+
+@dataclasses.dataclass
 class SceneSpec:
     object: ObjectSpec | None = None
     site: SiteSpec | None = None
@@ -137,6 +195,7 @@ class SceneSpec:
     camera: CameraSpec | None = None
     photos: dict[str, PhotoSpec] = dataclasses.field(default_factory=dict)
     base_dir: Path | None = None
+    projectors: list[ProjectorSpec] = dataclasses.field(default_factory=list)
 
     def photo(self, name: str) -> PhotoSpec:
         return self.photos.get(name, PhotoSpec())
@@ -262,6 +321,67 @@ def _receiver(table, where: str) -> ReceiverSpec:
     return spec
 
 
+_PROJECTOR_KEYS = ("position", "target", "direction", "up", "fov_deg", "slide", "frequency", "amplitude",
+                   "intensity", "falloff", "shadow_px")
+
+
+def _projector(table, where: str) -> ProjectorSpec:
+    table = _table(table, where)
+    _check_keys(table, _PROJECTOR_KEYS, where)
+    if "position" not in table:
+        raise SceneError(f"{where}: a projector needs position (metres)")
+    if ("target" in table) == ("direction" in table):
+        raise SceneError(f"{where}: give exactly one of target (the point it looks at) and direction")
+    spec = ProjectorSpec(_floats(table["position"], 3, f"{where}.position"))
+    if "target" in table:
+        spec.target = _floats(table["target"], 3, f"{where}.target")
+        if np.allclose(spec.target, spec.position):
+            raise SceneError(f"{where}.target must differ from position")
+    else:
+        spec.direction = _floats(table["direction"], 3, f"{where}.direction")
+        if not np.any(spec.direction):
+            raise SceneError(f"{where}.direction must not be zero")
+    if "up" in table:
+        spec.up = _floats(table["up"], 3, f"{where}.up")
+        axis = np.subtract(spec.target, spec.position) if spec.target is not None else np.asarray(spec.direction)
+        up = np.asarray(spec.up)
+        if not np.any(up) or np.linalg.norm(np.cross(axis / np.linalg.norm(axis), up / np.linalg.norm(up))) < 1e-9:
+            raise SceneError(f"{where}.up must be a non-zero direction off the projector's axis")
+    spec.fov_deg = _number(table.get("fov_deg", spec.fov_deg), f"{where}.fov_deg", positive=True)
+    if not spec.fov_deg < 170:
+        raise SceneError(f"{where}.fov_deg must be below 170 degrees, got {spec.fov_deg:g}")
+    slide = table.get("slide", "spot")
+    if not isinstance(slide, str) or not slide:
+        raise SceneError(f"{where}.slide must be \"spot\", \"sine\" or an image file name, got {slide!r}")
+    spec.slide = slide
+    if slide == "sine":
+        if "frequency" not in table:
+            raise SceneError(f"{where}: a sine slide needs frequency (cycles across the slide)")
+        spec.frequency = _number(table["frequency"], f"{where}.frequency")
+        if spec.frequency < 0:
+            raise SceneError(f"{where}.frequency must be >= 0, got {spec.frequency:g}")
+        if "amplitude" in table:
+            spec.amplitude = _number(table["amplitude"], f"{where}.amplitude")
+            if not 0 <= spec.amplitude <= 1:
+                raise SceneError(f"{where}.amplitude must be in [0, 1], got {spec.amplitude:g}")
+    else:
+        for key in ("frequency", "amplitude"):
+            if key in table:
+                raise SceneError(f"{where}.{key} goes with slide = \"sine\" only (slide is {slide!r})")
+    spec.intensity = _number(table.get("intensity", spec.intensity), f"{where}.intensity")
+    if spec.intensity < 0:
+        raise SceneError(f"{where}.intensity must be >= 0, got {spec.intensity:g}")
+    falloff = table.get("falloff", spec.falloff)
+    if falloff not in FALLOFFS:
+        raise SceneError(f"{where}.falloff must be one of {FALLOFFS}, got {falloff!r}")
+    spec.falloff = falloff
+    px = table.get("shadow_px", spec.shadow_px)
+    if isinstance(px, bool) or not isinstance(px, int) or not 16 <= px <= 8192:
+        raise SceneError(f"{where}.shadow_px must be a whole number in [16, 8192], got {px!r}")
+    spec.shadow_px = px
+    return spec
+
+
 def load_scene(path: str | Path) -> SceneSpec:
     """Read and validate a scene.toml."""
     path = Path(path)
@@ -275,7 +395,7 @@ def load_scene(path: str | Path) -> SceneSpec:
 
 
 #: The tables of scene.toml.
-TABLES = ("site", "object", "receiver", "camera", "photos")
+TABLES = ("site", "object", "receiver", "camera", "photos", "projector")
 #: ``[object] mesh = NO_GEOMETRY``: the folder has no known occluder; each photo is measured on its own.
 NO_GEOMETRY = "none"
 _PHOTO_KEYS = ("time", "group", "sun_azimuth_deg", "sun_elevation_deg", "camera", "depth", "ignore")
@@ -325,6 +445,12 @@ def scene_from_dict(data: dict, base_dir=None, source="scene.toml") -> SceneSpec
         spec.receiver = _receiver(data.pop("receiver"), f"{source} [receiver]")
     if "camera" in data:
         spec.camera = _camera(data.pop("camera"), f"{source} [camera]")
+    projectors = data.pop("projector", [])
+    if isinstance(projectors, dict):
+        raise SceneError(f"{source}: write projectors as [[projector]] (an array of tables), not [projector]")
+    if not isinstance(projectors, list):
+        raise SceneError(f"{source}: projector must be [[projector]] tables, got {projectors!r}")
+    spec.projectors = [_projector(p, f"{source} [[projector]] #{i + 1}") for i, p in enumerate(projectors)]
     for name, p in _table(data.pop("photos", {}) or {}, f"{source} [photos]").items():
         where = f'{source} [photos."{name}"]'
         p = _table(p, where)
@@ -373,6 +499,8 @@ def scene_to_dict(spec: SceneSpec) -> dict:
     out["receiver"] = spec.receiver.to_toml()
     if spec.camera is not None:
         out["camera"] = spec.camera.to_toml()
+    if spec.projectors:
+        out["projector"] = [p.to_toml() for p in spec.projectors]
     if spec.photos:
         photos = {}
         for name, p in spec.photos.items():

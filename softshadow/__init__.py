@@ -11,6 +11,7 @@ from .colour import linear_to_srgb, srgb_to_linear
 from .compilation_cache import default_cache_dir, use_compilation_cache
 from .camera import GroundGrid, PinholeCamera, look_at_camera
 from .evaluate import plan_alpha, plan_alpha_jit, plan_coordinate, plan_coordinate_light
+from .lod import PAPER_FACE_COUNTS, LodLevel, decimate, lod_series
 from .meshes import BUILTIN_MESHES, MeshError, builtin_mesh, load_mesh
 from .occluder import Occluder, Silhouette
 from .params import (Pose, ShadowParams, Sun, brightness_to_paper, paper_to_range_k, paper_to_rho,
@@ -25,12 +26,21 @@ from .sky import (SkyNodes, cosine_weighted_directions, hidden_sky_fraction, hid
                   open_sky_fraction)
 from .shadowmap import BIAS_PX, LightFrame, ShadowMap, depth_bias, faces_away, rasterise_depth, shadow_map
 from .render import CameraRender, SoftShadowModel, object_mask
+from .slides import DEFAULT_SLIDE_PX, PAPER_SLIDES, SlideError, load_slide, sine_slide, slide_from_text, spot_slide
+from .projector import FALLOFFS, Projector, ProjectorShadowMap, projector_shadow_map
+from .visibility import GROUND, NOTHING, Surface, VisibleSurfaces, visible_surfaces
+from .scene_render import SceneLights, SceneRender, SceneSetup, prepare_scene, render_scene, shade_scene
 from .sun import SunBelowHorizonError, check_sun_above_horizon, light_direction, sun_direction
 from .threads import one_blas_thread
 
 __all__ = [
+    "DEFAULT_SLIDE_PX", "PAPER_SLIDES", "SlideError", "load_slide", "sine_slide", "slide_from_text", "spot_slide",
+    "FALLOFFS", "Projector", "ProjectorShadowMap", "projector_shadow_map",
+    "GROUND", "NOTHING", "Surface", "VisibleSurfaces", "visible_surfaces",
+    "SceneLights", "SceneRender", "SceneSetup", "prepare_scene", "render_scene", "shade_scene",
     "BACKENDS", "BIAS_PX", "LightFrame", "ShadowMap", "depth_bias", "faces_away", "light_band_widths",
     "rasterise_depth", "shadow_map",
+    "PAPER_FACE_COUNTS", "LodLevel", "decimate", "lod_series",
     "BUILTIN_MESHES", "CameraRender", "GridPlan", "GroundGrid", "MeshError", "Occluder", "PROFILES",
     "PinholeCamera", "PointPlan", "Pose", "PosedOccluder", "RULES", "ShadowParams", "Silhouette",
     "SoftShadowModel", "Sun", "SunBelowHorizonError", "blurred_profile_alpha", "brightness_to_paper",

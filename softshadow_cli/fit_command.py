@@ -21,7 +21,8 @@ def fit_options(args):
     profiles = ("linear", "disk") if args.profile == "auto" else (args.profile,)
     return FitOptions(profiles=profiles, rule=args.rule, range_k_max=args.range_k_max,
                       plots=args.plots, overlays=getattr(args, "overlays", "first"),
-                      verbose=args.verbose)
+                      verbose=args.verbose, lod=getattr(args, "lod", "auto"),
+                      lod_tolerance=getattr(args, "lod_tolerance", 0.1))
 
 
 def progress_bar(total_label: str):

@@ -37,9 +37,36 @@ def _add_render(sub):
     p.add_argument("--size", help="image size WxH (default: 512x512 for a top-down map, the principal "
                                    "point's image for an explicit camera)")
     p.add_argument("--pixel-m", type=float, help="metres per pixel for a default top-down map")
-    p.add_argument("--npy", help="also write the linear shading (H, W) as .npy")
+    p.add_argument("--npy", help="also write the linear shading (H, W) as .npy ((H, W, 3) linear radiance for a "
+                                 "scene image)")
     p.add_argument("--silhouettes", action="store_true",
                    help="draw the outer (expanded), hard and inner (contracted) outlines")
+    g = p.add_argument_group("projectors and scene images",
+                             "With a projector (here or [[projector]] in scene.toml) or --camera-position, render "
+                             "a camera image of the whole scene: object and receivers, Lambertian, lit by an "
+                             "ambient term (default rho), the sun (its soft shadow) and the projectors; see "
+                             "docs/projector.md. Each projector option may be repeated, paired in order. Write "
+                             "X,Y,Z values that start with a minus sign with =, e.g. --projector=-2,-3,3.")
+    g.add_argument("--projector", action="append", metavar="X,Y,Z", help="a projector's position (metres)")
+    g.add_argument("--projector-target", action="append", metavar="X,Y,Z", help="the point it looks at")
+    g.add_argument("--projector-fov", action="append", type=float, metavar="DEG",
+                   help="full angle across the slide's width (default 30)")
+    g.add_argument("--slide", action="append", metavar="spot|sine:FREQ[:AMP]|PATH",
+                   help="the slide: the spotlight, the spotlight through a sine grid of FREQ cycles across the "
+                        "slide and amplitude AMP in [0, 1] (default 1), or an image file (default spot)")
+    g.add_argument("--projector-intensity", action="append", type=float, metavar="E",
+                   help="irradiance at the target through a clear slide, linear (default 1)")
+    g.add_argument("--no-sun", action="store_true", help="no sun: ambient and projectors only (the paper's set-up)")
+    g.add_argument("--ambient", type=float, help="ambient irradiance (default rho; 0.3 without the sun)")
+    g.add_argument("--camera-position", metavar="X,Y,Z", help="a look-at camera's position (with --camera-target)")
+    g.add_argument("--camera-target", metavar="X,Y,Z", help="the point the camera looks at")
+    g.add_argument("--camera-fov", type=float, metavar="DEG", help="its horizontal field of view (default 50)")
+    g.add_argument("--smooth", action="store_true",
+                   help="interpolate vertex normals (default: flat faces, which show a mesh's facets)")
+    g.add_argument("--supersample", type=int, default=1, metavar="S",
+                   help="S x S samples per pixel, averaged (anti-aliasing; default 1)")
+    g.add_argument("--exposure", type=float, default=1.0, help="scale the linear image before sRGB encoding "
+                                                                "(default 1; values above 1 clip)")
     p.set_defaults(func=_run_render)
 
 
@@ -86,7 +113,27 @@ def _add_fit(sub):
     p.add_argument("--overlays", default="first", choices=("first", "all"),
                    help="overlay plots of the fitted shadow for the first photo of each group "
                         "(default) or for every photo")
+    p.add_argument("--lod", default="auto", type=_lod_value, metavar="auto|off|FACES",
+                   help="level of detail of the object's mesh: auto (default: the coarsest level that "
+                        "moves k and rho by at most --lod-tolerance of their standard errors), off "
+                        "(the mesh as given), or a face count to decimate to")
+    p.add_argument("--lod-tolerance", type=float, default=0.1, metavar="SE",
+                   help="with --lod auto: the largest shift of k or rho allowed, in their standard "
+                        "errors (default 0.1)")
     p.set_defaults(func=_run_fit)
+
+
+def _lod_value(text: str):
+    """--lod: "auto", "off" or a face count (at least 4)."""
+    if text in ("auto", "off"):
+        return text
+    try:
+        faces = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected auto, off or a face count, got {text!r}") from None
+    if faces < 4:
+        raise argparse.ArgumentTypeError(f"a level of detail needs at least 4 faces, got {faces}")
+    return faces
 
 
 def _run_fit(args) -> int:
@@ -157,7 +204,8 @@ def main(argv=None) -> int:
     try:
         _use_compilation_cache()
         from softshadow import one_blas_thread
-        with one_blas_thread():
+        from .interrupts import ctrl_c_never_swallowed
+        with ctrl_c_never_swallowed(), one_blas_thread():
             return int(args.func(args) or 0)
     except KeyboardInterrupt:
         return _fail(args.command, "interrupted", 130)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 
+import jax
 import numpy as np
 import pytest
 
@@ -90,14 +91,23 @@ def test_vendored_dragon_has_the_papers_face_count_and_stands_on_the_ground():
     assert abs(len(decimated(m, 1000).faces) - 1000) <= 10
 
 
-def test_sweep_quick_writes_json_report_and_plot(tmp_path, monkeypatch, capsys):
+def test_sweep_tiny_writes_json_report_and_plot(tmp_path, monkeypatch, capsys):
+    """The whole sweep at its tiny size (the full one is behind ``softshadow bench --what sweep``),
+    Mitsuba reported as skipped, the report made from the run's JSON."""
+    from softshadow_cli.bench import mitsuba_peer, sweep_and_report
+    from softshadow_cli.bench.sweep import SweepSettings
     monkeypatch.setenv("SOFTSHADOW_BENCH_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setattr(mitsuba_peer, "mitsuba_available", lambda: False)
     out, md = tmp_path / "bench.json", tmp_path / "docs" / "speed.md"
-    assert main(["bench", "--what", "sweep", "--quick", "--no-fit", "--json", str(out), "--report", str(md)]) == 0
+    with jax.enable_x64(False):  # the command line's precision (and its compiled programs, shared)
+        sweep_and_report(SweepSettings.tiny(), fit=False, json_path=out, report_path=md)
+    assert "skipped: mitsuba not installed" in capsys.readouterr().err
     result = json.loads(out.read_text())
+    assert result["mitsuba"] == {"skipped": "mitsuba not installed"}
     for key in ("pillar", "ball", "dragon"):
         case = result[key]
         assert case["median_ms"] > 0 and case["error"]["rms"] >= 0 and case["error"]["band_pixels"] > 0
+        assert case["mesh"] == key
     for sweep in ("resolution", "profile", "dtype", "lod"):
         assert result[sweep] and all("error" in c for c in result[sweep])
     assert [c["dtype"] for c in result["dtype"]] == ["float32", "float64"]
@@ -109,12 +119,70 @@ def test_sweep_quick_writes_json_report_and_plot(tmp_path, monkeypatch, capsys):
     sc = result["scaling"]
     assert [r["faces"] for r in sc["by_faces"]] == [176, 1472] and "median_ms" in sc["by_faces"][0]["naive"]
     assert set(sc["slope_vs_faces"]) == {"softshadow", "paper", "naive"}
-    assert all(r["measured_S_m"] > r["measured_H_m"] > 0 for r in result["table1"])
-    assert "fit_samples" not in result  # --no-fit (the fit sweep reuses fit.bench_same_model)
-    assert result["environment"]["versions"]["jax"]
+    law = sc["cost_model"]  # six timed cases: both laws fitted, residuals reported
+    assert law["points"] == 6 and law["pixels_plus_edges"]["rms_rel_residual"] >= 0
+    assert "fit_samples" not in result and "fit_baseline" not in result  # fit=False
+
+    def timed_renderers(node):
+        if isinstance(node, dict):
+            if "renderer" in node and "median_ms" in node:
+                yield node
+            for v in node.values():
+                yield from timed_renderers(v)
+        elif isinstance(node, list):
+            for v in node:
+                yield from timed_renderers(v)
+
+    timed = list(timed_renderers(result))
+    assert len(timed) >= 12 and all("rms" in c["error"] for c in timed)  # every timed renderer has its error
+    env = result["environment"]
+    assert env["versions"]["jax"] and len(env["machine"]["load_average_1_5_15_min"]) == 3
+    assert len(env["load_average_at_end"]) == 3
     assert list((tmp_path / "cache").glob("reference-*.npz"))  # the truth is cached
     text = md.read_text()
-    assert "img/speed_vs_error_pareto.png" in text and result["environment"]["date_utc"] in text
+    assert "img/speed_vs_error_pareto.png" in text and env["date_utc"] in text
     assert "Table 1" in text and "Table 3" in text and "Table 2 in the paper's own parameters" in text
+    assert "Skipped: mitsuba not installed" in text and "Cost grows with pixels plus silhouette edges?" in text
+    for mesh in ("pillar", "ball", "dragon"):
+        assert f"| {mesh} |" in text.split("Pareto front of each mesh")[1].split("## The meshes")[0]
     assert (md.parent / "img" / "speed_vs_error_pareto.png").stat().st_size > 1000
     assert (md.parent / "img" / "speed_vs_error_scaling.png").stat().st_size > 1000
+
+
+def test_cost_model_tells_a_sum_from_a_product():
+    from softshadow_cli.bench.scaling import cost_model
+    rows = [{"pixels": p, "silhouette_edges": e, "softshadow": {"median_ms": 1.0 + 2e-5 * p + 3e-3 * e}}
+            for p in (1e4, 4e4, 1.6e5) for e in (50, 500, 5000)]
+    law = cost_model(rows)
+    a = law["pixels_plus_edges"]
+    assert a["rms_rel_residual"] < 1e-6 and a["ms_per_megapixel"] == pytest.approx(20.0, rel=1e-4)
+    assert a["ms_per_thousand_edges"] == pytest.approx(3.0, rel=1e-4)
+    assert law["pixels_times_edges"]["rms_rel_residual"] > 0.1
+
+
+def test_time_mitsuba_needs_is_interpolated_or_extrapolated():
+    from softshadow_cli.bench.mitsuba_peer import time_to_reach
+    t, e = [10.0, 40.0, 160.0], [0.04, 0.02, 0.01]
+    assert time_to_reach(t, e, 0.02) == {"ms": pytest.approx(40.0), "how": "interpolated"}
+    assert time_to_reach(t, e, 0.0283)["ms"] == pytest.approx(20.0, rel=0.01)
+    far = time_to_reach(t, e, 0.005)
+    assert far["ms"] == pytest.approx(640.0) and far["how"].startswith("extrapolated")
+    assert time_to_reach(t, e, 0.05)["how"] == "at the fewest samples measured"
+
+
+def test_mitsuba_peer_renders_the_bench_scene(tmp_path, monkeypatch):
+    """Where Mitsuba is installed (the optional extra), its top-down render of the pillar agrees
+    with the physical truth (the same scene) and its cases carry errors."""
+    pytest.importorskip("mitsuba")
+    from softshadow_cli.bench.meshes import bench_mesh
+    from softshadow_cli.bench.mitsuba_peer import bench_mitsuba
+    from softshadow_cli.bench.sweep import SweepSettings, _Scene
+    monkeypatch.setenv("SOFTSHADOW_BENCH_CACHE", str(tmp_path / "cache"))
+    s = SweepSettings.tiny()
+    s.reference_pixels, s.reference_samples = 48, 64
+    scene = _Scene(bench_mesh("pillar"), s, name="pillar")
+    run = bench_mitsuba(scene, (16, 64), targets={"x": {"median_ms": 1.0, "error": {"rms": 0.01, "rms_band": 0.05}}})
+    errs = [c["error"]["rms"] for c in run["cases"]]
+    assert run["variant"] in ("llvm_ad_rgb", "scalar_rgb") and [c["spp"] for c in run["cases"]] == [16, 64]
+    # The same scene: a mirrored or misplaced shadow would read tenths, not hundredths.
+    assert errs[1] < 0.03 and run["time_to_reach"]["x"]["rms"]["mitsuba_ms"] > 0

@@ -105,6 +105,56 @@ def test_profile_fit_recovers_an_exact_ramp(blur_px):
     assert fit.residual_rms < 1e-5
 
 
+def _least_squares_fit(s, y, max_width_px):
+    """The per-profile reference: scipy's least_squares (trf, soft-L1, finite-difference Jacobian) on the same
+    objective, start and bounds as the batched fit."""
+    from scipy import optimize
+    from fitting.edge_ramp import LOSS_SCALE_PER_NOISE, SAMPLING_BLUR_PX, SLOPE_SIGMA_PER_PX, _start
+
+    ok, p0, lo, hi, noise = _start(s, y[None], np.ones((1, s.size), bool), np.array([max_width_px]))
+    if not ok[0]:
+        return None
+    prior = noise[0] / SLOPE_SIGMA_PER_PX
+
+    def residual(p):
+        return np.append(ramp_log_model(s, *p, blur_px=SAMPLING_BLUR_PX) - y, prior * p[1])
+
+    return optimize.least_squares(residual, p0[0], bounds=(lo[0], hi[0]), loss="soft_l1",
+                                  f_scale=LOSS_SCALE_PER_NOISE * noise[0], x_scale="jac", jac="3-point").x
+
+
+def test_batched_profile_fit_matches_the_per_profile_least_squares_fit():
+    """One batched fit of profiles of different lengths, widths, noise and specks lands where scipy's
+    least_squares lands, profile by profile."""
+    from fitting.edge_ramp import fit_edge_profiles
+
+    rng = np.random.default_rng(3)
+    s = np.arange(-24.0, 24.01, 0.5)
+    n = 40
+    halves = rng.uniform(8.0, 24.0, n)
+    present = np.abs(s)[None, :] <= halves[:, None]
+    y = np.empty((n, s.size))
+    for i in range(n):
+        y[i] = ramp_log_model(s, rng.normal(), rng.normal(0.0, 3e-4), rng.uniform(-2.0, 2.0),
+                              rng.uniform(1.0, halves[i]), rng.uniform(0.1, 0.8), blur_px=0.41)
+        y[i] += rng.normal(0.0, rng.uniform(0.005, 0.08), s.size)
+        if i % 5 == 0:
+            y[i, np.abs(s - 3.0) < 1.0] += 0.4                       # a pebble inside the span
+    y[-1] = y[-1, ::-1]                                              # no darker side
+    y_padded = np.where(present, y, np.nan)                          # padding must not matter
+    fits = fit_edge_profiles(s, y_padded, present, 1.2 * halves)
+    assert not fits.ok[-1]
+    for i in range(n - 1):
+        m = present[i]
+        ref = _least_squares_fit(s[m], y[i, m], 1.2 * halves[i])
+        assert fits.ok[i]
+        assert fits.rho[i] == pytest.approx(ref[4], abs=1e-3)
+        assert fits.w[i] == pytest.approx(ref[3], abs=0.02 * ref[3] + 0.05)
+        assert fits.s0[i] == pytest.approx(ref[2], abs=0.05)
+        one = fit_edge_profile(s[m], y[i, m], 1.2 * halves[i])       # the single-profile entry point agrees
+        assert one.rho == pytest.approx(fits.rho[i], abs=1e-6)
+
+
 def test_blurred_ramp_keeps_its_ends_and_area():
     """Blurring moves no mass: alpha still runs 1 -> 0 and integrates to the same area as the sharp ramp."""
     s = np.arange(-30.0, 30.0, 0.01)
@@ -190,7 +240,7 @@ def test_a_small_round_shadow_is_measured_all_round():
 
 def test_a_leaning_normal_is_straightened_by_the_ramp_shifts_across_the_strip():
     """Internal step: a normal 12 deg off on a straight edge is turned back by the tilt seen across the strip."""
-    from fitting.edge_measure import _Images, _refined_normal
+    from fitting.edge_measure import _Images, _refined_normals
 
     poly = [(-100, -100), (300, -100), (300, 70), (-100, 70)]         # one straight edge, v = 70, lit below
     rng = np.random.default_rng(11)
@@ -201,8 +251,12 @@ def test_a_leaning_normal_is_straightened_by_the_ramp_shifts_across_the_strip():
     s = np.arange(-14.0, 14.01, 0.5)
     y = ramp_log_model(s, np.log(0.85), 0.0, 0.0, 5.0 / np.cos(tilt), 0.3, 0.41)   # the ramp as seen obliquely
     fit = fit_edge_profile(s, y, 20.0)
-    refined = _refined_normal(images, np.array([80.0, 70.0]), leaning, 14.0, fit)
-    assert np.degrees(np.arccos(refined @ [0.0, 1.0])) < 3.0
+    params = np.array([[fit.a, fit.b, fit.s0, fit.w, fit.rho]] * 2)
+    # two profiles in one batch, the second already straight: only the first turns
+    refined = _refined_normals(images, np.array([[80.0, 70.0], [120.0, 70.0]]), np.array([leaning, [0.0, 1.0]]),
+                               np.array([14.0, 14.0]), params)
+    assert np.degrees(np.arccos(refined[0] @ [0.0, 1.0])) < 3.0
+    assert np.degrees(np.arccos(refined[1] @ [0.0, 1.0])) < 3.0
 
 
 def test_penumbra_in_metres_scales_the_pixel_width():

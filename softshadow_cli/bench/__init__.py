@@ -6,20 +6,37 @@ import json
 import sys
 from pathlib import Path
 
-__all__ = ["run_bench"]
+__all__ = ["run_bench", "sweep_and_report"]
 
 
-def _sweep(args, result: dict) -> dict:
-    """The speed-against-error sweep (top-level keys per mesh, each with its ``error``), and the
-    report made from it when asked."""
-    from .environment import environment
-    from .sweep import SweepSettings, run_sweep
-    result = {"environment": environment(), **result}
-    result.update(run_sweep(SweepSettings(quick=args.quick), fit=getattr(args, "fit", True),
-                            progress=lambda msg: print(msg, file=sys.stderr, flush=True)))
-    if getattr(args, "report", None):
+def _progress(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def sweep_and_report(settings, result: dict | None = None, fit: bool = True, json_path=None,
+                     report_path=None) -> dict:
+    """The speed-against-error sweep in one run (``sweep.run_sweep``): its JSON (top-level keys
+    per mesh, ``paper``, the peers, each timed case with its ``error``), with the date, machine,
+    load (at the start and the end) and versions, written to ``json_path``; and the report made
+    from that JSON alone, written to ``report_path`` (its plots in ``img/`` beside it)."""
+    import datetime
+    import time
+    from .environment import environment, load_average
+    from .sweep import run_sweep
+    t0 = time.perf_counter()
+    result = {"environment": environment(), **(result or {})}
+    result.update(run_sweep(settings, fit=fit, progress=_progress))
+    result["environment"]["load_average_at_end"] = load_average()
+    result["environment"]["run_minutes"] = round((time.perf_counter() - t0) / 60.0, 1)
+    result["environment"]["finished_utc"] = datetime.datetime.now(datetime.timezone.utc).strftime(
+        "%Y-%m-%d %H:%M UTC")
+    if json_path:
+        Path(json_path).parent.mkdir(parents=True, exist_ok=True)
+        Path(json_path).write_text(json.dumps(result, indent=1) + "\n")
+    if report_path:
         from .speed_report import write_report
-        write_report(result, Path(args.report), Path(args.json_path).name if args.json_path else None)
+        write_report(json.loads(json.dumps(result)), Path(report_path),
+                     Path(json_path).name if json_path else None)
     return result
 
 
@@ -29,6 +46,12 @@ def run_bench(args) -> int:
     dtype = str(jnp.result_type(float))
     result = {"jax": jax.__version__, "devices": [str(d) for d in jax.devices()], "dtype": dtype,
               "settings": f"top-down map, k=0.01, rho=0.3, sun az 200 el 40, {dtype}"}
+    if args.what == "sweep":
+        from .sweep import SweepSettings
+        result = sweep_and_report(SweepSettings(quick=args.quick), result, fit=getattr(args, "fit", True),
+                                  json_path=args.json_path, report_path=getattr(args, "report", None))
+        print(json.dumps(result, indent=1))
+        return 0
     sizes = (256, 512) if args.quick else (256, 512, 1024)
     if args.what in ("render", "all"):
         from .render import bench_render
@@ -45,10 +68,7 @@ def run_bench(args) -> int:
         result["fit"] = bench_fit(quick=args.quick)
     if args.what == "floor":
         from .floor import bench_floor
-        result["floor"] = bench_floor(quick=args.quick,
-                                      progress=lambda msg: print(msg, file=sys.stderr, flush=True))
-    if args.what == "sweep":
-        result = _sweep(args, result)
+        result["floor"] = bench_floor(quick=args.quick, progress=_progress)
     text = json.dumps(result, indent=1)
     print(text)
     if args.json_path:

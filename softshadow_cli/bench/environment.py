@@ -7,7 +7,7 @@ import os
 import platform
 from importlib import metadata
 
-__all__ = ["environment"]
+__all__ = ["environment", "load_average"]
 
 _PACKAGES = ("softshadow", "jax", "jaxlib", "numpy", "scipy", "opencv-contrib-python-headless", "trimesh",
              "embreex", "fast-simplification", "equinox", "optimistix", "matplotlib")
@@ -31,6 +31,14 @@ def _memory_gb() -> float | None:
         return None
 
 
+def load_average() -> list[float] | None:
+    """The system's load average over 1, 5 and 15 minutes (runnable processes), if known."""
+    try:
+        return [round(x, 2) for x in os.getloadavg()]
+    except (OSError, AttributeError):
+        return None
+
+
 def environment() -> dict:
     versions = {"python": platform.python_version()}
     for name in _PACKAGES:
@@ -41,5 +49,6 @@ def environment() -> dict:
     cpus = os.sched_getaffinity(0) if hasattr(os, "sched_getaffinity") else None
     return {"date_utc": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
             "machine": {"cpu": _cpu_model(), "cores": len(cpus) if cpus else os.cpu_count(),
-                        "memory_gb": _memory_gb(), "platform": platform.platform()},
+                        "memory_gb": _memory_gb(), "platform": platform.platform(),
+                        "load_average_1_5_15_min": load_average()},
             "versions": versions}

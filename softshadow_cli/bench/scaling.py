@@ -13,7 +13,7 @@ import numpy as np
 
 from .measure import timed
 
-__all__ = ["scaling_meshes", "loglog_slope", "bench_scaling"]
+__all__ = ["scaling_meshes", "loglog_slope", "cost_model", "bench_scaling"]
 
 
 def loglog_slope(x, y) -> float | None:
@@ -70,30 +70,64 @@ def _row(name, mesh, grid, sun, light_rho, k, repeats, naive_limit):
     return row
 
 
-def bench_scaling(quick: bool = False, repeats: int = 3) -> dict:
+def cost_model(rows: list[dict], renderer: str = "softshadow") -> dict:
+    """Time against pixels plus silhouette edges, measured: ``renderer``'s median ms over the rows
+    (by faces and by pixels) fitted, non-negative least squares, as t = a + b P + c E (P pixels,
+    E silhouette edges) and, for contrast, as t = a + d P E (the naive renderer's law). Returns
+    the coefficients and each law's RMS relative residual (the better law has the smaller)."""
+    from scipy.optimize import nnls
+    pts = [(r["pixels"], r["silhouette_edges"], r[renderer]["median_ms"]) for r in rows
+           if "median_ms" in r[renderer]]
+    if len(pts) < 4:
+        return {"renderer": renderer, "points": len(pts)}
+    p, e, t = (np.array(c, float) for c in zip(*pts))
+
+    def law(columns):
+        a = np.stack(columns, axis=1) / t[:, None]  # relative residuals: every row weighs the same
+        coef, _ = nnls(a, np.ones_like(t))
+        rel = a @ coef - 1.0
+        return coef, float(np.sqrt(np.mean(rel ** 2))), float(np.max(np.abs(rel)))
+
+    (a, b, c), rms_sum, max_sum = law([np.ones_like(t), p, e])
+    (a2, d), rms_prod, max_prod = law([np.ones_like(t), p * e])
+    return {"renderer": renderer, "points": len(pts),
+            "pixels_plus_edges": {"ms": a, "ms_per_megapixel": 1e6 * b, "ms_per_thousand_edges": 1e3 * c,
+                                  "rms_rel_residual": rms_sum, "max_rel_residual": max_sum},
+            "pixels_times_edges": {"ms": a2, "ms_per_giga_pixel_edges": 1e9 * d,
+                                   "rms_rel_residual": rms_prod, "max_rel_residual": max_prod}}
+
+
+def bench_scaling(face_counts=(176, 1472, 5000, 26584, 106336, 200000), pixel_sizes=(128, 256, 512, 1024),
+                  repeats: int = 3, naive_limit: float = 1.5e8, pixels_for_faces: int | None = None) -> dict:
+    """Time and peak memory against faces (at ``pixels_for_faces``^2, default the second of
+    ``pixel_sizes``) and against map size (the pillar and the largest dragon up to 26,584
+    faces), with log-log slopes, and the cost law (``cost_model``)."""
     from softshadow import Sun
     from .sweep import scene_grid
     sun, k, rho = Sun(200.0, 40.0), 0.01, 0.2
     s_dir = -np.asarray(sun.light_np)
-    face_counts = (176, 1472) if quick else (176, 1472, 5000, 26584, 106336, 200000)
-    pixels = 32 if quick else 256
-    limit = 2e5 if quick else 1.5e8
+    pixels = pixels_for_faces or pixel_sizes[min(1, len(pixel_sizes) - 1)]
     meshes = scaling_meshes(face_counts)
-    by_faces = [_row(f"{n} faces", m, scene_grid(m, s_dir, pixels), sun, rho, k, repeats, limit)
+    by_faces = [_row(f"{n} faces", m, scene_grid(m, s_dir, pixels), sun, rho, k, repeats, naive_limit)
                 for n, m in meshes.items()]
     by_pixels = []
-    for name, mesh in (("pillar", meshes[176]), ("dragon", meshes.get(26584, meshes[1472]))):
-        for p in ((16, 32) if quick else (128, 256, 512, 1024)):
-            by_pixels.append(_row(f"{name} {p} px", mesh, scene_grid(mesh, s_dir, p), sun, rho, k, repeats, limit))
+    dragon = max((n for n in meshes if n <= 26584), default=min(meshes))
+    for name, mesh in (("pillar", meshes[min(meshes)]), ("dragon", meshes[dragon])):
+        for p in pixel_sizes:
+            by_pixels.append(_row(f"{name} {p} px", mesh, scene_grid(mesh, s_dir, p), sun, rho, k, repeats,
+                                  naive_limit))
 
-    def slopes(rows, x_key):
+    def slopes(rows, x_key, y_key="median_ms"):
         out = {}
         for r in ("softshadow", "paper", "naive"):
-            pts = [(row[x_key], row[r]["median_ms"]) for row in rows if "median_ms" in row[r]]
+            pts = [(row[x_key], row[r][y_key]) for row in rows if row[r].get(y_key) is not None]
             out[r] = loglog_slope([p[0] for p in pts], [p[1] for p in pts])
         return out
 
+    pix = {name: [r for r in by_pixels if r["case"].startswith(name)] for name in ("pillar", "dragon")}
     return {"pixels_for_faces": pixels, "by_faces": by_faces, "slope_vs_faces": slopes(by_faces, "faces"),
             "by_pixels": by_pixels,
-            "slope_vs_pixels": {name: slopes([r for r in by_pixels if r["case"].startswith(name)], "pixels")
-                                for name in ("pillar", "dragon")}}
+            "slope_vs_pixels": {name: slopes(rows, "pixels") for name, rows in pix.items()},
+            "memory_slope_vs_faces": slopes(by_faces, "faces", "peak_extra_mb"),
+            "memory_slope_vs_pixels": {name: slopes(rows, "pixels", "peak_extra_mb") for name, rows in pix.items()},
+            "cost_model": cost_model(by_faces + by_pixels)}

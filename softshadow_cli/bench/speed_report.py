@@ -9,24 +9,33 @@ from pathlib import Path
 __all__ = ["image_cases", "pareto_front", "pareto_plot", "write_report", "report_from_json"]
 
 
-def image_cases(result: dict) -> list[tuple[str, dict]]:
-    """(label, case) of every timed render that has an image error."""
+def image_cases(result: dict) -> list[tuple[str, str, dict]]:
+    """(mesh, label, case) of every timed render that has an image error."""
     out = []
     for key in ("pillar", "ball", "dragon", "knot"):
         if key in result:
-            out.append((f"{key} {result[key]['pixels']} px", result[key]))
+            out.append((key, f"{result[key]['pixels']} px", result[key]))
     for c in result.get("resolution", []):
-        out.append((f"pillar {c['pixels']} px", c))
+        out.append(("pillar", f"{c['pixels']} px", c))
     for c in result.get("profile", []):
-        out.append((f"pillar {c['profile']}", c))
+        out.append(("pillar", c["profile"], c))
     for c in result.get("dtype", []):
-        out.append((f"pillar {c['dtype']}", c))
+        out.append(("pillar", c["dtype"], c))
     for c in result.get("lod", []):
-        out.append((f"dragon {c['faces']} faces", c))
+        out.append(("dragon", f"{c['faces']} faces", c))
     for name, row in result.get("paper", {}).get("table3", {}).items():
-        out.append((f"paper {name} soft", row["soft"]))
-        out.append((f"paper {name} hard", row["hard"]))
+        out.append((name, "paper soft", row["soft"]))
+        out.append((name, "paper hard", row["hard"]))
+    for name, peer in mitsuba_runs(result).items():
+        for c in peer["cases"]:
+            out.append((name, f"{c['spp']} spp", c))
     return out
+
+
+def mitsuba_runs(result: dict) -> dict:
+    """{mesh: Mitsuba run} of the sweep ({} when it was skipped)."""
+    m = result.get("mitsuba") or {}
+    return {} if "skipped" in m else m
 
 
 def pareto_front(points: list[tuple[float, float]]) -> list[int]:
@@ -41,35 +50,59 @@ def pareto_front(points: list[tuple[float, float]]) -> list[int]:
 
 
 def pareto_plot(result: dict, path: Path) -> None:
-    """Time against penumbra-band error of every image case (log-log), the Pareto front joined."""
+    """Time against penumbra-band error of every image case (log-log), one panel per mesh, each
+    with its own Pareto front."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    cases = [(lab, c) for lab, c in image_cases(result) if c["error"].get("rms_band") is not None]
-    fig, ax = plt.subplots(figsize=(7.5, 5))
-    groups = {}
-    for lab, c in cases:
-        groups.setdefault(c.get("renderer", "softshadow"), []).append((lab, c))
-    for renderer, items in groups.items():
-        ax.scatter([c["median_ms"] for _, c in items], [c["error"]["rms_band"] for _, c in items],
-                   label=renderer, s=22)
-        for lab, c in items:
-            ax.annotate(lab, (c["median_ms"], c["error"]["rms_band"]), fontsize=6, xytext=(3, 2),
-                        textcoords="offset points")
-    pts = [(c["median_ms"], c["error"]["rms_band"]) for _, c in cases]
-    front = pareto_front(pts)
-    ax.plot([pts[i][0] for i in front], [pts[i][1] for i in front], "k--", lw=0.8, label="Pareto front")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel("median wall time per render after compilation (ms)")
-    ax.set_ylabel("RMS shading error in the penumbra band")
-    ax.set_title("Speed against error (top-down ground map, real sun)")
-    ax.legend(fontsize=8)
-    ax.grid(True, which="both", lw=0.3)
+    cases = [x for x in image_cases(result) if x[2]["error"].get("rms_band") is not None]
+    meshes = list(dict.fromkeys(m for m, _, _ in cases))
+    cols = 2 if len(meshes) > 1 else 1
+    rows = (len(meshes) + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(6.5 * cols, 4.8 * rows), squeeze=False)
+    markers = {"softshadow": "o", "paper": "s", "paper (hard)": "v", "mitsuba": "^"}
+    for ax, mesh in zip(axes.ravel(), meshes):
+        mine = [(lab, c) for m, lab, c in cases if m == mesh]
+        groups = {}
+        for lab, c in mine:
+            groups.setdefault(c.get("renderer", "softshadow"), []).append((lab, c))
+        for renderer, items in groups.items():
+            ax.scatter([c["median_ms"] for _, c in items], [c["error"]["rms_band"] for _, c in items],
+                       label=renderer, s=22, marker=markers.get(renderer, "o"))
+            for lab, c in items:
+                ax.annotate(lab, (c["median_ms"], c["error"]["rms_band"]), fontsize=6, xytext=(3, 2),
+                            textcoords="offset points")
+        pts = [(c["median_ms"], c["error"]["rms_band"]) for _, c in mine]
+        front = pareto_front(pts)
+        ax.plot([pts[i][0] for i in front], [pts[i][1] for i in front], "k--", lw=0.8, label="Pareto front")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("median wall time per render after compilation (ms)")
+        ax.set_ylabel("RMS shading error, penumbra band")
+        ax.set_title(mesh)
+        ax.legend(fontsize=7)
+        ax.grid(True, which="both", lw=0.3)
+    for ax in axes.ravel()[len(meshes):]:
+        ax.set_visible(False)
+    fig.suptitle("Speed against error (top-down ground map, real sun; truth: converged physical render)")
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
+    fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def pareto_table(result: dict) -> list[str]:
+    """The Pareto front of each mesh as a table (the plot's dashed lines)."""
+    cases = [x for x in image_cases(result) if x[2]["error"].get("rms_band") is not None]
+    L = ["| mesh | on the front (fastest first) | renderer | time (ms) | RMS band |", "|---|---|---|---:|---:|"]
+    for mesh in dict.fromkeys(m for m, _, _ in cases):
+        mine = [(lab, c) for m, lab, c in cases if m == mesh]
+        pts = [(c["median_ms"], c["error"]["rms_band"]) for _, c in mine]
+        for i in pareto_front(pts):
+            lab, c = mine[i]
+            L.append(f"| {mesh} | {lab} | {c.get('renderer', 'softshadow')} | {c['median_ms']:.1f} | "
+                     f"{c['error']['rms_band']:.4f} |")
+    return L
 
 
 def _f(x, fmt="{:.4f}"):
@@ -152,6 +185,98 @@ def _table1_section(rows: list[dict]) -> list[str]:
     return L
 
 
+def _load(x) -> str:
+    return "n/a" if not x else " / ".join(f"{v:.1f}" for v in x)
+
+
+def _mitsuba_section(mitsuba: dict) -> list[str]:
+    L = ["## Mitsuba 3, measured in the same run", ""]
+    if "skipped" in mitsuba:
+        return L + [f"Skipped: {mitsuba['skipped']} (`pip install 'softshadow[peers]'`)."]
+    runs = list(mitsuba.values())
+    L += [f"Mitsuba 3 (`{runs[0]['variant']}` variant) path-traces the same scene: the mesh on a Lambertian "
+          "ground, a uniform sun disk (a far disk light subtending the sun's radius) and a uniform sky (a "
+          "constant emitter), direct light only (`direct` integrator), an orthographic top-down camera over "
+          "the same square with a box pixel filter and a low-discrepancy sampler, at the truth's size. Time is "
+          "the wall time of a render after a warm-up render at the same samples per pixel (spp), its "
+          "kernel compiled, except where the table says \"first\" (high spp: the first render at that spp, "
+          "its kernel compilation of a second or two included); error against the same converged physical "
+          "truth as every other case.", "",
+          "| mesh | spp | pixels | time (ms) | RMS | RMS band | max abs |", "|---|---:|---:|---:|---:|---:|---:|"]
+    for name, run in mitsuba.items():
+        for c in run["cases"]:
+            e = c["error"]
+            first = "" if c.get("warmed_up", True) else " (first)"
+            L.append(f"| {name} | {c['spp']} | {c['pixels']} | {c['median_ms']:.0f}{first} | {_f(e['rms'])} | "
+                     f"{_f(e['rms_band'])} | {_f(e['max_abs'], '{:.3f}')} |")
+    L += ["", "The time Mitsuba needs to reach this renderer's error on the same mesh and map (log-log "
+          "interpolation between the measured spp, or past the last one with Monte Carlo's error ~ time^-1/2):",
+          "", "| mesh | error measure | this renderer's error | this renderer (ms) | Mitsuba (ms) | how | ratio |",
+          "|---|---|---:|---:|---:|---|---:|"]
+    for name, run in mitsuba.items():
+        for metric, r in run["time_to_reach"]["softshadow"].items():
+            L.append(f"| {name} | {'whole map' if metric == 'rms' else 'penumbra band'} | {r['target']:.4f} | "
+                     f"{r['softshadow_ms']:.1f} | {r['mitsuba_ms']:.0f} | {r['how']} | {r['ratio']:.0f} |")
+    return L
+
+
+def fit_scaling_plot(fb: dict, path: Path) -> None:
+    """The fit's time against photos per group and against samples (log-log), both solvers."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4.0))
+    for solver, style in (("autodiff", "o-"), ("finite_differences", "s--")):
+        ph = sorted(fb["by_photos"].items(), key=lambda kv: int(kv[0]))
+        axes[0].plot([int(n) for n, _ in ph], [v[solver]["median_ms"] for _, v in ph], style, label=solver)
+        cp = sorted(fb["by_cap"].values(), key=lambda v: v["samples"])
+        axes[1].plot([v["samples"] for v in cp], [v[solver]["median_ms"] for v in cp], style, label=solver)
+    axes[0].set_xlabel(f"photos per group ({fb['cap_for_photos']} samples per photo at most)")
+    axes[1].set_xlabel("samples (one photo)")
+    for ax in axes:
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_ylabel("median ms per solve")
+        ax.grid(True, which="both", lw=0.3)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _fit_baseline_section(fb: dict) -> list[str]:
+    t = fb["truth"]
+    L = ["## The same fit without autodiff (baseline 6)", "",
+         "One group's plain least-squares problem as the fitter builds it (`fitting.group_problem`: its "
+         "samples, its start, its residual function) solved twice in the same process: by the fitter's own "
+         "solve (optimistix Levenberg-Marquardt, Jacobian by autodiff, plus the Jacobian at the solution for "
+         "the errors) and by `scipy.optimize.least_squares` (trust region reflective, default tolerances) "
+         "with a 2-point finite-difference Jacobian of the same residual function. The data: the pillar "
+         f"rendered top-down by the project's own model (disk profile, k = {t['range_k']}, rho = {t['rho']}, "
+         f"Gaussian noise sigma {t['noise_sigma']}), one noise draw per photo. Times are medians after "
+         "compilation; errors over the groups (RMS).", "",
+         "| photos per group | samples per photo (cap) | samples | parameters | groups | autodiff (ms) | "
+         "finite differences (ms) | FD / autodiff | k error autodiff | k error FD | rho error autodiff | "
+         "rho error FD | max k difference FD - autodiff |",
+         "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    rows = [(n, fb["cap_for_photos"], v) for n, v in fb["by_photos"].items()]
+    rows += [(1, int(c), v) for c, v in fb["by_cap"].items() if int(c) != fb["cap_for_photos"]]
+    for n, cap, v in rows:
+        ad, fd = v["autodiff"], v["finite_differences"]
+        L.append(f"| {n} | {cap} | {v['samples']} | {v['parameters']} | {v['groups']} | {ad['median_ms']:.0f} | "
+                 f"{fd['median_ms']:.0f} | {v['time_ratio_fd_over_autodiff']:.1f} | {100 * ad['k_rel_rms']:.2f} % | "
+                 f"{100 * fd['k_rel_rms']:.2f} % | {ad['rho_abs_rms']:.4f} | {fd['rho_abs_rms']:.4f} | "
+                 f"{100 * v['k_fd_minus_autodiff_max_rel']:.4f} % |")
+    sp, ss = fb["slope_vs_photos"], fb["slope_vs_samples"]
+    L += ["", f"Log-log slopes of time: against photos per group, autodiff {_f(sp['autodiff'], '{:.2f}')}, "
+          f"finite differences {_f(sp['finite_differences'], '{:.2f}')}; against samples (one photo), "
+          f"autodiff {_f(ss['autodiff'], '{:.2f}')}, finite differences {_f(ss['finite_differences'], '{:.2f}')}. "
+          "Finite differences need p + 1 residual evaluations per Jacobian (p = 5 + 4 x photos parameters).",
+          "", "![fit scaling](img/speed_vs_error_fit.png)"]
+    return L
+
+
 def scaling_plot(scaling: dict, path: Path) -> None:
     """Time against faces and against pixels (log-log) for the three renderers."""
     import matplotlib
@@ -190,7 +315,30 @@ def _scaling_section(scaling: dict) -> list[str]:
          f"Slopes against faces: this renderer {_f(sf['softshadow'], '{:.2f}')}, the paper's algorithm "
          f"{_f(sf['paper'], '{:.2f}')}, naive {_f(sf['naive'], '{:.2f}')}. Against pixels: " +
          "; ".join(f"{name}: this renderer {_f(v['softshadow'], '{:.2f}')}, paper {_f(v['paper'], '{:.2f}')}, "
-                   f"naive {_f(v['naive'], '{:.2f}')}" for name, v in scaling["slope_vs_pixels"].items()) + ".", "",
+                   f"naive {_f(v['naive'], '{:.2f}')}" for name, v in scaling["slope_vs_pixels"].items()) + "."]
+    if "memory_slope_vs_faces" in scaling:
+        mf = scaling["memory_slope_vs_faces"]
+        L += ["", "Peak memory above the resident set before the case (MB), log-log slopes: against faces, this "
+              f"renderer {_f(mf['softshadow'], '{:.2f}')}, naive {_f(mf['naive'], '{:.2f}')}; against pixels, " +
+              "; ".join(f"{name}: this renderer {_f(v['softshadow'], '{:.2f}')}, naive {_f(v['naive'], '{:.2f}')}"
+                        for name, v in scaling["memory_slope_vs_pixels"].items()) +
+              " (n/a: fewer than two cases rose above the resident set)."]
+    cm = scaling.get("cost_model", {})
+    if "pixels_plus_edges" in cm:
+        a, b = cm["pixels_plus_edges"], cm["pixels_times_edges"]
+        better = a["rms_rel_residual"] < b["rms_rel_residual"]
+        verdict = ("so the measurement supports the claim that cost grows with pixels plus silhouette edges "
+                   "(not with their product)" if better else
+                   "so this run does not support the claim over the product law")
+        L += ["", "**Cost grows with pixels plus silhouette edges?** This renderer's times over all the cases "
+              f"below ({cm['points']}) fitted (non-negative least squares, relative residuals) as "
+              f"t = {a['ms']:.2f} ms + {a['ms_per_megapixel']:.1f} ms per megapixel + "
+              f"{a['ms_per_thousand_edges']:.2f} ms per thousand silhouette edges leave an RMS relative "
+              f"residual of {100 * a['rms_rel_residual']:.0f} % (largest {100 * a['max_rel_residual']:.0f} %); the "
+              f"naive renderer's law t = {b['ms']:.2f} ms + {b['ms_per_giga_pixel_edges']:.2f} ms per 10^9 "
+              f"pixel-edge pairs leaves {100 * b['rms_rel_residual']:.0f} % (largest "
+              f"{100 * b['max_rel_residual']:.0f} %): {verdict}."]
+    L += ["",
          "| case | faces | pixels | silhouette edges | this renderer (ms) | peak extra (MB) | paper (ms) | naive (ms) | naive vs this renderer (RMS) |",
          "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for x in scaling["by_faces"] + scaling["by_pixels"]:
@@ -217,8 +365,12 @@ def write_report(result: dict, md_path: Path, json_name: str | None = None) -> N
          "of one run as ratios.", "",
          f"- Date: {env['date_utc']}",
          f"- Machine: {m['cpu']}, {m['cores']} cores, {m['memory_gb']} GB, {m['platform']}",
+         f"- Load average (1, 5, 15 min): {_load(m.get('load_average_1_5_15_min'))} at the start, "
+         f"{_load(env.get('load_average_at_end'))} at the end (runnable processes on the "
+         f"{m['cores']} cores: above {m['cores']} the machine was shared)",
+         f"- The run took {env.get('run_minutes', 'n/a')} minutes (finished {env.get('finished_utc', 'n/a')}); "
+         f"{'quick' if s.get('quick') else 'full'} sizes",
          "- Versions: " + ", ".join(f"{k} {val}" for k, val in v.items() if val), ""]
-    L += [f"- Note: {n}" for n in result.get("notes", [])] + ([""] if result.get("notes") else [])
     L += [
          "## The scene and the truth", "",
          f"A top-down ground map of each mesh's shadow: sun azimuth {s['sun_azimuth_deg']} deg, elevation "
@@ -240,7 +392,9 @@ def write_report(result: dict, md_path: Path, json_name: str | None = None) -> N
           "block-averaged to its own size. `dragon` is the real (MIT) Stanford dragon decimated to the "
           "paper's 26,584 faces; `knot` the built-in procedural stand-in. The linear profile uses the "
           "linear ramp closest to the sun's disk profile.", "",
-          "![Pareto plot](img/speed_vs_error_pareto.png)", "", "## The meshes", ""]
+          "![Pareto plot](img/speed_vs_error_pareto.png)", "",
+          "The Pareto front of each mesh (no other case of that mesh is both faster and closer to the truth):",
+          ""] + pareto_table(result) + ["", "## The meshes", ""]
     L += _case_table([(k, result[k]) for k in ("pillar", "ball", "dragon", "knot") if k in result])
     L += ["", "## Resolution (pillar)", ""]
     L += _case_table([(f"{c['pixels']} px", c) for c in result.get("resolution", [])])
@@ -263,8 +417,13 @@ def write_report(result: dict, md_path: Path, json_name: str | None = None) -> N
                      f"{r['truth']['range_k']} | {k['std']:.2e} | {k['crb']:.2e} | {k['std_over_crb']:.2f} | "
                      f"{k['bias_over_crb']:+.2f} | {rho['std']:.2e} | {rho['crb']:.2e} | {rho['std_over_crb']:.2f} | "
                      f"{r['group_seconds_after_compile']['median']:.2f} |")
+    if result.get("fit_baseline"):
+        fit_scaling_plot(result["fit_baseline"], md_path.parent / "img" / "speed_vs_error_fit.png")
+        L += [""] + _fit_baseline_section(result["fit_baseline"])
     if "paper" in result:
         L += [""] + _paper_sections(result["paper"])
+    if "mitsuba" in result:
+        L += [""] + _mitsuba_section(result["mitsuba"])
     if result.get("table1"):
         L += [""] + _table1_section(result["table1"])
     if result.get("scaling"):

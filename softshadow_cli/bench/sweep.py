@@ -33,10 +33,12 @@ SUN_AZIMUTH, SUN_ELEVATION, SUN_RADIUS_DEG, RHO = 200.0, 40.0, 0.2665, 0.2
 
 
 class SweepSettings:
-    """Sizes of a sweep: ``quick`` is for tests (tiny maps, few rays, one repeat)."""
+    """Sizes of a sweep: ``quick`` is a short run (small maps, few rays, one repeat); ``tiny()``
+    the smallest that still runs every part (the harness's own test)."""
 
     def __init__(self, quick: bool = False):
         self.quick = quick
+        self.tiny = False
         self.reference_pixels = 64 if quick else 512
         self.reference_samples = 64 if quick else 4096
         # The knot's many silhouette edges make its rays the dearest: fewer (its noise is reported).
@@ -52,7 +54,31 @@ class SweepSettings:
         self.paper_ranges = (0, 2) if quick else tuple(range(0, 41))
         self.paper_expands = (0.0,) if quick else (0.0, 0.002, 0.004, 0.006, 0.008, 0.01, 0.012)
         self.table2_samples = 64 if quick else 1024
+        self.table1_pixels, self.table1_samples = (64, 64) if quick else (512, 512)
+        # The Mitsuba peer (when installed): samples per pixel, on these meshes.
+        self.mitsuba_spps = (1, 4) if quick else (4, 16, 64, 256)
+        self.mitsuba_meshes = ("pillar",) if quick else ("pillar", "dragon")
+        # Baseline 6 and the fit's scaling: photos per group and samples per photo (cap).
+        self.fit_photos = (1, 2) if quick else (1, 2, 4, 8)
+        self.fit_caps = (150, 400) if quick else (150, 400, 1300, 4000)
+        self.fit_baseline_seeds = 1 if quick else 2  # an 8-photo group's solve takes seconds
+        self.scaling_faces = (176, 1472) if quick else (176, 1472, 5000, 26584, 106336, 200000)
+        self.scaling_pixels = (16, 32) if quick else (128, 256, 512, 1024)
 
+    @classmethod
+    def tiny(cls) -> "SweepSettings":
+        """Every part of the sweep at the least size that runs it (seconds, not minutes)."""
+        s = cls(quick=True)
+        s.tiny = True
+        s.reference_pixels = s.base_pixels = 32
+        s.reference_samples = s.table2_samples = 16
+        s.resolutions = (32,)  # each new map size is one more compilation
+        s.lod_faces = (1000,)
+        s.fit_samples = (150,)
+        s.table1_pixels, s.table1_samples = 16, 16
+        s.mitsuba_spps = (1,)
+        s.fit_photos, s.fit_caps, s.fit_baseline_seeds = (1,), (150,), 1
+        return s
 
 @functools.lru_cache(maxsize=None)
 def linear_equivalent_k(k_disk: float) -> float:
@@ -121,6 +147,7 @@ class _Scene:
         self.model = SoftShadowModel.from_mesh(mesh)
         self._object_mask = object_mask
         self.faces = int(len(mesh.faces))
+        self.name = name
 
     def grid(self, pixels: int):
         from softshadow import GroundGrid
@@ -148,7 +175,7 @@ class _Scene:
 
             timing = timed(forward, repeats)
             image = np.asarray(forward())
-        out = {"renderer": "softshadow", "faces": self.faces, "pixels": pixels, "profile": profile,
+        out = {"renderer": "softshadow", "mesh": self.name, "faces": self.faces, "pixels": pixels, "profile": profile,
                "dtype": dtype, "range_k": k, "rho": self.light.rho, **timing}
         out["error"] = image_error(image, grid, self.reference, self.ref_grid, self.footprint)
         return out
@@ -193,14 +220,37 @@ def run_sweep(settings: SweepSettings, fit: bool = True, progress=print) -> dict
     out["paper"]["table2"] = bench_paper_table2(settings)
     progress("bench sweep: Table 1 (expansion ratios)")
     from .table1 import bench_table1
-    out["table1"] = bench_table1(pixels=64 if settings.quick else 512, samples=64 if settings.quick else 512)
+    out["table1"] = bench_table1(pixels=settings.table1_pixels, samples=settings.table1_samples)
+    out["mitsuba"] = mitsuba_sweep(scenes, out, settings, progress)
     progress("bench sweep: scaling against faces and pixels")
     from .scaling import bench_scaling
-    out["scaling"] = bench_scaling(quick=settings.quick, repeats=settings.repeats if settings.quick else 3)
+    out["scaling"] = bench_scaling(settings.scaling_faces, settings.scaling_pixels,
+                                   repeats=settings.repeats if settings.quick else 3,
+                                   naive_limit=2e5 if settings.quick else 1.5e8)
     if fit:
         progress("bench sweep: fit samples per photo")
         out["fit_samples"] = fit_samples_sweep(settings)
+        progress("bench sweep: the fit with finite differences (baseline 6), photos and samples per group")
+        from .fit_baseline import bench_fit_baseline
+        out["fit_baseline"] = bench_fit_baseline(settings.fit_photos, settings.fit_caps,
+                                                 seeds=settings.fit_baseline_seeds,
+                                                 repeats=1 if settings.quick else 2)
     return out
+
+
+def mitsuba_sweep(scenes: dict, out: dict, settings: SweepSettings, progress=print) -> dict:
+    """The Mitsuba peer on ``settings.mitsuba_meshes`` (each against this renderer's case of the
+    same mesh in ``out``), or {"skipped": ...} when it is not installed."""
+    from .mitsuba_peer import bench_mitsuba, mitsuba_available
+    if not mitsuba_available():
+        progress("skipped: mitsuba not installed (pip install 'softshadow[peers]')")
+        return {"skipped": "mitsuba not installed"}
+    result = {}
+    for name in settings.mitsuba_meshes:
+        progress(f"bench sweep: Mitsuba 3 on {name}")
+        result[name] = bench_mitsuba(scenes[name], settings.mitsuba_spps, repeats=1,
+                                     targets={"softshadow": out[name]})
+    return result
 
 
 def fit_samples_sweep(settings: SweepSettings) -> list[dict]:

@@ -1,0 +1,129 @@
+"""Levels of detail: the decimated series (softshadow.lod) and the fitter's automatic choice
+(fitting.lod) on a small mesh."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from softshadow import PAPER_FACE_COUNTS, decimate, lod_series
+
+
+@pytest.fixture(scope="module")
+def dragon():
+    from softshadow_cli.bench.meshes import mit_dragon
+    return mit_dragon(full=True)
+
+
+def test_series_follows_the_papers_counts_capped_at_the_mesh(dragon):
+    levels = lod_series(dragon)
+    assert len(dragon.faces) == 41384 and dragon.is_watertight
+    # 69,000 is more than the mesh has: that level is the mesh itself, unchanged.
+    assert levels[0].mesh is dragon and levels[0].faces == 41384 and levels[0].target == 41384
+    assert [lv.target for lv in levels] == [41384, 5000, 1000, 300]
+    for lv in levels[1:]:
+        assert abs(lv.faces - lv.target) <= 10
+        assert lv.watertight == lv.mesh.is_watertight  # reported as it is, kept or not
+        # The decimated mesh stays where the dragon is (quadric error keeps the surface; the
+        # 300-face level loses the tips of the tail and claws, a few percent of the length).
+        assert np.allclose(lv.mesh.bounds, dragon.bounds, atol=0.05 * np.ptp(dragon.vertices[:, 0]))
+    assert levels[0].watertight
+
+
+def test_series_drops_levels_the_mesh_cannot_fill():
+    box = trimesh.creation.box()  # 12 faces: every level of the paper's series is the box itself
+    levels = lod_series(box, PAPER_FACE_COUNTS)
+    assert len(levels) == 1 and levels[0].mesh is box
+    assert decimate(box, 300) is box
+    with pytest.raises(ValueError, match="at least 4 faces"):
+        decimate(box, 2)
+
+
+def test_fitter_counts_halve_down_to_the_coarsest():
+    from fitting.lod import fitter_face_counts
+    assert fitter_face_counts(5120) == [5120, 2560, 1280, 640, 300]
+    assert fitter_face_counts(41384)[:3] == [41384, 20692, 10346] and fitter_face_counts(41384)[-1] == 300
+    assert fitter_face_counts(500) == [500, 300]
+
+
+def _ball() -> trimesh.Trimesh:
+    ball = trimesh.creation.icosphere(subdivisions=4, radius=0.5)  # 5,120 faces
+    ball.apply_translation([0.0, 0.0, 1.5])
+    return ball
+
+
+@pytest.fixture(scope="module")
+def ball_folder(tmp_path_factory):
+    from data_synth import model_topdown_folder
+    return model_topdown_folder(tmp_path_factory.mktemp("lod") / "ball", k=0.02, rho=0.3, noise=0.004,
+                                mesh=_ball())
+
+
+def _fit(folder, **options):
+    import fitting
+    result = fitting.fit_folder(folder, options=fitting.FitOptions(plots=False, **options))
+    (group,) = result.groups
+    assert group.fitted, group.error
+    return group
+
+
+def test_automatic_choice_follows_the_tolerance(ball_folder):
+    loose = _fit(ball_folder, lod="auto", lod_tolerance=1e9)
+    assert loose.mesh_faces == 5120 and loose.lod_faces == 300  # anything goes: the coarsest
+    strict = _fit(ball_folder, lod="auto", lod_tolerance=0.0)
+    assert strict.lod_faces == 5120  # nothing may move: the full mesh
+    off = _fit(ball_folder, lod="off")
+    assert off.lod_faces == 5120 and off.range_k == strict.range_k and off.rho == strict.rho
+    fixed = _fit(ball_folder, lod=1000)
+    assert abs(fixed.lod_faces - 1000) <= 10
+    # The coarsest level really changes the fit, so the strict choice kept the detail for a reason.
+    assert abs(loose.range_k - off.range_k) > off.range_stderr
+    doc = off.to_json()
+    assert doc["lod_faces"] == 5120 and doc["mesh_faces"] == 5120
+
+
+def test_noise_lets_a_coarser_level_through(ball_folder, tmp_path):
+    """The tolerance is in standard errors: a noisier photo (larger errors) hides more detail."""
+    import jax
+
+    from data_synth import model_topdown_folder
+    from fitting.lod import LevelsOfDetail, ShadowReference, choice_samples
+    from softshadow import Pose, SoftShadowModel, Sun
+    from fitting.views import PhotoView
+    import cv2
+
+    ball = _ball()
+    chosen = {}
+    for noise in (0.004, 0.06):
+        folder = model_topdown_folder(tmp_path / f"n{noise}", k=0.02, rho=0.3, noise=noise, mesh=ball)
+        from scene import load_scene
+        scene = load_scene(folder / "scene.toml")
+        spec = scene.photo("top.png")
+        gray = cv2.imread(str(folder / "top.png"), cv2.IMREAD_UNCHANGED).astype(np.float32) / 65535
+        view = PhotoView("top.png", gray, np.zeros(gray.shape, bool),
+                         grid=spec.camera.grid(gray.shape[1], gray.shape[0]),
+                         sun_azimuth_deg=spec.sun_azimuth_deg, sun_elevation_deg=spec.sun_elevation_deg,
+                         sun_source="given")
+        with jax.enable_x64(True):
+            full = SoftShadowModel.from_mesh(ball, profile="disk")
+            lods = LevelsOfDetail(ball, full)
+            samples, used = choice_samples(full, Pose(), [view], 0.03, 1300)
+            reference = ShadowReference(full, Pose(), used, samples, 0.3, 0.03)
+            chosen[noise] = lods.choose(reference, 1.0, "disk")
+        assert 0.005 < reference.k_ref < 0.02  # one grid step below the k the photo shows (0.02)
+    quiet, noisy = chosen[0.004], chosen[0.06]
+    assert noisy.faces < quiet.faces
+    for choice in (quiet, noisy):
+        assert all((c.worst <= 1.0) == (c.faces >= choice.faces) for c in choice.checks)
+
+
+def test_cli_reports_the_level_in_results_and_table(ball_folder, tmp_path):
+    import json
+
+    from softshadow_cli.main import main
+    out = tmp_path / "out"
+    assert main(["fit", str(ball_folder), "--out", str(out), "--no-plots", "--lod", "640"]) == 0
+    (group,) = json.loads((out / "results.json").read_text())["groups"]
+    assert group["mesh_faces"] == 5120 and abs(group["lod_faces"] - 640) <= 10
+    assert f"level of detail of {group['lod_faces']:,} of the mesh's 5,120 faces" in (out / "table2.md").read_text()
