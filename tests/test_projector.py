@@ -267,6 +267,25 @@ def test_visible_points_lie_on_the_faces_they_name_and_match_the_object_mask():
     np.testing.assert_allclose(vis.albedo[ground], 0.3)
 
 
+def test_near_plane_clipping_keeps_a_floor_that_passes_behind_the_camera():
+    """A floor mesh of two huge triangles under a camera looking down at 45 degrees: every pixel
+    below the horizon sees it (its faces reach behind the camera and are cut, not dropped), at the
+    same points as the analytic ground. ``clip_near`` keeps the area and the winding."""
+    floor = Surface(np.array([[-50.0, -50, 0], [50, -50, 0], [50, 50, 0], [-50, 50, 0]]),
+                    np.array([[0, 1, 2], [0, 2, 3]]), 0.5, "floor")
+    cam = look_at_camera((0.0, 0.0, 2.0), (0.0, 4.0, 0.0), 48, 36, 60.0)
+    mesh = visible_surfaces(cam, [floor], None)
+    plane = visible_surfaces(cam, [], 0.5)
+    np.testing.assert_array_equal(mesh.surface == 0, plane.surface == GROUND)
+    np.testing.assert_allclose(mesh.points, plane.points, atol=1e-9)
+    from softshadow.clip import clip_near
+    v, f, src = clip_near(floor.vertices, floor.vertices[:, 1] + 1.0, floor.faces, 0.0)  # keep y > -1
+    assert set(src.tolist()) == {0, 1} and np.all(v[f][..., 1] >= -1.0 - 1e-12)
+    area = 0.5 * np.linalg.norm(np.cross(v[f][:, 1] - v[f][:, 0], v[f][:, 2] - v[f][:, 0]), axis=1).sum()
+    np.testing.assert_allclose(area, 100.0 * 51.0)
+    assert np.all(np.cross(v[f][:, 1] - v[f][:, 0], v[f][:, 2] - v[f][:, 0])[:, 2] > 0), "winding kept"
+
+
 def test_smooth_normals_follow_the_sphere_better_than_flat_faces():
     model = model_of("ball")
     surf = Surface(ss.posed_vertices(model.occluder, Pose())[0], model.occluder.faces)

@@ -74,7 +74,7 @@ def run_bench(args) -> int:
     if args.what in ("render", "all", "receiver"):
         from .render import bench_depth_receiver
         result.setdefault("render", {})["depth_receiver_512"] = bench_depth_receiver(
-            repeats=3 if args.quick else 7)
+            repeats=5 if args.quick else 15)
     if args.what in ("precision", "all"):
         from .shadow_precision import bench_shadow_precision
         result["shadow_map_precision"] = bench_shadow_precision()
