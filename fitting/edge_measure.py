@@ -30,7 +30,8 @@ from fitting.edge_detect import (MIN_CHAIN_PX, LogImage, detect_edge_candidates,
 from fitting.edge_ramp import (RHO_MIN, SAMPLING_BLUR_PX, RampFit, RampFits, fit_edge_profile, fit_edge_profiles,
                                ramp_alpha, ramp_log_model, robust_std)
 from fitting.ground_region import ground_region
-from fitting.shadow_cues import MODE_WINDOW_LOG, bluer_umbrae, mode_of_log_rho, reliability
+from fitting.shadow_cues import (MODE_WINDOW_LOG, bluer_umbrae, edge_structures, mode_of_log_rho, reliability,
+                                  textured_outlines)
 
 __all__ = ["EdgeMeasurement", "EdgeProfile", "RampFit", "measure_shadow_edges", "fit_edge_profile", "ramp_alpha",
            "ramp_log_model"]
@@ -102,6 +103,8 @@ class EdgeProfile:
     fitted_log: (S,) the fitted model at offsets_px.
     blue_shift_log: log step of blue minus log step of red across the edge
         (positive: the dark side is bluer, as a skylit umbra is); NaN without colour.
+    texture_ratio: robust std of the fine log texture on the dark plateau over
+        that on the lit plateau (about 1 on one surface); NaN when not measured.
     """
 
     position_uv: np.ndarray
@@ -115,6 +118,7 @@ class EdgeProfile:
     observed_log: np.ndarray
     fitted_log: np.ndarray
     blue_shift_log: float = float("nan")
+    texture_ratio: float = float("nan")
 
 
 @dataclass(frozen=True)
@@ -218,6 +222,7 @@ def measure_shadow_edges(linear_gray: np.ndarray, mask: np.ndarray | None = None
     profiles = [p if not p.kept or ground.contains(p.position_uv)[0] else _with_reason(p, NOT_GROUND_REASON)
                 for p in profiles]
     profiles = _prefer_bluer_umbrae(profiles)
+    profiles = _drop_textured_outlines(profiles, work.gray.shape)
     shadow_like_log_rho = np.log([p.rho for p in profiles if p.kept])
     profiles = _keep_dominant_mode(profiles)
     profiles = [_to_full_scale(p, work) for p in profiles]
@@ -231,7 +236,7 @@ def measure_shadow_edges(linear_gray: np.ndarray, mask: np.ndarray | None = None
     rho = float(np.exp(np.median(log_rho)))
     rho_stderr = _block_bootstrap_median_stderr(np.exp(log_rho), positions, rng)
     q25, q50, q75 = np.percentile(widths, [25, 50, 75])
-    warnings, reliable = reliability(shadow_like_log_rho, positions, gray.shape, np.log(RHO_MIN))
+    warnings, reliable = reliability(shadow_like_log_rho, positions, gray.shape, np.log(RHO_MIN), log_rho)
     return EdgeMeasurement(rho=rho, rho_stderr=rho_stderr, penumbra_px=float(q50), penumbra_px_iqr=float(q75 - q25),
                            penumbra_m=None if pixel_m is None else float(q50 * pixel_m), n_profiles=len(kept),
                            edges_found=True, profiles=profiles, reason=None, warnings=tuple(warnings),
@@ -289,7 +294,7 @@ def _fit_chunk(images: _Images, points, normals, half1, max_half) -> list[EdgePr
         half2 = np.minimum(np.minimum(first.fits.w[ok] * (0.5 + PLATEAU_PER_WIDTH) + PLATEAU_EXTRA_PX, max_half), room)
         second = _sampled_fits(images, centres, refined, half2)
         passed = second.reasons == None                # noqa: E711
-        reasons, blue = _shadow_edge_tests(images, centres, refined, second, passed)
+        reasons, blue, texture = _shadow_edge_tests(images, centres, refined, second, passed)
         f = second.fits
         for j, i in enumerate(ok):
             if not passed[j]:
@@ -300,7 +305,8 @@ def _fit_chunk(images: _Images, points, normals, half1, max_half) -> list[EdgePr
                                  rho=float(f.rho[j]), width_px=float(f.w[j]), residual=float(f.residual_rms[j]),
                                  kept=reasons[j] is None, reject_reason=reasons[j],
                                  offsets_px=second.s[m] - f.s0[j], observed_log=second.y[j, m],
-                                 fitted_log=f.fitted[j, m], blue_shift_log=float(blue[j]))
+                                 fitted_log=f.fitted[j, m], blue_shift_log=float(blue[j]),
+                                 texture_ratio=float(texture[j]))
     return out
 
 
@@ -421,7 +427,8 @@ def _plateaus(s: np.ndarray, present: np.ndarray, s0: np.ndarray, w: np.ndarray,
 
 
 def _shadow_edge_tests(images: _Images, centres, normals, fitted: _Pass, passed: np.ndarray):
-    """(reasons (N,) why each fitted profile is not a shadow edge on one surface or None, blue shifts (N,)).
+    """(reasons (N,) why each fitted profile is not a shadow edge on one surface or None, blue shifts (N,),
+    texture ratios dark/lit (N,)).
 
     Only the profiles with ``passed`` are tested (the others keep their pass's reason); blue is NaN
     for a profile rejected before the colour test, or without colour.
@@ -454,7 +461,7 @@ def _shadow_edge_tests(images: _Images, centres, normals, fitted: _Pass, passed:
             worst = np.max(np.abs(colour[i]))
             if worst > COLOUR_TOL_LOG:
                 reasons[i] = f"colour changes across the edge (channel log ratios differ by {worst:.2f})"
-    return reasons, blue
+    return reasons, blue, ratio
 
 
 def _texture_ratios(images: _Images, centres, normals, half, s, present, s0, w) -> np.ndarray:
@@ -503,6 +510,24 @@ def _prefer_bluer_umbrae(profiles: list[EdgeProfile]) -> list[EdgeProfile]:
         if not bluer[j]:
             out[i] = _with_reason(profiles[i], "dark side not bluer than the lit side while other edges' are: "
                                                "paint, a kerb or a material border, not a skylit umbra")
+    return out
+
+
+def _drop_textured_outlines(profiles: list[EdgeProfile], shape: tuple[int, int]) -> list[EdgeProfile]:
+    """Drop the shadow-like profiles on outlines whose texture changes across them (``textured_outlines``)."""
+    idx = [i for i, p in enumerate(profiles) if p.kept]
+    if not idx:
+        return profiles
+    labels = edge_structures(np.array([profiles[i].position_uv for i in idx]), shape)
+    ratios = np.array([profiles[i].texture_ratio for i in idx])
+    rho = np.array([profiles[i].rho for i in idx])
+    drop = textured_outlines(ratios, rho, labels)
+    out = list(profiles)
+    for j, i in enumerate(idx):
+        if drop[j]:
+            median = np.nanmedian((ratios * np.sqrt(rho))[labels == labels[j]])
+            out[i] = _with_reason(profiles[i], f"the texture changes across this whole outline (dark/lit x sqrt(rho) "
+                                               f"median {median:.2f}): a border between two materials, not a shadow")
     return out
 
 

@@ -160,7 +160,10 @@ class ShadowReference:
         self.pose, self.samples, self.rho = pose, samples, float(rho)
         self.sigmas = [pixel_noise(v, s) for v, s in zip(views, samples)]
         self.suns = [Sun(v.sun_azimuth_deg, v.sun_elevation_deg) for v in views]
-        plans = [_plan(full, pose, sun, s, 1.2 * range_k_max) for sun, s in zip(self.suns, samples)]
+        # The samples' own plans (``select_samples`` planned them on the full mesh for 1.5
+        # range_k_max), padded as the levels' will be.
+        plans = [concatenate_plans([s.plan], [len(s.observed)], pad_to=bucket_size(len(s.observed)))
+                 for s in samples]
         self.pads = [int(np.asarray(p.edges.outward_sign).shape[0]) for p in plans]
         if k_ref is None:
             grid = np.geomspace(5e-4, range_k_max, 9)

@@ -64,6 +64,12 @@ class GroupResult:
     range_stderr: float | None = None
     rho: float | None = None
     rho_stderr: float | None = None
+    # The stated *_stderr split into its statistical and systematic parts (fitting.uncertainty);
+    # stated = hypot(stat, sys).
+    range_stderr_stat: float | None = None
+    rho_stderr_stat: float | None = None
+    range_stderr_sys: float | None = None
+    rho_stderr_sys: float | None = None
     sun_azimuth_deg: float | None = None
     sun_elevation_deg: float | None = None
     sun_source: str | None = None  # "given", "time+site", "fitted"
@@ -114,7 +120,9 @@ class GroupResult:
             "seconds": round(float(self.seconds), 3),
             "warnings": list(self.warnings), "reliable": bool(self.reliable),
         }
-        optional = {"sun_source": self.sun_source, "profile": self.profile,
+        optional = {"range_stderr_stat": _num(self.range_stderr_stat), "rho_stderr_stat": _num(self.rho_stderr_stat),
+                    "range_stderr_sys": _num(self.range_stderr_sys), "rho_stderr_sys": _num(self.rho_stderr_sys),
+                    "sun_source": self.sun_source, "profile": self.profile,
                     "blur_px": _num(self.blur_px), "n_samples": self.n_samples or None,
                     "penumbra_px": _num(self.penumbra_px),
                     "penumbra_px_iqr": _num(self.penumbra_px_iqr),

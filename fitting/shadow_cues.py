@@ -11,6 +11,12 @@ Used by ``fitting.edge_measure`` after the per-profile tests:
 - ``edge_structures``: profiles that lie along one outline are one piece of
   evidence, not many; a few profiles scattered over unrelated structures are
   weak evidence whatever their spread.
+- ``textured_outlines``: a shadow leaves the ground's fine texture alone;
+  an outline whose dark side is, over its whole length, much rougher (or
+  smoother) than its lit side is a border between two materials.
+- ``outline_disagreement``: one shadow has one step all along its outline,
+  and all shadows on the ground share it; separate outlines whose medians
+  differ are not all cast shadows.
 - ``reliability``: the warnings (one line each) and the ``reliable`` flag
   derived from the above.
 """
@@ -22,7 +28,8 @@ from scipy import stats
 from scipy.cluster.hierarchy import fcluster, linkage
 from scipy.signal import find_peaks
 
-__all__ = ["bluer_umbrae", "log_rho_modes", "edge_structures", "reliability", "mode_of_log_rho"]
+__all__ = ["bluer_umbrae", "log_rho_modes", "edge_structures", "reliability", "mode_of_log_rho",
+           "disagreement_warning", "few_profiles_warning", "outline_disagreement", "textured_outlines"]
 
 # Skylit umbrae are bluer: on the real photo DSC_0569 the blue step minus the
 # red step was about 0.8 (log) across shadow edges, about 0 across paint; the
@@ -42,6 +49,29 @@ MODE_WINDOW_LOG = 0.25         # a mode's members lie within this of its peak (f
 SECOND_MODE_SHARE = 0.25
 SECOND_MODE_MIN = 8
 RELIABLE_MIN_PROFILES = 10     # fewer kept profiles than this: too little evidence
+# A shadow does not change the fine texture of the ground: along a shadow
+# outline the dark/lit ratio of the high-pass log texture stays near 1, or
+# grows to 1 / sqrt(rho) where shot noise dominates a smooth surface (the
+# darker side is noisier). So the ratio times sqrt(rho) is compared: its
+# median over an outline was 0.18-0.87 on the shadows of the street preset,
+# DSC_0569 and p21_1, and 1.56-1.78 across the street preset's kerbs (smooth
+# concrete against asphalt; per profile 1.7-7 before the sqrt(rho)). An
+# outline of at least OUTLINE_TEXTURE_MIN_PROFILES measured profiles whose
+# median is above this is two materials, not a shadow.
+OUTLINE_TEXTURE_MAX = 1.35
+OUTLINE_TEXTURE_MIN_PROFILES = 3
+# One sun and one sky give every shadow outline on the ground the same step:
+# separate outlines (structures) of at least OUTLINE_MIN_PROFILES kept
+# profiles whose median log rho differ by more than this disagree. On the
+# street preset the kerb's outline read 0.27-0.29 against 0.32-0.34 on the
+# shadows of the same photo (0.15-0.2 in log); shadows near facades, which
+# see less sky, read up to 0.06 lower in log. Only outlines that each hold at
+# least OUTLINE_MIN_SHARE of the kept profiles are compared: on the real
+# asphalt photo DSC_0569 outlines of 8 profiles scattered from 0.19 to 0.27
+# (texture, parking lines) while the two that held 63 of 105 read 0.228-0.229.
+OUTLINE_DISAGREE_LOG = 0.12
+OUTLINE_MIN_PROFILES = 4
+OUTLINE_MIN_SHARE = 0.2
 STRUCTURE_LINK = 0.04          # profiles closer than this fraction of the image diagonal: one structure
 PROFILES_PER_STRUCTURE = 5     # more structures than kept / this (and than 2): scattered evidence
 
@@ -105,24 +135,81 @@ def edge_structures(positions_uv: np.ndarray, image_shape: tuple[int, int]) -> n
     return fcluster(linkage(pts, method="single"), t=link, criterion="distance")
 
 
+def few_profiles_warning(n_profiles: int) -> str | None:
+    """The warning for a measurement that rests on fewer than RELIABLE_MIN_PROFILES profiles
+    (with or without geometry), or None."""
+    return f"only {n_profiles} shadow-edge profiles" if n_profiles < RELIABLE_MIN_PROFILES else None
+
+
+def disagreement_warning(modes: list[tuple[float, int]], measured_log: float) -> str:
+    """The one "edges disagree" warning: the mode the reported rho comes from (the highest
+    density, ``mode_of_log_rho``: ``measured_log``) named first as "measured", then the fullest
+    other mode. Modes are (log peak, profiles) as ``log_rho_modes`` gives them, two or more.
+    Named this way, the warning, the table's value and results.json's rho always agree on
+    which mode was measured (ordering by profile count alone named the other one first when
+    the denser mode held fewer profiles)."""
+    i = int(np.argmin([abs(peak - measured_log) for peak, _ in modes]))
+    other = next(m for j, m in enumerate(modes) if j != i)
+    return (f"edges disagree: measured rho {np.exp(modes[i][0]):.3f} ({modes[i][1]} profiles), "
+            f"another mode at rho {np.exp(other[0]):.3f} ({other[1]} profiles)")
+
+
 def reliability(shadow_like_log_rho: np.ndarray, kept_positions_uv: np.ndarray, image_shape: tuple[int, int],
-                lowest_log: float) -> tuple[list[str], bool]:
+                lowest_log: float, kept_log_rho: np.ndarray | None = None) -> tuple[list[str], bool]:
     """(warnings, reliable) of a single-photo measurement.
 
     shadow_like_log_rho: (M,) log rho of every profile that passed the
         per-profile tests (before the dominant mode was chosen).
     kept_positions_uv: (N,) positions of the profiles the result rests on.
+    kept_log_rho: (N,) their log rho; given, separate outlines must agree (``outline_disagreement``).
     """
     warnings: list[str] = []
     modes = log_rho_modes(shadow_like_log_rho, lowest_log)
     if len(modes) > 1 and modes[1][1] >= max(SECOND_MODE_SHARE * modes[0][1], SECOND_MODE_MIN):
-        warnings.append(f"edges disagree: rho {np.exp(modes[0][0]):.3f} ({modes[0][1]} profiles) and "
-                        f"{np.exp(modes[1][0]):.3f} ({modes[1][1]} profiles)")
+        warnings.append(disagreement_warning(modes, mode_of_log_rho(shadow_like_log_rho, lowest_log)))
     n = int(np.asarray(kept_positions_uv).reshape(-1, 2).shape[0])
-    if n < RELIABLE_MIN_PROFILES:
-        warnings.append(f"only {n} shadow-edge profiles")
+    if few_profiles_warning(n):
+        warnings.append(few_profiles_warning(n))
     if n:
-        n_struct = int(np.unique(edge_structures(kept_positions_uv, image_shape)).size)
+        labels = edge_structures(kept_positions_uv, image_shape)
+        n_struct = int(np.unique(labels).size)
         if n_struct > max(2, n / PROFILES_PER_STRUCTURE):
             warnings.append(f"{n} profiles spread over {n_struct} separate structures")
+        if kept_log_rho is not None:
+            spread = outline_disagreement(kept_log_rho, labels)
+            if spread is not None:
+                warnings.append(f"shadow outlines disagree: rho {np.exp(spread[0]):.3f} and {np.exp(spread[1]):.3f} "
+                                "on separate outlines (an albedo edge, or ground that sees different sky)")
     return warnings, not warnings
+
+
+def textured_outlines(texture_ratio: np.ndarray, rho: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """(N,) bool: the profiles on outlines whose median texture ratio (dark/lit) times sqrt(rho) exceeds
+    OUTLINE_TEXTURE_MAX.
+
+    texture_ratio: (N,) per profile (NaN: not measured, e.g. both sides smooth);
+    rho: (N,) their steps; labels: (N,) their outlines (``edge_structures``).
+    Outlines with fewer than OUTLINE_TEXTURE_MIN_PROFILES measured ratios are not judged.
+    """
+    r = np.asarray(texture_ratio, float) * np.sqrt(np.asarray(rho, float))
+    out = np.zeros(r.size, bool)
+    for k in np.unique(labels):
+        member = labels == k
+        measured = r[member & np.isfinite(r)]
+        if measured.size >= OUTLINE_TEXTURE_MIN_PROFILES and np.median(measured) > OUTLINE_TEXTURE_MAX:
+            out |= member
+    return out
+
+
+def outline_disagreement(log_rho: np.ndarray, labels: np.ndarray) -> tuple[float, float] | None:
+    """(lowest, highest) median log rho of the outlines holding OUTLINE_MIN_SHARE of the profiles (and at least
+    OUTLINE_MIN_PROFILES), when they differ by more than OUTLINE_DISAGREE_LOG; else None.
+
+    log_rho: (N,) log rho of the kept profiles; labels: (N,) their structures (``edge_structures``).
+    """
+    x = np.asarray(log_rho, float)
+    need = max(OUTLINE_MIN_PROFILES, OUTLINE_MIN_SHARE * x.size)
+    medians = [float(np.median(x[labels == k])) for k in np.unique(labels) if np.sum(labels == k) >= need]
+    if len(medians) < 2 or max(medians) - min(medians) <= OUTLINE_DISAGREE_LOG:
+        return None
+    return min(medians), max(medians)

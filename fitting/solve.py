@@ -4,7 +4,9 @@ Photos of one group share k, rho (and a sun correction when the sun is
 fitted); each keeps its own lit levels (paper and ground) and a linear
 brightness gradient (exposure, vignetting). Optional terms, the camera blur
 and the penumbra profile, are chosen by BIC. Uncertainties come from the
-Jacobian at the solution, scaled by the residual variance.
+Jacobian at the solution, scaled by the residual variance, or from a cluster-robust
+sandwich over stretches of edge when that is larger, plus a calibrated systematic
+term (``uncertainty``).
 """
 
 from __future__ import annotations
@@ -29,6 +31,8 @@ from .overlay import fitted_alpha_image
 from .receiver_light import shadow_factor
 from .results import GroupResult, OverlayPlotData, ProfilePlotData
 from .samples import NoShadowInView, PhotoSamples, select_samples
+from .shadow_cues import few_profiles_warning
+from .uncertainty import cluster_covariance, combine_errors, edge_clusters
 from .views import PhotoView
 
 __all__ = ["FitOptions", "fit_group", "Solution", "Trial", "KRho", "Identifiability", "sample_views",
@@ -385,14 +389,17 @@ class Identifiability(NamedTuple):
     warning: str | None
 
 
-def identifiability(k: float, k_stderr: float, penumbra_px: float | None) -> Identifiability:
+def identifiability(k: float, k_stderr: float, penumbra_px: float | None,
+                    bound_stderr: float | None = None) -> Identifiability:
     """Step 5b: k is not identifiable when the penumbra is narrower than MIN_PENUMBRA_PX
-    (or not seen) or k is lost in its own noise (error above MAX_K_REL_STDERR of k). Then
-    the reported range_k is an upper bound: k + 2 sigma, and at least the k whose penumbra
-    would be one pixel wide (k / penumbra_px, the width scaling with k)."""
+    (or not seen) or k is lost in its own noise (statistical error ``k_stderr`` above
+    MAX_K_REL_STDERR of k). Then the reported range_k is an upper bound: k + 2 sigma (sigma
+    = ``bound_stderr``, the stated error with its systematic part, when given; else
+    ``k_stderr``), and at least the k whose penumbra would be one pixel wide
+    (k / penumbra_px, the width scaling with k)."""
     if penumbra_px is not None and penumbra_px >= MIN_PENUMBRA_PX and k_stderr <= MAX_K_REL_STDERR * max(k, 1e-12):
         return Identifiability(True, float(k), None)
-    upper = k + 2.0 * k_stderr
+    upper = k + 2.0 * (k_stderr if bound_stderr is None else max(k_stderr, bound_stderr))
     if penumbra_px:
         upper = max(upper, k / max(penumbra_px, 1e-9))
     return Identifiability(False, float(upper), "range not identifiable: the penumbra is narrower than "
@@ -457,7 +464,9 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
     sol, cfg = best.solution, best.config
     result.solve_seconds = _time.perf_counter() - solve_start
     est = k_rho_with_errors(sol.params, cov)
-    result.rho, result.range_stderr, result.rho_stderr = est.rho, est.range_stderr, est.rho_stderr
+    clusters = edge_clusters([s.profile_id for s in samples], len(sol.residuals))
+    robust = k_rho_with_errors(sol.params, cluster_covariance(sol.residuals, sol.jacobian, clusters))
+    result.rho = est.rho
     result.profile = cfg.profile
     raw_blur = float(sol.params.raw_blur)
     result.blur_px = float(np.sqrt(max(raw_blur, 0.0))) if float(cfg.fit_blur) else None
@@ -472,7 +481,12 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
     result.sun_elevation_deg = float(used[0].sun_elevation_deg) + float(d[1])
     result.sun_source = used[0].sun_source
     result.penumbra_px, result.penumbra_px_iqr = penumbra_width_px(samples, sol.prediction)
-    ident = identifiability(est.range_k, est.range_stderr, result.penumbra_px)
+    errors = combine_errors(est.range_k, est.rho, (est.range_stderr, est.rho_stderr),
+                            (robust.range_stderr, robust.rho_stderr), result.penumbra_px)
+    result.range_stderr, result.rho_stderr = errors.range_stderr, errors.rho_stderr
+    result.range_stderr_stat, result.rho_stderr_stat = errors.range_stderr_stat, errors.rho_stderr_stat
+    result.range_stderr_sys, result.rho_stderr_sys = errors.range_stderr_sys, errors.rho_stderr_sys
+    ident = identifiability(est.range_k, errors.range_stderr_stat, result.penumbra_px, errors.range_stderr)
     result.identifiable, result.range_k = ident.identifiable, ident.range_k
     if ident.warning:
         result.warnings.append(ident.warning)
@@ -483,5 +497,9 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
                                 for i in range(len(samples)) if options.overlays == "all" or i == 0]
     if not sol.converged:
         result.warnings.append("the solver stopped before converging")
+    if few_profiles_warning(result.n_profiles):
+        # Too little of the outline in view: one stretch of edge decides k and rho.
+        result.warnings.append(few_profiles_warning(result.n_profiles))
+        result.reliable = False
     result.seconds = _time.perf_counter() - start
     return result

@@ -13,6 +13,7 @@ penumbra width.
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import equinox as eqx
 import numpy as np
@@ -202,6 +203,46 @@ def plan_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k
     return PointPlan(EdgeSet(*_pack_edges(occ, sil)), edge_id, hard, active, near_boundary)
 
 
+def _within_reach(uv: np.ndarray, depth: np.ndarray, lo: np.ndarray, hi: np.ndarray, edge_depth: float,
+                  range_k: float, margin_m: float) -> np.ndarray:
+    """Indices of the points (light-space uv (N, 2), depth (N,)) within the occluder's view
+    [lo, hi] padded by 1.5 times the widest wedge they can see from their own depth behind the
+    nearest edge (``light_band_widths``) plus margin_m: the others are lit whatever the shadow.
+    One compiled pass (numba) over what may be every pixel of a range image."""
+    keep = np.empty(len(uv), bool)
+    _reach_kernel()(np.ascontiguousarray(uv, np.float64), np.ascontiguousarray(depth, np.float64),
+                    float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]), edge_depth,
+                    1.5 * float(light_band_widths(np.float64(1.0), range_k)), margin_m, keep)
+    return np.flatnonzero(keep)
+
+
+@functools.cache
+def _reach_kernel():
+    """The compiled loop of ``_within_reach``: per_m is 1.5 wedge widths per metre behind."""
+    import numba
+
+    @numba.njit(cache=True, nogil=True)
+    def kernel(uv, depth, lo_u, lo_v, hi_u, hi_v, edge_depth, per_m, margin_m, keep):
+        for i in range(uv.shape[0]):
+            pad = per_m * max(depth[i] - edge_depth, 0.0) + margin_m
+            keep[i] = (uv[i, 0] >= lo_u - pad) & (uv[i, 0] <= hi_u + pad) & (uv[i, 1] >= lo_v - pad) \
+                & (uv[i, 1] <= hi_v + pad)
+
+    return kernel
+
+
+def _spacing(uv: np.ndarray, cell_m: float) -> float:
+    """The typical distance (m) between neighbouring points (N, 2) where they lie: the area of
+    the cells of side ``cell_m`` they occupy, per point, square-rooted. Cells several points
+    wide fill where the points are, so the area is theirs, holes and outline included."""
+    col = ((uv[:, 0] - uv[:, 0].min()) / cell_m).astype(np.int64)
+    row = ((uv[:, 1] - uv[:, 1].min()) / cell_m).astype(np.int64)
+    width = int(col.max()) + 1
+    taken = np.zeros(width * (int(row.max()) + 1), bool)
+    taken[row * width + col] = True
+    return cell_m * float(np.sqrt(np.count_nonzero(taken) / len(uv)))
+
+
 def light_band_widths(depth_behind: np.ndarray, range_k: float) -> np.ndarray:
     """Width (m, perpendicular to the light) of a penumbra wedge at ``depth_behind`` metres
     behind its edge along the light: 2 k d for the ``edge`` rule (L +- k n, n perpendicular
@@ -225,29 +266,38 @@ def _plan_points_light(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, 
         return PointPlan(edges, edge_id, hard, active, near_boundary)
     frame = LightFrame.of_light(light, 0.5 * (world.min(0) + world.max(0)))
     # In ``dtype`` (float32 rounds as a float32 pipeline would), the rest in float64.
-    uv_v, d_v = (a.astype(np.float64) for a in frame.project(world, dtype))
-    uv_all, d_all = (a.astype(np.float64) for a in frame.project(points, dtype))
+    uv_v, d_v = (a.astype(np.float64, copy=False) for a in frame.project(world, dtype))
+    uv_all, d_all = (a.astype(np.float64, copy=False) for a in frame.project(points, dtype))
     ids = sil.vertex_ids
     edge_depth = np.minimum(d_v[ids[:, 0]], d_v[ids[:, 1]])  # the edge's end nearer the sun
     # The region the shadow can reach: the occluder's view padded by the widest wedge any
     # point can see (and the raster's margins, at the coarsest pixel); points outside it are
     # lit (or in attached shadow) and take no further work.
     reach = float(light_band_widths(d_all.max() - edge_depth.min(), range_k_max))
-    lo_occ, hi_occ = uv_v.min(0), uv_v.max(0)
+    lo_occ = np.array([uv_v[:, 0].min(), uv_v[:, 1].min()])  # per column: (N, 2).min(0) is slow
+    hi_occ = np.array([uv_v[:, 0].max(), uv_v[:, 1].max()])
     extent = float((hi_occ - lo_occ).max()) + 3.0 * reach
-    margin_m = (margin_px + CANDIDATE_REACH_PX + 2) * max(pixel_m or 0.0, extent / 512)
-    lo_r, hi_r = lo_occ - 1.5 * reach - margin_m, hi_occ + 1.5 * reach + margin_m
-    cand = np.flatnonzero((uv_all[:, 0] >= lo_r[0]) & (uv_all[:, 0] <= hi_r[0])
-                          & (uv_all[:, 1] >= lo_r[1]) & (uv_all[:, 1] <= hi_r[1]))
+    margin_m = (margin_px + CANDIDATE_REACH_PX + 2) * max(pixel_m or 0.0, extent / 256)  # the coarsest raster
+    # Each point's own reach: the wedge it can see from its own depth behind the nearest edge.
+    cand = _within_reach(uv_all, d_all, lo_occ, hi_occ, float(edge_depth.min()), range_k_max, margin_m)
     if not len(cand):
         return PointPlan(edges, edge_id, hard, active, near_boundary)
     uv_p, d_p, pts = uv_all[cand], d_all[cand], points[cand]
-    lo_pts, hi_pts = uv_p.min(0), uv_p.max(0)
+    att = attached[cand]
+    reach = float(light_band_widths(d_p.max() - edge_depth.min(), range_k_max))
+    extent = float((hi_occ - lo_occ).max()) + 3.0 * reach
+    lo_pts = np.array([uv_p[:, 0].min(), uv_p[:, 1].min()])  # per column: (N, 2).min(0) is slow
+    hi_pts = np.array([uv_p[:, 0].max(), uv_p[:, 1].max()])
     if pixel_m is None:
-        # About the points' own spacing in the sun's view (finer buys nothing but time), within
-        # [extent / 2048, extent / 512].
-        spacing = np.sqrt(np.prod(np.maximum(hi_pts - lo_pts, 1e-9)) / len(cand))
-        pixel_m = float(np.clip(spacing, extent / 2048, extent / 512))
+        # The raster of labels and distances at about the points' own spacing in the sun's
+        # view (finer buys nothing but time), within [extent / 2048, extent / 256]; the shadow
+        # map no coarser than extent / 512, so that the occluder's faces stay larger than its
+        # pixels and its lookups exact.
+        spacing = _spacing(uv_p, extent / 128)
+        pixel_m = float(np.clip(spacing, extent / 2048, extent / 256))
+        map_pixel_m = float(np.clip(spacing, extent / 2048, extent / 512))
+    else:
+        map_pixel_m = pixel_m
     pixel_m = max(pixel_m, 1e-5)
     pad_m = 1.5 * reach + (margin_px + CANDIDATE_REACH_PX + 2) * pixel_m
     lo = np.maximum(lo_occ - pad_m, lo_pts - pad_m)
@@ -255,6 +305,7 @@ def _plan_points_light(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, 
     if np.any(hi <= lo):
         return PointPlan(edges, edge_id, hard, active, near_boundary)
     pixel_m = max(pixel_m, float((hi - lo).max()) / MAX_RASTER_SIDE)
+    map_pixel_m = max(min(map_pixel_m, pixel_m), float((hi - lo).max()) / MAX_RASTER_SIDE, 1e-5)
     width = int(np.ceil((hi[0] - lo[0]) / pixel_m)) + 1
     height = int(np.ceil((hi[1] - lo[1]) / pixel_m)) + 1
     grid = GroundGrid(pixel_m, (float(lo[0]), float(hi[1])), width, height)
@@ -262,31 +313,38 @@ def _plan_points_light(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, 
     # silhouette region, labels and distances to its outline.
     raster = rasterise_shadow(grid, world, light, sil, uv_v)
     in_view, label, dist = raster.lookup(uv_p)
-    near = np.flatnonzero(dist <= 2.0 * pixel_m)
+    # Points in attached shadow are hard whatever the occluder does: no side, no depth test.
+    near = np.flatnonzero((dist <= 2.0 * pixel_m) & ~att)
     if len(near):  # a raster pixel is too coarse for the side near the outline: test exactly
         in_view[near] = posed.hard_shadow_at(uv_p[near], projected=uv_v)
     # The depth test where the occluder is in the sun's way. The nearest faces to the sun are
     # lit ones for a closed mesh, any face for an open one.
     faces = occ.faces[sil.lit] if occ.watertight else occ.faces
     behind = np.zeros(len(cand), bool)
-    test = np.flatnonzero(in_view > 0)
+    test = np.flatnonzero((in_view > 0) & ~att)
     # Farther from the sun than the whole occluder: behind it wherever it is in the way, no
     # lookup needed (most of a cast shadow). The others go to the shadow map.
-    far = d_p[test] > d_v[faces].max(initial=-np.inf) + 0.5 * pixel_m
+    far = d_p[test] > d_v[faces].max(initial=-np.inf) + 0.5 * map_pixel_m
     behind[test[far]] = True
     test = test[~far]
     if len(test):
-        smap = shadow_map(grid, uv_v, d_v, faces, dtype)
-        occ_depth, face_slope, exact = smap.occluder_depth(uv_p[test].astype(dtype))
+        # The shadow map only where the lookups fall (and their 2-pixel neighbourhoods).
+        uv_t = uv_p[test]
+        m_lo = np.array([uv_t[:, 0].min(), uv_t[:, 1].min()]) - 3 * map_pixel_m
+        m_hi = np.array([uv_t[:, 0].max(), uv_t[:, 1].max()]) + 3 * map_pixel_m
+        map_grid = GroundGrid(map_pixel_m, (float(m_lo[0]), float(m_hi[1])),
+                              int(np.ceil((m_hi[0] - m_lo[0]) / map_pixel_m)) + 1,
+                              int(np.ceil((m_hi[1] - m_lo[1]) / map_pixel_m)) + 1)
+        smap = shadow_map(map_grid, uv_v, d_v, faces, dtype)
+        occ_depth, face_slope, exact = smap.occluder_depth(uv_t.astype(dtype))
         recv_slope = 0.0
         if normals is not None:
             nt = normals[cand[test]]
             cos = np.abs(nt[:, 0] * light[0] + nt[:, 1] * light[1] + nt[:, 2] * light[2])
             recv_slope = np.sqrt(np.maximum(1.0 - cos * cos, 0.0)) / np.maximum(cos, 1e-12)
         scale = max(smap.scale, float(np.abs(pts[test]).max()), float(np.abs(world).max()))
-        bias = depth_bias(pixel_m, face_slope, recv_slope, scale, dtype, exact, receiver_tolerance_m)
+        bias = depth_bias(map_pixel_m, face_slope, recv_slope, scale, dtype, exact, receiver_tolerance_m)
         behind[test] = d_p[test].astype(dtype) > occ_depth + bias
-    att = attached[cand]
     hard[cand] = behind | att
     ok = label >= 0
     widths = light_band_widths(d_p - edge_depth[np.maximum(label, 0)], range_k_max)

@@ -28,8 +28,8 @@ point on an occluder's surface compares against its own face; the bias is the su
 map pixel's footprint at the point, pixel_tan * z (metres; an upper bound across the ray)
 and the slopes taken against the ray to the projector. The test compares depths along
 the projector's axis z, where an error along the ray shrinks by cos(off-axis angle), so
-the bias is conservative off axis. Faces with a corner within ``NEAR_M`` of the
-projector's plane or behind it are not drawn (they cannot be projected).
+the bias is conservative off axis. Faces are cut ``NEAR_M`` in front of the projector's
+plane (``clip.clip_near``): what lies behind it cannot be projected.
 """
 
 from __future__ import annotations
@@ -41,6 +41,7 @@ import numpy as np
 from scipy import ndimage
 
 from .camera import GroundGrid, PinholeCamera, look_at_camera
+from .clip import clip_near
 from .shadowmap import FACING_TOL, ShadowMap, depth_bias, shadow_map
 
 __all__ = ["FALLOFFS", "NEAR_M", "Projector", "ProjectorShadowMap", "projector_shadow_map"]
@@ -237,6 +238,9 @@ def projector_shadow_map(projector: Projector, vertices, faces) -> ProjectorShad
     seen from ``projector``; ``shadow_px`` pixels across the slide's larger side."""
     world = np.asarray(vertices, np.float64).reshape(-1, 3)
     faces = np.asarray(faces, np.int64).reshape(-1, 3)
+    # Faces cut at the near plane: the part of a face in front of the projector still casts.
+    _, z_world = projector.image_coordinates(world)
+    world, faces, _ = clip_near(world, z_world, faces, NEAR_M)
     ab, z = projector.image_coordinates(world)
     h, w = projector.slide.shape[:2]
     K = projector.camera.K
@@ -249,11 +253,11 @@ def projector_shadow_map(projector: Projector, vertices, faces) -> ProjectorShad
     origin = (-(width - 1) / 2 * pixel_tan, (height - 1) / 2 * pixel_tan)
     grid = GroundGrid(pixel_tan, origin, width, height)
     scale = float(np.abs(world).max(initial=1.0))
-    keep = faces[np.all(z[faces] > NEAR_M, axis=1)] if len(faces) else faces
+    keep = faces
     if not len(keep):
         return ProjectorShadowMap(projector, None, pixel_tan, scale)
     uv = np.column_stack([ab[:, 0], -ab[:, 1]])
-    smap = shadow_map(grid, uv, -1.0 / np.where(z > NEAR_M, z, 1.0), keep)
+    smap = shadow_map(grid, uv, -1.0 / np.maximum(z, NEAR_M), keep)  # originals behind: unused
     # The bias's slope term in metric terms: tan of the angle between each face's normal and the
     # ray from the projector to its centroid.
     tri = world[keep]

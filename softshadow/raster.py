@@ -21,6 +21,7 @@ through the governing edge's geometry.
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import cv2
 import numpy as np
@@ -301,44 +302,71 @@ def candidate_labels(edge_label: np.ndarray, rows: np.ndarray, cols: np.ndarray,
     return slots.T.copy()
 
 
-def winding_at_points(points: np.ndarray, start: np.ndarray, end: np.ndarray, weight: np.ndarray,
-                      chunk_elements: int = 4_000_000, points_per_strip: int = 64) -> np.ndarray:
+def winding_at_points(points: np.ndarray, start: np.ndarray, end: np.ndarray,
+                      weight: np.ndarray) -> np.ndarray:
     """Non-zero winding test (N,) bool of points (N, 2) against weighted directed segments.
 
-    The exact twin of ``winding_fill`` at arbitrary points (same half-open rule). The
-    points are cut into horizontal strips of ``points_per_strip`` (sorted by y), and each
-    strip tests only the segments whose y-range meets it: O(points x segments crossing
-    their strip), in chunks of at most ``chunk_elements``; used where a raster pixel is
-    too coarse.
+    The exact twin of ``winding_fill`` at arbitrary points (same half-open rule: a segment
+    counts for a point when ymin <= y < ymax and it crosses the point's row at or left of
+    it); used where a raster pixel is too coarse. The segments are binned by the rows of
+    y they span, so each point tests only those of its bin: O(points x segments crossing
+    its row + segments x bins spanned), compiled (numba).
     """
     out = np.zeros(len(points), bool)
     if not len(start) or not len(points):
         return out
-    y0, y1 = start[:, 1], end[:, 1]
-    x0, x1 = start[:, 0], end[:, 0]
+    points = np.ascontiguousarray(points[:, :2], np.float64)
+    y0, y1 = start[:, 1].astype(np.float64), end[:, 1].astype(np.float64)
+    x0, x1 = start[:, 0].astype(np.float64), end[:, 0].astype(np.float64)
     ymin, ymax = np.minimum(y0, y1), np.maximum(y0, y1)
     dirw = np.where(y1 > y0, 1.0, -1.0) * weight
     with np.errstate(divide="ignore", invalid="ignore"):
         slope = np.where(y1 != y0, (x1 - x0) / (y1 - y0), 0.0)
-    order = np.argsort(points[:, 1], kind="stable")
-    # Segments sorted by ymin: a strip's candidates are a prefix of them (ymin <= strip top),
-    # of which those with ymax > strip bottom cross it.
-    by_min = np.argsort(ymin, kind="stable")
-    ymin_sorted = ymin[by_min]
-    for s0 in range(0, len(order), points_per_strip):
-        idx = order[s0:s0 + points_per_strip]
-        p = points[idx]
-        lo, hi = p[0, 1], p[-1, 1]
-        prefix = by_min[:np.searchsorted(ymin_sorted, hi, side="right")]
-        seg = prefix[ymax[prefix] > lo]
-        if not len(seg):
-            continue
-        step = max(1, chunk_elements // len(seg))
-        for i in range(0, len(idx), step):
-            q = p[i:i + step]
-            py, px = q[:, 1:2], q[:, 0:1]
-            crosses = (py >= ymin[seg]) & (py < ymax[seg])
-            xc = x0[seg] + (py - y0[seg]) * slope[seg]
-            left = crosses & (xc <= px)
-            out[idx[i:i + step]] = np.abs(left.astype(np.float64) @ dirw[seg]) > 0.5
+    # Bins over the points' range of y, about one per 16 points (a segment in many bins costs
+    # one entry per bin).
+    lo, hi = float(points[:, 1].min()), float(points[:, 1].max())
+    n_bins = int(np.clip(len(points) // 16, 1, 4096))
+    height = max((hi - lo) / n_bins, 1e-300)
+    _winding_kernel()(points, x0, y0, ymin, ymax, slope, dirw, lo, height, n_bins, out)
     return out
+
+
+@functools.cache
+def _winding_kernel():
+    """The compiled loop of ``winding_at_points`` (numba, compiled on first use and cached)."""
+    import numba
+
+    @numba.njit(cache=True, nogil=True)
+    def kernel(points, x0, y0, ymin, ymax, slope, dirw, lo, height, n_bins, out):
+        # Bins of segments (CSR): bin b holds the segments whose [ymin, ymax] meets it.
+        first = np.empty(len(x0), np.int64)
+        last = np.empty(len(x0), np.int64)
+        count = np.zeros(n_bins + 1, np.int64)
+        for s in range(len(x0)):
+            # Clipped to the bins like the points' own bins (a point at the top of the range
+            # falls in the last bin); a segment beyond the range lands in an end bin, harmlessly.
+            first[s] = int(min(max(np.floor((ymin[s] - lo) / height), 0.0), n_bins - 1))
+            last[s] = int(min(max(np.floor((ymax[s] - lo) / height), 0.0), n_bins - 1))
+            for k in range(first[s], last[s] + 1):
+                count[k + 1] += 1
+        for k in range(n_bins):
+            count[k + 1] += count[k]
+        # Each bin's segments stored contiguously (6 values each), read in order below.
+        fill = count[:-1].copy()
+        seg = np.empty((count[n_bins], 6))
+        for s in range(len(x0)):
+            for k in range(first[s], last[s] + 1):
+                seg[fill[k], 0], seg[fill[k], 1], seg[fill[k], 2] = ymin[s], ymax[s], x0[s]
+                seg[fill[k], 3], seg[fill[k], 4], seg[fill[k], 5] = y0[s], slope[s], dirw[s]
+                fill[k] += 1
+        for i in range(len(points)):
+            px, py = points[i, 0], points[i, 1]
+            k = int(min(max(np.floor((py - lo) / height), 0.0), n_bins - 1))
+            total = 0.0
+            for j in range(count[k], count[k + 1]):
+                # Without branches: which segments count is unpredictable.
+                crosses = (py >= seg[j, 0]) & (py < seg[j, 1]) & (seg[j, 2] + (py - seg[j, 3]) * seg[j, 4] <= px)
+                total += seg[j, 5] * crosses
+            out[i] = abs(total) > 0.5
+
+    return kernel

@@ -12,8 +12,8 @@ level-of-detail comparison must see; ``smooth=True`` interpolates vertex normals
 turned towards the camera so an open mesh is lit on the side the camera sees.
 
 A camera with lens distortion is drawn in undistorted pixel coordinates of its K, and
-each pixel takes the face at its undistorted position (nearest). Faces with a corner
-within ``NEAR_M`` of the camera's plane or behind it are not drawn.
+each pixel takes the face at its undistorted position (nearest). Faces are cut at
+``NEAR_M`` in front of the camera's plane (``clip.clip_near``).
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ import numpy as np
 import trimesh
 
 from .camera import GroundGrid, PinholeCamera
+from .clip import clip_near
 from .posed import pose_matrix
 from .shadowmap import rasterise_depth
 
@@ -139,17 +140,17 @@ def visible_surfaces(camera: PinholeCamera | GroundGrid, surfaces=(), ground_alb
     origin, direction = _camera_rays(camera, h, w, float(max(verts[:, 2].max(initial=0.0), 0.0)) + 1.0)
     if isinstance(camera, GroundGrid):
         xy, depth = camera.to_pixel(verts), -verts[:, 2]
-        drawn = np.arange(len(faces))
+        drawn, source = faces, np.arange(len(faces))
         lookup = np.arange(h * w)
     else:
-        z = verts @ camera.R[2] + camera.t[2]
-        pc = verts @ camera.R.T + camera.t
-        zs = np.where(z > NEAR_M, z, 1.0)
+        # Faces cut at the near plane (a floor passing under and behind the camera stays whole in view).
+        cut, drawn, source = clip_near(verts, verts @ camera.R[2] + camera.t[2], faces, NEAR_M)
+        pc = cut @ camera.R.T + camera.t
+        zs = np.maximum(pc[:, 2], NEAR_M)  # the originals behind the plane are no longer used
         K = camera.K
         a, b = pc[:, 0] / zs, pc[:, 1] / zs
         xy = np.column_stack([K[0, 0] * a + K[0, 1] * b + K[0, 2], K[1, 1] * b + K[1, 2]])
         depth = -1.0 / zs
-        drawn = np.flatnonzero(np.all(z[faces] > NEAR_M, axis=1)) if len(faces) else np.zeros(0, np.int64)
         if camera.dist is not None and np.any(camera.dist):
             import cv2
             rows, cols = np.mgrid[0:h, 0:w]
@@ -162,10 +163,10 @@ def visible_surfaces(camera: PinholeCamera | GroundGrid, surfaces=(), ground_alb
             lookup = np.arange(h * w)
     fid = np.full(h * w, -1, np.int64)
     if len(drawn):
-        _, f_img = rasterise_depth(xy, depth, faces[drawn], (h, w))
+        _, f_img = rasterise_depth(xy, depth, drawn, (h, w))
         f_img = f_img.ravel()
         ok = lookup >= 0
-        fid[ok] = np.where(f_img[lookup[ok]] >= 0, drawn[np.maximum(f_img[lookup[ok]], 0)], -1)
+        fid[ok] = np.where(f_img[lookup[ok]] >= 0, source[np.maximum(f_img[lookup[ok]], 0)], -1)
     # The ray's distance to the face's plane (exact), and to the ground.
     all_normals = (np.vstack([s.face_normals for s in surfaces]) if surfaces else np.zeros((0, 3)))
     t_mesh = np.full(h * w, np.inf)

@@ -225,7 +225,8 @@ def _render_lit_scene(args, scene, model, pose, sun, projectors, name, k=0.01, r
     else:
         lights = SceneLights(0.3 if args.ambient is None else args.ambient, 0.0, k)
     rendered = render_scene(camera, model, pose, lights, sun, projectors, receivers, object_albedo=PAPER_ALBEDO,
-                            ground_albedo=ground, range_k_max=max(k, 0.03), smooth=args.smooth, supersample=args.supersample)
+                            ground_albedo=ground, range_k_max=max(k, 0.03), smooth=args.smooth,
+                            supersample=args.supersample)
     radiance = np.asarray(rendered.image, np.float64)
     exposed = np.clip(radiance * args.exposure, 0.0, 1.0)
     return np.rint(linear_to_srgb(exposed) * 255).astype(np.uint8), radiance

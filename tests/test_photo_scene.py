@@ -19,7 +19,7 @@ from fitting.edge_measure import measure_shadow_edges
 from fitting.ground_region import ground_region
 from fitting.ignore_masks import IgnoreMaskError, ignore_mask_path, is_auxiliary, read_ignore_mask
 from fitting.photos import list_photos
-from fitting.shadow_cues import bluer_umbrae, log_rho_modes, reliability
+from fitting.shadow_cues import bluer_umbrae, log_rho_modes, mode_of_log_rho, reliability
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 SUN = np.array([1.0, 0.97, 0.9])
@@ -132,6 +132,22 @@ def test_two_well_filled_modes_make_the_measurement_unreliable():
     assert reliable and warnings == []
 
 
+def test_edges_disagree_names_the_measured_mode_first_even_when_it_holds_fewer_profiles():
+    """A tight mode (the shadows, 30 profiles) is denser than a spread one (a kerb, 45 profiles):
+    the measurement takes the densest mode, and the warning must name that one as measured."""
+    rng = np.random.default_rng(1)
+    tight = np.log(0.2) + 0.01 * rng.normal(size=30)
+    spread = np.log(0.5) + 0.08 * rng.normal(size=45)
+    log_rho = np.concatenate([tight, spread])
+    measured = np.exp(mode_of_log_rho(log_rho, np.log(0.005)))
+    assert abs(measured - 0.2) < 0.01
+    line = np.stack([np.linspace(100, 600, 75), np.full(75, 500.0)], axis=1)
+    warnings, reliable = reliability(log_rho, line, (800, 1000), np.log(0.005))
+    assert not reliable
+    assert warnings[0].startswith(f"edges disagree: measured rho {measured:.3f} (")
+    assert "another mode at rho 0.4" in warnings[0] or "another mode at rho 0.5" in warnings[0]
+
+
 def test_few_profiles_on_scattered_structures_are_unreliable():
     rng = np.random.default_rng(0)
     scattered = rng.uniform(0, 1000, size=(12, 2))
@@ -139,6 +155,37 @@ def test_few_profiles_on_scattered_structures_are_unreliable():
     assert not reliable and any("separate structures" in w for w in warnings)
     warnings, reliable = reliability(np.full(6, np.log(0.2)), scattered[:6], (1000, 1000), np.log(0.005))
     assert not reliable and any(w.startswith("only 6") for w in warnings)
+
+
+def test_separate_outlines_with_different_steps_make_the_measurement_unreliable():
+    """A kerb's long outline at 0.27 beside two shadow outlines at 0.32 (the street preset's seeds 7 and 10):
+    each outline is consistent, and they are within one mode, but one of them is not a shadow."""
+    rng = np.random.default_rng(1)
+    kerb = np.stack([np.linspace(100, 300, 25), np.full(25, 700.0)], axis=1)
+    shadow_a = np.stack([np.full(20, 600.0), np.linspace(100, 300, 20)], axis=1)
+    shadow_b = np.stack([np.linspace(700, 900, 20), np.full(20, 300.0)], axis=1)
+    specks = np.array([[50.0, 50.0], [52.0, 50.0], [54.0, 50.0], [56.0, 50.0]])   # a small outline, far off
+    positions = np.concatenate([kerb, shadow_a, shadow_b])
+    log_rho = np.concatenate([np.log(0.27) + 0.02 * rng.normal(size=25), np.log(0.32) + 0.02 * rng.normal(size=40)])
+    warnings, reliable = reliability(log_rho, positions, (1000, 1000), np.log(0.005), log_rho)
+    assert not reliable and any(w.startswith("shadow outlines disagree") for w in warnings)
+    # the same outlines all at one step agree; a small outline (under a fifth of the profiles) far off is not compared
+    same = np.concatenate([np.log(0.32) + 0.02 * rng.normal(size=65), np.log(0.2) * np.ones(4)])
+    warnings, reliable = reliability(same, np.concatenate([positions, specks]), (1000, 1000), np.log(0.005), same)
+    assert not any(w.startswith("shadow outlines disagree") for w in warnings)
+
+
+def test_an_outline_whose_texture_changes_across_it_is_two_materials():
+    """Per profile the texture ratio is noisy (a kerb's ranged 1.7-7); the outline's median decides."""
+    from fitting.shadow_cues import textured_outlines
+
+    labels = np.array([1] * 6 + [2] * 6 + [3] * 2 + [4] * 3)
+    ratios = np.array([3.1, 1.7, 6.9, 2.4, 4.0, np.nan,       # a kerb: median 3.1, x sqrt(0.27) = 1.6
+                       0.5, 1.0, 1.9, 0.8, 1.2, 1.0,           # a shadow on one surface: median 1
+                       5.0, 6.0,                               # too few to judge
+                       2.9, 3.0, 3.1])                         # a dark shadow on smooth ground: noise, 1 / sqrt(rho)
+    rho = np.array([0.27] * 14 + [0.11] * 3)
+    assert textured_outlines(ratios, rho, labels).tolist() == [True] * 6 + [False] * 11
 
 
 # ----------------------------------------------------------------------------- ignore masks

@@ -165,7 +165,8 @@ def test_render_a_scene_toml_with_a_projector_a_mesh_receiver_and_the_sun(tmp_pa
         'slide = "sine"\nfrequency = 4\n')
     npy = tmp_path / "scene.npy"
     code = main(["render", "--scene", str(tmp_path / "scene.toml"), "--out", str(tmp_path / "s.png"), "--npy",
-                 str(npy), "--sun-azimuth", "200", "--sun-elevation", "45", "--size", "80x60", "--smooth", "--supersample", "2"])
+                 str(npy), "--sun-azimuth", "200", "--sun-elevation", "45", "--size", "80x60", "--smooth",
+                 "--supersample", "2"])
     assert code == 0, capsys.readouterr().err
     img = np.load(npy)
     assert img.shape == (60, 80, 3) and np.all(np.isfinite(img))

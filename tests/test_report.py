@@ -382,10 +382,11 @@ def test_written_files_have_ordinary_permissions(tmp_path):
 def test_an_unreliable_group_says_so_in_the_table_and_csv(tmp_path):
     results = _results()
     g = results.groups[3]
-    g.reliable, g.warnings = False, ["edges disagree: rho 0.200 (30 profiles) and 0.550 (20 profiles)"]
+    g.reliable, g.warnings = False, ["edges disagree: measured rho 0.200 (30 profiles), "
+                                     "another mode at rho 0.550 (20 profiles)"]
     md_path, csv_path = write_table2(results, tmp_path)
     md = md_path.read_text()
-    assert f"{g.label}: NOT RELIABLE: edges disagree: rho 0.200 (30 profiles)" in md
+    assert f"{g.label}: NOT RELIABLE: edges disagree: measured rho 0.200 (30 profiles)" in md
     assert "NOT RELIABLE" in format_table(results)
     with open(csv_path, newline="", encoding="utf-8") as fh:
         rows = list(csv.reader(fh))

@@ -52,6 +52,21 @@ def run_bench(args) -> int:
                                   json_path=args.json_path, report_path=getattr(args, "report", None))
         print(json.dumps(result, indent=1))
         return 0
+    if args.what in ("lod", "lod-grid"):
+        from .environment import environment
+        result = {"environment": environment(), **result}
+        if args.what == "lod":
+            from .lod import bench_lod
+            result["lod"] = bench_lod(quick=args.quick, progress=_progress)
+        else:
+            from .lod_grid import lod_grid
+            result["lod_grid"] = lod_grid(quick=args.quick, report_path=getattr(args, "report", None),
+                                          progress=_progress)
+        text = json.dumps(result, indent=1)
+        print(text)
+        if args.json_path:
+            Path(args.json_path).write_text(text + "\n")
+        return 0
     sizes = (256, 512) if args.quick else (256, 512, 1024)
     if args.what in ("render", "all"):
         from .render import bench_render
@@ -59,7 +74,7 @@ def run_bench(args) -> int:
     if args.what in ("render", "all", "receiver"):
         from .render import bench_depth_receiver
         result.setdefault("render", {})["depth_receiver_512"] = bench_depth_receiver(
-            repeats=3 if args.quick else 7)
+            repeats=5 if args.quick else 15)
     if args.what in ("precision", "all"):
         from .shadow_precision import bench_shadow_precision
         result["shadow_map_precision"] = bench_shadow_precision()

@@ -133,8 +133,11 @@ def bench_depth_receiver(size: int = 512, mesh: str = "dragon", repeats: int = 7
     beside the ground back end on a ``size``^2 top-down map, in the same run.
 
     ``light_ms``: plan plus evaluation at every range-image point (``at_points`` with
-    normals); ``ground_ms``: ``ground_map`` on a map framing the shadow; ``ratio`` =
-    light_ms / ground_ms.
+    normals); ``ground_ms``: ``ground_map`` on a map framing the shadow (medians, the two
+    calls alternating); ``ratio`` = light_ms / ground_ms; ``ratio_of_pairs``: the median of
+    each light call's time over the ground call's after it; ``*_cpu_ms`` and ``cpu_ratio``: the
+    same in the process's CPU time (all its threads), less moved by other jobs on a shared
+    machine than the wall time.
     """
     import numpy as np
 
@@ -155,9 +158,24 @@ def bench_depth_receiver(size: int = 512, mesh: str = "dragon", repeats: int = 7
         model.ground_map(params, sun, pose, grid).block_until_ready()
 
     plan = model.plan_points(sun, pose, points, 0.01, normals)
-    light_ms = _median_ms(light, repeats)
-    ground_ms = _median_ms(ground, repeats)
+    # Interleaved, so that both see the same load on a shared machine (one after the other, a
+    # change of load between the two batches moved the ratio by half).
+    light(), ground()  # compile / warm up
+    times = {"light": [], "ground": []}
+    cpu = {"light": [], "ground": []}
+    for _ in range(repeats):
+        for name, fn in (("light", light), ("ground", ground)):
+            t, c = time.perf_counter(), time.process_time()
+            fn()
+            times[name].append(time.perf_counter() - t)
+            cpu[name].append(time.process_time() - c)
+    light_ms, ground_ms = (1000.0 * statistics.median(times[k]) for k in ("light", "ground"))
+    light_cpu, ground_cpu = (1000.0 * statistics.median(cpu[k]) for k in ("light", "ground"))
+    pair = statistics.median(a / b for a, b in zip(times["light"], times["ground"]))
     n = len(points)
     return {"points": int(n), "band_points": int(plan.active[:n].sum()),
             "hard_points": int(plan.hard[:n].sum()), "light_ms": round(light_ms, 2),
-            "ground_ms": round(ground_ms, 2), "ratio": round(light_ms / ground_ms, 3)}
+            "ground_ms": round(ground_ms, 2), "ratio": round(light_ms / ground_ms, 3),
+            "ratio_of_pairs": round(pair, 3), "light_cpu_ms": round(light_cpu, 2),
+            "ground_cpu_ms": round(ground_cpu, 2), "cpu_ratio": round(light_cpu / ground_cpu, 3),
+            "repeats": repeats}
