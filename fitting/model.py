@@ -8,7 +8,7 @@ Per sample pixel of photo p with albedo class c:
 where u is softshadow's penumbra coordinate at the pixel's ground point (a
 function of k, the sun and the pose), the 1/12 is the pixel's own area (a
 box of one pixel), blur is the camera's optical blur in pixels, and h the
-sky fraction hidden from the pixel's receiver point (``fitting.sky``; 0 on open
+sky fraction hidden from the pixel's receiver point (``softshadow.sky``; 0 on open
 ground, where rho and level are defined) and c the sun's incidence on the
 receiver over the open ground's (1 on the ground; ``fitting.receiver_light``).
 On the ground this is level (1 - alpha (1 - rho) - rho h). Bounds
@@ -63,7 +63,7 @@ class GroupArrays(eqx.Module):
     albedo_class (n,); uv_norm (n, 2); plan: one plan for all photos (their edges
     stacked); sun_azimuth_deg, sun_elevation_deg, scale (P,) per photo;
     grad_t_pixel (n,) |dT/dpixel| at the start; sky_hidden (n,) the sky fraction the object
-    hides from each sample (``fitting.sky``).
+    hides from each sample (``softshadow.sky``).
     """
 
     ground: Float[Array, "n 3"]

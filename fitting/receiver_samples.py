@@ -28,7 +28,7 @@ from softshadow import PointPlan, Pose, PosedOccluder, SoftShadowModel, Sun, obj
 
 from .receiver_light import sun_incidence
 from .receiver_points import ReceiverSurface
-from .sky import open_sky_fraction
+from softshadow import open_sky_fraction
 from .views import PhotoView
 
 __all__ = ["select_receiver_samples", "receiver_plan", "MIN_SUN_INCIDENCE", "RECEIVER_SAMPLES_FACTOR"]

@@ -19,7 +19,7 @@ import trimesh
 from softshadow import (PointPlan, Pose, PosedOccluder, SoftShadowModel, Sun, edge_band_widths, object_mask,
                         project_to_ground)
 
-from .sky import hidden_sky_fraction
+from softshadow import hidden_sky_fraction
 from .views import PhotoView
 
 __all__ = ["PhotoSamples", "select_samples", "NoShadowInView", "paper_mask"]
@@ -50,7 +50,7 @@ class PhotoSamples:
     plan: PointPlan
     n_profiles: int
     band_px: int
-    sky_hidden: np.ndarray | None = None  # (n,) sky fraction hidden from each point (``fitting.sky``)
+    sky_hidden: np.ndarray | None = None  # (n,) sky fraction hidden from each point (``softshadow.sky``)
     sun_cos: np.ndarray | None = None  # (n,) sun incidence over the open ground's (None: 1, the ground)
 
 

@@ -64,7 +64,7 @@ class FitOptions:
     robust: bool = True
     max_steps: int = 60
     seed: int = 0
-    sky_occlusion: bool = True  # model the sky the object hides from each sample (fitting.sky)
+    sky_occlusion: bool = True  # model the sky the object hides from each sample (softshadow.sky)
     plots: bool = True
     overlays: str = "first"  # overlay plots for the "first" photo of each group, or "all"
     verbose: bool = False

@@ -26,14 +26,21 @@ def _as_jax(plan: PointPlan) -> PointPlan:
 
 
 def plan_alpha(points: Float[Array, "n 3"], plan: PointPlan, pose: Pose, sun: Sun, range_k,
-               rule: str = "edge", profile: str = "linear") -> Float[Array, " n"]:
-    """Alpha (n,) at the plan's points: the penumbra formula in bands, the hard shadow elsewhere."""
+               rule: str = "edge", profile: str = "linear",
+               pixel_axes: Float[Array, "*n 2 3"] | None = None) -> Float[Array, " n"]:
+    """Alpha (n,) at the plan's points: the penumbra formula in bands, the hard shadow elsewhere.
+
+    pixel_axes: (2, 3) or (n, 2, 3) offsets (m) across a pixel along its two sides: alpha
+    is then the mean over each pixel's footprint (``footprint_profile_alpha``), else the
+    value at the point.
+    """
     plan = _as_jax(plan)
     edges = plan.edges
     ev = pose.apply(edges.vertices_local)
     paper = pose.apply_direction(edges.paper_normal_local) if rule == "paper" else None
     alpha = edge_alpha(points, plan.edge_id, ev, edges.outward_sign, sun.light, range_k,
-                       plan.hard, rule, profile, paper, near_boundary=plan.near_boundary)
+                       plan.hard, rule, profile, paper, near_boundary=plan.near_boundary,
+                       pixel_axes=pixel_axes)
     return jnp.where(plan.active, alpha, plan.hard)
 
 

@@ -369,7 +369,9 @@ class GridPlan:
     plan: the PointPlan of the band pixels (``band_points``), with NumPy arrays for
     the jitted evaluation to take; raster: the ShadowRaster of the shadow's window
     (the projected mesh's bounding box plus the band's reach, within the padded
-    grid), for debugging; n_edges: silhouette edges before padding.
+    grid), for debugging; n_edges: silhouette edges before padding; sky_hidden (H, W):
+    the sky fraction the object hides from each pixel (``softshadow.sky``), None when
+    not modelled.
     """
 
     grid: GroundGrid
@@ -379,6 +381,7 @@ class GridPlan:
     raster: ShadowRaster | None
     n_band: int
     n_edges: int = 0
+    sky_hidden: np.ndarray | None = None
 
     @property
     def band_points(self) -> np.ndarray:

@@ -171,13 +171,16 @@ def _add_bench(sub):
     p.add_argument("--json", dest="json_path", help="also write the JSON here")
     p.add_argument("--quick", action="store_true", help="fewer repeats and sizes")
     p.add_argument("--what", default="render",
-                   choices=("render", "fit", "all", "sweep", "receiver", "precision", "lod", "lod-grid"),
+                   choices=("render", "fit", "all", "sweep", "receiver", "precision", "lod", "lod-grid",
+                            "floor"),
                    help="render / fit benchmarks, both (all), or the speed-against-error sweep with its "
                         "image and parameter errors against a known truth (sweep); the light-space back "
                         "end on a 512x512 range image beside the ground map (receiver, also in render); "
                         "the shadow map's depth in float32 against float64 (precision); the fit on the "
                         "real 41k-face dragon at each level of detail (lod); the Dowling paper's grid of "
-                        "levels of detail under its slides with the SSIM masking table (lod-grid)")
+                        "levels of detail under its slides with the SSIM masking table (lod-grid); the "
+                        "renderer's error floor against a physical render, before and after its pixel "
+                        "footprint and hidden sky (floor)")
     p.add_argument("--report", help="with --what sweep or lod-grid: also write the Markdown report here (and "
                                     "its images in img/ beside it), e.g. docs/speed_vs_error.md, "
                                     "docs/lod_masking.md")

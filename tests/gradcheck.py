@@ -43,13 +43,14 @@ def fixed_shape_plan(mdl, sun, pose, points, range_k_max):
 
 def check_point_gradients(mdl, theta0: np.ndarray, points: np.ndarray, range_k_max: float,
                           min_points: int = 8, keep=None, params=range(len(PARAM_NAMES)),
-                          steps=None, smooth_fraction: float = 0.85):
+                          steps=None, smooth_fraction: float = 0.85, pixel_axes=None):
     """Autodiff Jacobian (N, 10) of shading at points vs central differences, plan held fixed.
 
     keep: (N,) bool, the points to compare (default: inside the penumbra, alpha in
     (0.05, 0.95)); params: indices into PARAM_NAMES to check; steps (10,): the central
     difference steps (default STEPS; smaller for a narrow penumbra). Returns the Jacobian
-    rows of the kept points.
+    rows of the kept points. pixel_axes: each point's pixel footprint (``at_points``), None for
+    point sampling.
     """
     theta0 = np.asarray(theta0, np.float64)
     sun, pose = unpack(jnp.asarray(theta0))[1:]
@@ -57,7 +58,7 @@ def check_point_gradients(mdl, theta0: np.ndarray, points: np.ndarray, range_k_m
 
     def shading(theta):
         p, s, q = unpack(theta)
-        return mdl.at_points(p, s, q, points, plan=plan)
+        return mdl.at_points(p, s, q, points, plan=plan, pixel_axes=pixel_axes)
 
     base = np.asarray(shading(jnp.asarray(theta0)))
     if keep is None:

@@ -30,7 +30,7 @@ ALLOWED = {
 }
 PUBLIC_ONLY = ("softshadow", "scene")  # imported from above by their public names only
 DISCRETE_RENDERER_MODULES = ("meshes", "camera", "occluder", "raster", "posed", "plan", "colour", "threads",
-                             "shadowmap", "slides", "projector", "visibility", "clip")
+                             "shadowmap", "slides", "projector", "visibility", "clip", "sky")
 
 
 def _imports(path: Path):

@@ -33,9 +33,14 @@ from softshadow.shadowmap import BIAS_PX, LightFrame, depth_bias, faces_away, ra
 from test_render_gradients import check_point_gradients, pillar_shadow_samples, scene, theta_of, unpack
 
 
+# These tests check the model's geometry at points: pixel centres sampled, no hidden sky
+# (the pixel footprint and the sky have their own tests in test_render_floor.py).
+point_model = functools.partial(SoftShadowModel.from_mesh, footprint=False, hidden_sky=False)
+
+
 @functools.lru_cache(maxsize=None)
 def builtin_model(name: str, rule: str = "edge", profile: str = "linear") -> SoftShadowModel:
-    return SoftShadowModel.from_mesh(builtin_mesh(name), rule=rule, profile=profile)
+    return point_model(builtin_mesh(name), rule=rule, profile=profile)
 
 
 def posed_trimesh(mesh: trimesh.Trimesh, pose: Pose) -> trimesh.Trimesh:
@@ -142,7 +147,7 @@ def test_plane_agrees_with_the_ground_back_end(name, sun, pose):
     if name == "box":
         box = trimesh.creation.box(extents=(0.6, 0.4, 1.0))
         box.apply_translation((0.0, 0.0, 0.5))
-        mdl = SoftShadowModel.from_mesh(box)
+        mdl = point_model(box)
     else:
         mdl = builtin_model(name)
     params = ShadowParams(0.02, 0.3)
@@ -246,7 +251,7 @@ def test_no_acne_on_a_lit_plate(grazing_deg):
     # Tilt the plate about x so that its top face's normal makes ``grazing_deg`` with the sun.
     tilt = 90.0 - 50.0 - grazing_deg  # normal (0, -sin t, cos t) against s = (0, -cos 50, sin 50)
     mesh = plate(tilt)
-    mdl = SoftShadowModel.from_mesh(mesh)
+    mdl = point_model(mesh)
     pts, nrm = surface_samples(mesh, 3000)
     top = nrm @ np.array([0.0, -np.sin(np.deg2rad(tilt)), np.cos(np.deg2rad(tilt))]) > 0.999
     incidence = np.degrees(np.arccos(np.clip(nrm[top] @ to_sun(sun), -1, 1)))
@@ -288,7 +293,7 @@ def test_contact_shadow_is_not_detached_beyond_the_bias():
     box = trimesh.creation.box(extents=(1.0, 0.02, 1.0))
     box.apply_transform(trimesh.transformations.rotation_matrix(np.deg2rad(-30.0), (1, 0, 0)))
     box.apply_translation((0.0, 0.0, -box.bounds[0, 2]))  # resting on z = 0
-    mdl = SoftShadowModel.from_mesh(box)
+    mdl = point_model(box)
     y0 = box.vertices[np.argmin(box.vertices[:, 2]), 1]
     y = y0 + np.linspace(-0.02, 0.4, 800)
     pts = np.c_[np.zeros_like(y), y, np.zeros_like(y)]

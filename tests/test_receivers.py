@@ -31,11 +31,11 @@ def _frame(along_deg: float):
 
 def test_tilted_light_matches_the_physical_renderer():
     """Lit and umbra levels on the wall's face and on the ground beside it, over open ground's
-    lit level: receiver_light (with fitting.sky) against data_synth.physical, two independent
+    lit level: receiver_light (with softshadow.sky) against data_synth.physical, two independent
     ray casters, within 0.01."""
     from data_synth.physical import combined_mesh, irradiance, sky_visibility, sun_visibility
     from fitting.receiver_light import lit_level, plane_sky_fraction, sun_incidence, umbra_level
-    from fitting.sky import open_sky_fraction
+    from softshadow import open_sky_fraction
     sun, along, pillar, wall = _wall_scene()
     d, side = _frame(along)
     face_n = -d

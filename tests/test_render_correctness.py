@@ -33,9 +33,14 @@ from softshadow import GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun, loo
 from softshadow.meshes import builtin_mesh
 
 
+# These tests check the model's geometry at points: pixel centres sampled, no hidden sky
+# (the pixel footprint and the sky have their own tests in test_render_floor.py).
+point_model = functools.partial(SoftShadowModel.from_mesh, footprint=False, hidden_sky=False)
+
+
 @functools.lru_cache(maxsize=None)
 def builtin_model(name: str, rule: str = "edge", profile: str = "linear") -> SoftShadowModel:
-    return SoftShadowModel.from_mesh(builtin_mesh(name), rule=rule, profile=profile)
+    return point_model(builtin_mesh(name), rule=rule, profile=profile)
 
 
 def standing_box(extents) -> trimesh.Trimesh:
@@ -181,7 +186,7 @@ def footprint_mesh(kind):
 @pytest.mark.parametrize("kind,sun,pose", FOOTPRINT_SCENES, ids=[f"{s[0]}-{i}" for i, s in enumerate(FOOTPRINT_SCENES)])
 def test_box_and_cylinder_shadows_match_their_analytic_footprints(kind, sun, pose):
     mesh = footprint_mesh(kind)
-    mdl = SoftShadowModel.from_mesh(mesh)
+    mdl = point_model(mesh)
     hull = projected_hull(mesh, pose, sun)  # a convex occluder's shadow: the hull of its projection
     centre = hull.mean(0)
     grid = GroundGrid.around(tuple(centre), 1.3 * float(np.ptp(hull, axis=0).max()) + 0.5, 128)
@@ -336,7 +341,7 @@ def test_top_edge_penumbra_is_stretched_on_the_ground():
     sun = Sun(180.0, elevation)  # light travels north; the far top edge is the one at +y
     widths = []
     for height in (0.8, 1.6):
-        mdl = SoftShadowModel.from_mesh(standing_box((2.0, 0.3, height)))
+        mdl = point_model(standing_box((2.0, 0.3, height)))
         pose = Pose(rotation_deg=(0.0, 0.0, 3.0))  # off the exact side-on tie of the end faces
         edge_mid = np.array([0.0, 0.15, height]) @ np.asarray(pose.rotation).T
         t = np.array([1.0, 0.0, 0.0]) @ np.asarray(pose.rotation).T
@@ -407,7 +412,7 @@ def test_paper_rule_equals_edge_rule_on_a_cylinder_side():
     points = np.c_[xs, np.full_like(xs, y), np.zeros_like(xs)]
     widths = {}
     for rule in ("edge", "paper"):
-        shading = np.asarray(SoftShadowModel.from_mesh(cyl, rule=rule).at_points(ShadowParams(k, 0.0), sun,
+        shading = np.asarray(point_model(cyl, rule=rule).at_points(ShadowParams(k, 0.0), sun,
                                                                                  pose, points))
         widths[rule] = ramp_width(xs, 1.0 - shading, at=0.25)
     expected = 2 * k * h / np.sin(np.radians(elevation))
@@ -487,7 +492,7 @@ def test_camera_looking_straight_down_sees_the_ground_map(name, sun, grid):
 def test_box_lit_side_on_does_not_depend_on_the_tie_break(rule, k):
     """Sun due east on an axis-aligned box: two faces have n . L = 0 exactly. Turning the sun by
     +-1e-6 degrees breaks the tie either way; the shadow must not change (CONVENTIONS)."""
-    mdl = SoftShadowModel.from_mesh(standing_box((0.6, 0.4, 1.0)), rule=rule)
+    mdl = point_model(standing_box((0.6, 0.4, 1.0)), rule=rule)
     grid = GroundGrid(0.0213, (-2.6, 0.61), 96, 64)  # pixel centres off the shadow's sides y = +-0.2
     maps = [alpha_map(mdl, k, Sun(az, 35.0), Pose(), grid) for az in (90.0, 90.0 - 1e-6, 90.0 + 1e-6)]
     assert np.sum(maps[0] > 0.5) > 200

@@ -24,9 +24,14 @@ from softshadow import GroundGrid, Pose, PosedOccluder, ShadowParams, SoftShadow
 from softshadow.meshes import builtin_mesh
 
 
+# These tests check the model's geometry at points: pixel centres sampled, no hidden sky
+# (the pixel footprint and the sky have their own tests in test_render_floor.py).
+point_model = functools.partial(SoftShadowModel.from_mesh, footprint=False, hidden_sky=False)
+
+
 @functools.lru_cache(maxsize=None)
 def builtin_model(name: str, rule: str = "edge", profile: str = "linear") -> SoftShadowModel:
-    return SoftShadowModel.from_mesh(builtin_mesh(name), rule=rule, profile=profile)
+    return point_model(builtin_mesh(name), rule=rule, profile=profile)
 
 
 def standing_box(extents=(0.6, 0.4, 1.0)) -> trimesh.Trimesh:
@@ -176,7 +181,7 @@ def test_occluder_standing_on_the_ground(rule):
     sun, params = Sun(150.0, 40.0), ShadowParams(0.03, 0.2)
     cases = [(builtin_model("pillar", rule), Pose(rotation_deg=(0, 0, 25.0)))]
     if rule == "edge":
-        cases.append((SoftShadowModel.from_mesh(standing_box(), rule=rule), Pose(rotation_deg=(0, 0, 5.0))))
+        cases.append((point_model(standing_box(), rule=rule), Pose(rotation_deg=(0, 0, 5.0))))
     for mdl, pose in cases:
         grid = GroundGrid.around((0.0, 0.0), 0.8, 64)  # around the base, 12.5 mm pixels
         img, grads = render_and_grad(mdl, params, sun, pose, grid, 0.03)
@@ -196,9 +201,9 @@ def test_occluder_standing_on_the_ground(rule):
 def test_degenerate_and_duplicate_faces_change_nothing():
     sun, pose, params = Sun(100.0, 30.0), Pose(rotation_deg=(0, 0, 12.0)), ShadowParams(0.02, 0.3)
     grid = GroundGrid.around((-1.0, 0.3), 3.0, 64)
-    clean, _ = render_and_grad(SoftShadowModel.from_mesh(standing_box()), params, sun, pose, grid, 0.02,
+    clean, _ = render_and_grad(point_model(standing_box()), params, sun, pose, grid, 0.02,
                                with_grad=False)
-    bad, grads = render_and_grad(SoftShadowModel.from_mesh(box_with_bad_faces()), params, sun, pose, grid,
+    bad, grads = render_and_grad(point_model(box_with_bad_faces()), params, sun, pose, grid,
                                  0.02)
     assert 0.02 < shadow_fraction(clean, 0.3)
     np.testing.assert_allclose(bad, clean, atol=1e-9)
@@ -211,13 +216,13 @@ def test_open_box_casts_the_closed_box_shadow(rule):
     """A box without its top is not watertight, yet seen from the sun it has the same outline."""
     sun, pose, params = Sun(100.0, 30.0), Pose(rotation_deg=(0, 0, 12.0)), ShadowParams(0.02, 0.3)
     grid = GroundGrid.around((-1.0, 0.3), 3.0, 64)
-    closed, _ = render_and_grad(SoftShadowModel.from_mesh(standing_box(), rule=rule), params, sun, pose,
+    closed, _ = render_and_grad(point_model(standing_box(), rule=rule), params, sun, pose,
                                 grid, 0.02, with_grad=False)
-    opened, grads = render_and_grad(SoftShadowModel.from_mesh(open_box(), rule=rule), params, sun, pose,
+    opened, grads = render_and_grad(point_model(open_box(), rule=rule), params, sun, pose,
                                     grid, 0.02)
-    hard_closed, _ = render_and_grad(SoftShadowModel.from_mesh(standing_box(), rule=rule),
+    hard_closed, _ = render_and_grad(point_model(standing_box(), rule=rule),
                                      ShadowParams(0.0, 0.3), sun, pose, grid, 0.0, with_grad=False)
-    hard_open, _ = render_and_grad(SoftShadowModel.from_mesh(open_box(), rule=rule),
+    hard_open, _ = render_and_grad(point_model(open_box(), rule=rule),
                                    ShadowParams(0.0, 0.3), sun, pose, grid, 0.0, with_grad=False)
     np.testing.assert_array_equal(hard_open, hard_closed)
     if rule == "edge":  # the edge rule depends only on the outline's edges and the light
@@ -231,7 +236,7 @@ def test_open_box_casts_the_closed_box_shadow(rule):
 
 def test_single_quad_matches_its_projected_parallelogram():
     """Every edge of a lone quad is a boundary edge; with k = 0 the shadow is the projected quad."""
-    mdl = SoftShadowModel.from_mesh(single_quad())
+    mdl = point_model(single_quad())
     sun, pose = Sun(210.0, 50.0), Pose()
     grid = GroundGrid.around((0.6, 1.0), 3.0, 96)
     img, _ = render_and_grad(mdl, ShadowParams(0.0, 0.0), sun, pose, grid, 0.0, with_grad=False)
@@ -262,7 +267,7 @@ def _segment_distance(p, a, b):
 @pytest.mark.parametrize("rule", ["edge", "paper"])
 def test_box_lit_side_on_has_finite_gradients(rule):
     """Sun due east (azimuth 90) on an axis-aligned box: the +-y faces have n . L = 0 exactly."""
-    mdl = SoftShadowModel.from_mesh(standing_box(), rule=rule)
+    mdl = point_model(standing_box(), rule=rule)
     sun, pose, params = Sun(90.0, 35.0), Pose(), ShadowParams(0.02, 0.3)
     grid = GroundGrid.around((-1.0, 0.0), 3.0, 64)
     img, grads = render_and_grad(mdl, params, sun, pose, grid, 0.02)
@@ -437,7 +442,7 @@ def test_gradients_match_finite_differences_for_a_box_lit_side_on():
     """Sun due east on an axis-aligned box: faces with n . L = 0. The shadow's long sides are then
     differentiable in k, rho, the elevation and the translation (which keep the faces parallel
     to the light); azimuth and rotations tilt them one way or the other (a kink, not checked)."""
-    mdl = SoftShadowModel.from_mesh(standing_box())
+    mdl = point_model(standing_box())
     sun, pose = Sun(90.0, 35.0), Pose()
     inside = np.array([[-1.0, 0.0], [-1.0, 0.0], [-1.6, 0.0], [-1.6, 0.0]])
     outside = inside + np.array([[0.0, 0.5], [0.0, -0.5], [0.0, 0.5], [0.0, -0.5]])

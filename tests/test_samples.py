@@ -39,7 +39,7 @@ def test_hidden_sky_fraction_of_a_disk_overhead_matches_its_solid_angle():
     cosine-weighted sky from the point below its centre, and nothing from far away."""
     import trimesh
 
-    from fitting.sky import hidden_sky_fraction
+    from softshadow import hidden_sky_fraction
     R, d = 1.0, 1.5
     disk = trimesh.creation.cylinder(radius=R, height=0.01, sections=128)
     disk.apply_translation([0.0, 0.0, d])

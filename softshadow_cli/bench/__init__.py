@@ -81,6 +81,9 @@ def run_bench(args) -> int:
     if args.what in ("fit", "all"):
         from .fit import bench_fit
         result["fit"] = bench_fit(quick=args.quick)
+    if args.what == "floor":
+        from .floor import bench_floor
+        result["floor"] = bench_floor(quick=args.quick, progress=_progress)
     text = json.dumps(result, indent=1)
     print(text)
     if args.json_path:
