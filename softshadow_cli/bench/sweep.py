@@ -55,6 +55,7 @@ class SweepSettings:
         self.paper_expands = (0.0,) if quick else (0.0, 0.002, 0.004, 0.006, 0.008, 0.01, 0.012)
         self.table2_samples = 64 if quick else 1024
         self.table1_pixels, self.table1_samples = (64, 64) if quick else (512, 512)
+        self.profiles, self.dtypes = ("linear", "disk"), ("float32", "float64")
         # The Mitsuba peer (when installed): samples per pixel, on these meshes.
         self.mitsuba_spps = (1, 4) if quick else (4, 16, 64, 256)
         self.mitsuba_meshes = ("pillar",) if quick else ("pillar", "dragon")
@@ -79,6 +80,8 @@ class SweepSettings:
         s.mitsuba_spps = (1,)
         s.fit_photos, s.fit_caps, s.fit_baseline_seeds = (1,), (150,), 1
         s.scaling_pixels = (32,)
+        # Each profile, precision and mesh level is one more compilation (~3 s on 2 cores).
+        s.profiles, s.dtypes, s.lod_faces = ("linear",), ("float32",), ()
         return s
 
 @functools.lru_cache(maxsize=None)
@@ -206,9 +209,9 @@ def run_sweep(settings: SweepSettings, fit: bool = True, progress=print) -> dict
     out["resolution"] = [scenes["pillar"].case(p, repeats=settings.repeats) for p in settings.resolutions]
     progress("bench sweep: profile and dtype")
     out["profile"] = [scenes["pillar"].case(settings.base_pixels, profile=p, repeats=settings.repeats)
-                      for p in ("linear", "disk")]
+                      for p in settings.profiles]
     out["dtype"] = [scenes["pillar"].case(settings.base_pixels, dtype=d, repeats=settings.repeats)
-                    for d in ("float32", "float64")]
+                    for d in settings.dtypes]
     progress("bench sweep: level of detail")
     full = scenes["dragon"].mesh
     out["lod"] = [_Scene(decimated(full, f), settings, truth_mesh=full, name="dragon").case(settings.base_pixels,
