@@ -217,7 +217,26 @@ def _mitsuba_section(mitsuba: dict) -> list[str]:
         for metric, r in run["time_to_reach"]["softshadow"].items():
             L.append(f"| {name} | {'whole map' if metric == 'rms' else 'penumbra band'} | {r['target']:.4f} | "
                      f"{r['softshadow_ms']:.1f} | {r['mitsuba_ms']:.0f} | {r['how']} | {r['ratio']:.0f} |")
+    L += [""] + [line for name, run in mitsuba.items() for line in _levels_off(name, run["cases"])]
     return L
+
+
+def _levels_off(name: str, cases: list[dict]) -> list[str]:
+    """A note where Mitsuba's last spp step lowered its error much less than Monte Carlo noise
+    alone would (error ~ spp^-1/2): it levels off against this truth, and an extrapolated time
+    is then no more than a lower bound of a level it may not reach."""
+    if len(cases) < 2:
+        return []
+    a, b = cases[-2], cases[-1]
+    out = []
+    for metric, label in (("rms", "whole-map"), ("rms_band", "penumbra-band")):
+        drop, noise_drop = a["error"][metric] / b["error"][metric], (b["spp"] / a["spp"]) ** 0.5
+        if drop < 1.0 + 0.5 * (noise_drop - 1.0):
+            out.append(f"- {name}: from {a['spp']} to {b['spp']} spp Mitsuba's {label} error fell {drop:.2f}x "
+                       f"where noise alone falls {noise_drop:.1f}x: it levels off near {b['error'][metric]:.4f} "
+                       "against this truth (a difference between the two physical renders, not noise), so an "
+                       "extrapolated time above is a lower bound at best.")
+    return out
 
 
 def fit_scaling_plot(fb: dict, path: Path) -> None:
