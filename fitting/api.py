@@ -37,6 +37,7 @@ from .receiver_points import ReceiverError, load_receiver_mesh, receiver_for_pho
 from .resume import GroupStore, group_key, photo_digest
 from .results import FitResults, GroupResult
 from .solve import FitOptions, fit_group
+from .uncertainty import edge_rho_errors, profile_spread
 from .views import PhotoView
 
 __all__ = ["fit_folder", "fit_photos", "fit_and_report", "FolderError", "unreadable_summary"]
@@ -159,7 +160,10 @@ def _measure_without_scene(photo: Photo, when, scene: SceneSpec | None) -> Group
     if not m.edges_found:
         result.error = m.reason or "no shadow edge found"
         return result
-    result.rho, result.rho_stderr = float(m.rho), float(m.rho_stderr)
+    kept_log_rho = np.log([p.rho for p in m.profiles if p.kept])
+    errors = edge_rho_errors(m.rho, m.rho_stderr, profile_spread(kept_log_rho))
+    result.rho, result.rho_stderr = float(m.rho), errors.rho_stderr
+    result.rho_stderr_stat, result.rho_stderr_sys = errors.rho_stderr_stat, errors.rho_stderr_sys
     result.penumbra_px, result.penumbra_px_iqr = float(m.penumbra_px), float(m.penumbra_px_iqr)
     result.penumbra_m = None if m.penumbra_m is None else float(m.penumbra_m)
     result.n_profiles = int(m.n_profiles)

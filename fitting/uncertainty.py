@@ -18,6 +18,13 @@ interreflection and finite resolution bias k and rho by more than the noise does
 
 Both are added in quadrature. docs/uncertainty.md has the calibration and the coverage
 measured on folders not used for it.
+
+Without geometry (one photo, ``edge_measure``) the statistical part is the block
+bootstrap of the median profile rho, and the systematic part (``EdgeFloor``) is relative
+to rho and grows with the spread of the kept profiles' rho: profiles that disagree
+(outlines on different ground, hidden sky, albedo edges) mean the median itself is less
+certain than its bootstrap says. Calibrated on held-out ``street`` renders
+(``examples/street_table.py --calibrate``).
 """
 
 from __future__ import annotations
@@ -27,7 +34,8 @@ from typing import NamedTuple
 import numpy as np
 
 __all__ = ["SystematicFloor", "CALIBRATED_FLOOR", "Uncertainty", "edge_clusters", "cluster_covariance",
-           "systematic_errors", "combine_errors", "CLUSTERS_PER_PHOTO"]
+           "systematic_errors", "combine_errors", "CLUSTERS_PER_PHOTO", "EdgeFloor", "CALIBRATED_EDGE_FLOOR",
+           "profile_spread", "edge_rho_errors"]
 
 #: Stretches of edge per photo for the cluster-robust covariance: few enough that one
 #: stretch spans the residuals' correlation along the edge, enough for a stable sum.
@@ -127,3 +135,41 @@ def combine_errors(k: float, rho: float, classic: tuple[float, float], robust: t
     sk, sr = stat(classic[0], robust[0]), stat(classic[1], robust[1])
     yk, yr = systematic_errors(k, rho, penumbra_px, floor)
     return Uncertainty(float(np.hypot(sk, yk)), float(np.hypot(sr, yr)), sk, sr, yk, yr)
+
+
+class EdgeFloor(NamedTuple):
+    """The systematic one-sigma error of rho measured without geometry (one photo's edges).
+
+    sigma_rho_sys = sqrt(rho_abs^2 + (rho_rel rho)^2 + (rho_spread rho s)^2), with s the
+    robust spread (``profile_spread``) of the kept profiles' log rho.
+    """
+
+    rho_abs: float
+    rho_rel: float
+    rho_spread: float
+
+
+#: Calibrated on held-out street renders (seeds 100-111; docs/uncertainty.md "Without
+#: geometry": the coverage seeds 0-11 are never used for it).
+CALIBRATED_EDGE_FLOOR = EdgeFloor(rho_abs=0.0, rho_rel=0.05, rho_spread=0.5)
+
+
+def profile_spread(log_rho: np.ndarray) -> float:
+    """Robust standard deviation (normal-scaled median absolute deviation) of the profiles'
+    log rho (n,); 0 for fewer than two profiles."""
+    from scipy.stats import median_abs_deviation
+
+    log_rho = np.asarray(log_rho, dtype=float)
+    log_rho = log_rho[np.isfinite(log_rho)]
+    return float(median_abs_deviation(log_rho, scale="normal")) if len(log_rho) > 1 else 0.0
+
+
+def edge_rho_errors(rho: float, stat: float, spread: float,
+                    floor: EdgeFloor = CALIBRATED_EDGE_FLOOR) -> Uncertainty:
+    """Stated errors of a rho measured without geometry: the statistical part ``stat`` (the
+    bootstrap error; NaN stays NaN) and the systematic part of ``floor`` at ``rho`` and the
+    profiles' log-rho spread ``spread``, in quadrature. There is no k: its fields are NaN."""
+    _, base = systematic_errors(0.0, rho, None, SystematicFloor(0.0, 0.0, floor.rho_abs, floor.rho_rel))
+    sys = float(np.hypot(base, floor.rho_spread * abs(float(rho)) * float(spread)))
+    nan = float("nan")
+    return Uncertainty(nan, float(np.hypot(float(stat), sys)), nan, float(stat), nan, sys)

@@ -34,3 +34,6 @@ def test_street_rho_is_within_0_03_or_marked_unreliable(street_folder):
     assert group.error is None and group.rho is not None
     assert abs(group.rho - truth["rho"]) < 0.03 or not group.reliable, (group.rho, truth["rho"], group.warnings)
     assert group.reliable == (not group.warnings)
+    # Without geometry the stated error holds the bootstrap part and the systematic floor.
+    assert group.rho_stderr_sys > 0 and group.rho_stderr_stat > 0
+    assert group.rho_stderr == pytest.approx((group.rho_stderr_stat ** 2 + group.rho_stderr_sys ** 2) ** 0.5)

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from fitting.solve import covariance
-from fitting.uncertainty import (CALIBRATED_FLOOR, SystematicFloor, cluster_covariance, combine_errors,
+from fitting.uncertainty import (CALIBRATED_EDGE_FLOOR, CALIBRATED_FLOOR, EdgeFloor, edge_rho_errors, profile_spread,
+                                 SystematicFloor, cluster_covariance, combine_errors,
                                  edge_clusters, systematic_errors)
 
 
@@ -90,3 +91,25 @@ def test_the_calibrated_floor_is_positive():
     stated errors statistical only again."""
     assert CALIBRATED_FLOOR.k_rel > 0 or CALIBRATED_FLOOR.k_rel_px > 0
     assert CALIBRATED_FLOOR.rho_abs > 0 or CALIBRATED_FLOOR.rho_rel > 0
+
+
+def test_profile_spread_is_the_normal_scaled_mad_of_log_rho():
+    rng = np.random.default_rng(0)
+    log_rho = np.log(0.2) + 0.1 * rng.normal(size=4000)
+    assert profile_spread(log_rho) == pytest.approx(0.1, rel=0.05)
+    # One wild profile does not move it; one profile alone has no spread.
+    assert profile_spread(np.r_[log_rho, 50.0]) == pytest.approx(profile_spread(log_rho), rel=0.01)
+    assert profile_spread(np.array([np.log(0.2)])) == 0.0
+
+
+def test_edge_rho_error_adds_the_floor_and_the_profile_spread_in_quadrature():
+    floor = EdgeFloor(rho_abs=0.003, rho_rel=0.04, rho_spread=0.5)
+    e = edge_rho_errors(0.25, 0.006, 0.2, floor)
+    sys = np.sqrt(0.003 ** 2 + (0.04 * 0.25) ** 2 + (0.5 * 0.25 * 0.2) ** 2)
+    assert e.rho_stderr_sys == pytest.approx(sys) and e.rho_stderr_stat == 0.006
+    assert e.rho_stderr == pytest.approx(np.hypot(0.006, sys))
+    assert np.isnan(e.range_stderr) and np.isnan(e.range_stderr_sys)
+    # More disagreement between profiles, a larger error; no floor, the bootstrap alone.
+    assert edge_rho_errors(0.25, 0.006, 0.4, floor).rho_stderr > e.rho_stderr
+    assert edge_rho_errors(0.25, 0.006, 0.4, EdgeFloor(0.0, 0.0, 0.0)).rho_stderr == pytest.approx(0.006)
+    assert CALIBRATED_EDGE_FLOOR.rho_rel > 0 or CALIBRATED_EDGE_FLOOR.rho_abs > 0
