@@ -136,9 +136,8 @@ def calibrate(rows: list[dict], target: float) -> EdgeFloor:
     smallest mean log stated error."""
     got = [r for r in rows if r["rho"] is not None]
     best, width = None, np.inf
-    for a, b, c in itertools.product([0.0, 0.002, 0.005], [0.0, 0.01, 0.02, 0.03, 0.04, 0.05, 0.06, 0.08, 0.10],
-                                     [0.0, 0.1, 0.2, 0.3, 0.5, 0.7, 1.0, 1.5, 2.0]):
-        floor = EdgeFloor(a, b, c)
+    for a, b, c in itertools.product([0.0, 0.002, 0.005], np.arange(0, 0.205, 0.01), np.arange(0, 2.05, 0.1)):
+        floor = EdgeFloor(float(a), round(float(b), 3), round(float(c), 2))
         if coverage(got, floor)["within_2_sigma"] < target:
             continue
         w = float(np.mean([np.log(_stated(r, floor)) for r in got]))

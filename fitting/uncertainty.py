@@ -21,10 +21,10 @@ measured on folders not used for it.
 
 Without geometry (one photo, ``edge_measure``) the statistical part is the block
 bootstrap of the median profile rho, and the systematic part (``EdgeFloor``) is relative
-to rho and grows with the spread of the kept profiles' rho: profiles that disagree
-(outlines on different ground, hidden sky, albedo edges) mean the median itself is less
-certain than its bootstrap says. Calibrated on held-out ``street`` renders
-(``examples/street_table.py --calibrate``).
+to rho (the hidden sky, umbrae on other ground, albedo edges bias the median by more than
+its bootstrap says), with a term for the spread of the kept profiles' rho that the
+calibration on ``street`` renders set to zero: there the spread did not foretell the
+error (``examples/street_table.py --calibrate``).
 """
 
 from __future__ import annotations
@@ -149,9 +149,9 @@ class EdgeFloor(NamedTuple):
     rho_spread: float
 
 
-#: Calibrated on held-out street renders (seeds 100-111; docs/uncertainty.md "Without
+#: Calibrated on street renders (seeds 100-129; docs/uncertainty.md "Without
 #: geometry": the coverage seeds 0-11 are never used for it).
-CALIBRATED_EDGE_FLOOR = EdgeFloor(rho_abs=0.0, rho_rel=0.05, rho_spread=0.5)
+CALIBRATED_EDGE_FLOOR = EdgeFloor(rho_abs=0.0, rho_rel=0.11, rho_spread=0.0)
 
 
 def profile_spread(log_rho: np.ndarray) -> float:
