@@ -142,7 +142,7 @@ class EdgeMeasurement:
     reason: why nothing was measured (None when edges_found).
     warnings: one-line reasons to doubt the result (``fitting.shadow_cues``):
         edges that disagree, too few profiles, profiles scattered over
-        unrelated structures.
+        unrelated structures, dark sides scattered over separate dark regions.
     reliable: False when there is any warning (the value is still given).
     """
 
