@@ -234,7 +234,8 @@ def outline_disagreement(log_rho: np.ndarray, labels: np.ndarray) -> tuple[float
     return min(medians), max(medians)
 
 
-def dark_side_regions(log_image: np.ndarray, valid: np.ndarray, dark_uv: np.ndarray, threshold_log: float) -> np.ndarray:
+def dark_side_regions(log_image: np.ndarray, valid: np.ndarray, dark_uv: np.ndarray,
+                      threshold_log: float) -> np.ndarray:
     """(N,) label of the connected dark region each profile's dark side lies in (0: not in a dark region).
 
     log_image: (H, W) log of the (working-scale) photo; valid: (H, W) bool, False = masked or clipped.

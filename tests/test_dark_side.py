@@ -6,7 +6,6 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-from fitting.edge_measure import measure_shadow_edges
 from fitting.shadow_cues import dark_side_regions, scattered_dark_sides
 
 H, W = 64, 80
@@ -72,13 +71,24 @@ def test_a_few_profiles_in_the_main_shadow_and_some_strays_are_not_flagged():
     assert scattered_dark_sides(np.array([0, 0, 0, 1])) is None      # too few judged
 
 
-def test_a_measured_shadow_is_not_warned_about_scattered_dark_sides():
+def test_a_measured_shadow_is_not_warned_about_scattered_dark_sides(monkeypatch):
+    import fitting.edge_measure as edge_measure
+
+    seen = []
+    def spy(labels):
+        seen.append(labels)
+        return scattered_dark_sides(labels)
+
+    monkeypatch.setattr(edge_measure, "scattered_dark_sides", spy)
     rng = np.random.default_rng(2)
     yy, xx = np.mgrid[0:96, 0:128]
     d = np.maximum(np.abs(xx - 64) - 30, np.abs(yy - 48) - 22)        # a rectangle, signed distance (px)
     shade = 1.0 - np.clip(0.5 - d / 4.0, 0.0, 1.0) * 0.7
     tex = ndimage.gaussian_filter(rng.standard_normal(shade.shape), 0.7)
     photo = 0.4 * np.exp(0.1 * tex / tex.std()) * shade
-    m = measure_shadow_edges(photo + rng.normal(0.0, 0.003, photo.shape))
+    m = edge_measure.measure_shadow_edges(photo + rng.normal(0.0, 0.003, photo.shape))
     assert m.edges_found and abs(m.rho - 0.3) < 0.03
     assert not any("dark sides scattered" in w for w in m.warnings)
+    # Every kept profile's dark side was sampled inside the shadow (on the dark side of its normal), in one region.
+    assert len(seen) == 1 and seen[0].size == m.n_profiles
+    assert np.all(seen[0] > 0) and np.unique(seen[0]).size == 1
