@@ -41,16 +41,9 @@ DEFAULT_PAIRS = ("DSC_0569.jpg:DSC_0570.jpg", "p21_1.jpg:p21_n.jpg")
 
 def references(m, gray: np.ndarray, free_gray: np.ndarray, bands=()) -> tuple[float | None, float, dict]:
     """(reference at the kept profiles or None, umbra-wide reference, {band: umbra-wide reference in those rows})."""
-    ratio = ndimage.gaussian_filter(gray, 1.0) / np.maximum(ndimage.gaussian_filter(free_gray, 1.0), 1e-6)
-    refs = []
-    for p in m.profiles:
-        if not p.kept:
-            continue
-        pts = p.position_uv[None, :] + p.offsets_px[:, None] * p.normal_uv[None, :]
-        r = ndimage.map_coordinates(ratio, [pts[:, 1], pts[:, 0]], order=1)
-        umbra, lit = p.offsets_px < -0.5 * p.width_px - 1.0, p.offsets_px > 0.5 * p.width_px + 1.0
-        if umbra.any() and lit.any():
-            refs.append(np.median(r[umbra]) / np.median(r[lit]))
+    from fitting import attenuation_image, reference_at_profiles
+    ratio = attenuation_image(gray, free_gray)
+    at_profiles = reference_at_profiles(m, ratio)
     log_ratio = np.log(np.maximum(ratio, 1e-6))
     cut = threshold_otsu(log_ratio)
     umbra = ndimage.binary_erosion(log_ratio < cut, iterations=4)
@@ -63,7 +56,7 @@ def references(m, gray: np.ndarray, free_gray: np.ndarray, bands=()) -> tuple[fl
         rows[lo:hi] = True
         if (umbra & rows).any():
             per_band[f"{lo}:{hi}"] = float(np.median(ratio[umbra & rows]) / lit_level)
-    return (float(np.median(refs)) if refs else None), wide, per_band
+    return at_profiles, wide, per_band
 
 
 def main(argv=None) -> None:

@@ -16,6 +16,7 @@ from .grouping import NO_TIME_REASON, PhotoGroup, group_photos, photo_time
 from .many import DONE_MARKER, SUMMARY_COLUMNS, find_photo_folders, fit_many, write_summary
 from .markers import (Registration, RegistrationError, board_from_spec, board_outline_world,
                       board_world_points, register_board)
+from .pair_reference import attenuation_image, reference_at_profiles
 from .problem import GroupProblem, SolveOutcome, group_problem
 from .photos import (IMAGE_EXTENSIONS, RAW_EXTENSIONS, Photo, PhotoError, linear_to_srgb, list_photos,
                      read_photo, srgb_to_linear)
@@ -26,6 +27,7 @@ from .solve import FitOptions, fit_group
 from .views import PhotoView
 
 __all__ = [
+    "attenuation_image", "reference_at_profiles",
     "DONE_MARKER", "EdgeMeasurement", "FitOptions", "fit_and_report", "FitResults", "FolderError", "GroupResult",
     "IMAGE_EXTENSIONS",
     "NO_TIME_REASON", "NoShadowInView", "PAPER_TABLE2", "Photo", "PhotoError", "PhotoGroup",

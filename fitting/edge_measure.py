@@ -30,7 +30,8 @@ from fitting.edge_detect import (MIN_CHAIN_PX, LogImage, detect_edge_candidates,
 from fitting.edge_ramp import (RHO_MIN, SAMPLING_BLUR_PX, RampFit, RampFits, fit_edge_profile, fit_edge_profiles,
                                ramp_alpha, ramp_log_model, robust_std)
 from fitting.ground_region import ground_region
-from fitting.shadow_cues import (MODE_WINDOW_LOG, bluer_umbrae, edge_structures, mode_of_log_rho, reliability,
+from fitting.shadow_cues import (DARK_SIDE_STEP_PX, MODE_WINDOW_LOG, bluer_umbrae, dark_side_regions,
+                                  edge_structures, mode_of_log_rho, reliability, scattered_dark_sides,
                                   textured_outlines)
 
 __all__ = ["EdgeMeasurement", "EdgeProfile", "RampFit", "measure_shadow_edges", "fit_edge_profile", "ramp_alpha",
@@ -141,7 +142,7 @@ class EdgeMeasurement:
     reason: why nothing was measured (None when edges_found).
     warnings: one-line reasons to doubt the result (``fitting.shadow_cues``):
         edges that disagree, too few profiles, profiles scattered over
-        unrelated structures.
+        unrelated structures, dark sides scattered over separate dark regions.
     reliable: False when there is any warning (the value is still given).
     """
 
@@ -225,6 +226,7 @@ def measure_shadow_edges(linear_gray: np.ndarray, mask: np.ndarray | None = None
     profiles = _drop_textured_outlines(profiles, work.gray.shape)
     shadow_like_log_rho = np.log([p.rho for p in profiles if p.kept])
     profiles = _keep_dominant_mode(profiles)
+    dark_sides = _dark_sides_warning(img, profiles)
     profiles = [_to_full_scale(p, work) for p in profiles]
     kept = [p for p in profiles if p.kept]
     if len(kept) < MIN_PROFILES:
@@ -237,6 +239,8 @@ def measure_shadow_edges(linear_gray: np.ndarray, mask: np.ndarray | None = None
     rho_stderr = _block_bootstrap_median_stderr(np.exp(log_rho), positions, rng)
     q25, q50, q75 = np.percentile(widths, [25, 50, 75])
     warnings, reliable = reliability(shadow_like_log_rho, positions, gray.shape, np.log(RHO_MIN), log_rho)
+    if dark_sides is not None:
+        warnings, reliable = [*warnings, dark_sides], False
     return EdgeMeasurement(rho=rho, rho_stderr=rho_stderr, penumbra_px=float(q50), penumbra_px_iqr=float(q75 - q25),
                            penumbra_m=None if pixel_m is None else float(q50 * pixel_m), n_profiles=len(kept),
                            edges_found=True, profiles=profiles, reason=None, warnings=tuple(warnings),
@@ -554,6 +558,23 @@ def _keep_dominant_mode(profiles: list[EdgeProfile]) -> list[EdgeProfile]:
             out[i] = _with_reason(profiles[i], f"rho {profiles[i].rho:.3f} far from the dominant mode "
                                                f"{np.exp(centre):.3f}")
     return out
+
+
+def _dark_sides_warning(img, profiles: list[EdgeProfile]) -> str | None:
+    """``scattered_dark_sides`` for the kept profiles (working-scale positions) on the working log image.
+
+    Threshold: halfway in log between the kept profiles' median umbra and lit levels (the fitted model at
+    the ends of each profile). A warning rather than a drop: on the street preset and DSC_0569 the kept
+    profiles' dark sides fall in one or a few large regions, and dropping the profiles on small regions
+    would remove true shadow profiles whose umbra is cut up by texture or masks, with nothing gained for
+    the value (see docs/edge_measure.md).
+    """
+    kept = [p for p in profiles if p.kept]
+    if not kept:
+        return None
+    threshold = float(np.median([0.5 * (p.fitted_log[0] + p.fitted_log[-1]) for p in kept]))
+    dark_uv = np.array([p.position_uv - p.normal_uv * (0.5 * p.width_px + DARK_SIDE_STEP_PX) for p in kept])
+    return scattered_dark_sides(dark_side_regions(img.log, img.valid, dark_uv, threshold))
 
 
 def _with_reason(p: EdgeProfile, reason: str) -> EdgeProfile:

@@ -17,6 +17,10 @@ Used by ``fitting.edge_measure`` after the per-profile tests:
 - ``outline_disagreement``: one shadow has one step all along its outline,
   and all shadows on the ground share it; separate outlines whose medians
   differ are not all cast shadows.
+- ``dark_side_regions`` / ``scattered_dark_sides``: the dark side of a cast
+  shadow is one connected region; the dark sides of a shadow's profiles all
+  fall in it, while edges picked up on unrelated dark things (gaps, stains,
+  dark stones, facade details) each have a dark blob of their own.
 - ``reliability``: the warnings (one line each) and the ``reliable`` flag
   derived from the above.
 """
@@ -24,12 +28,13 @@ Used by ``fitting.edge_measure`` after the per-profile tests:
 from __future__ import annotations
 
 import numpy as np
-from scipy import stats
+from scipy import ndimage, stats
 from scipy.cluster.hierarchy import fcluster, linkage
 from scipy.signal import find_peaks
 
 __all__ = ["bluer_umbrae", "log_rho_modes", "edge_structures", "reliability", "mode_of_log_rho",
-           "disagreement_warning", "few_profiles_warning", "outline_disagreement", "textured_outlines"]
+           "disagreement_warning", "few_profiles_warning", "outline_disagreement", "textured_outlines",
+           "dark_side_regions", "scattered_dark_sides"]
 
 # Skylit umbrae are bluer: on the real photo DSC_0569 the blue step minus the
 # red step was about 0.8 (log) across shadow edges, about 0 across paint; the
@@ -72,6 +77,20 @@ OUTLINE_TEXTURE_MIN_PROFILES = 3
 OUTLINE_DISAGREE_LOG = 0.12
 OUTLINE_MIN_PROFILES = 4
 OUTLINE_MIN_SHARE = 0.2
+# The dark-side cue. The working log image is smoothed (Gaussian, this sigma in
+# working pixels, masked pixels left out) so that texture does not cut a
+# shadow into pieces, thresholded halfway (in log) between the kept profiles'
+# median umbra and lit levels, and labelled (8-connected). A profile's dark
+# side is sampled DARK_SIDE_STEP_PX beyond its ramp's dark end.
+DARK_SMOOTH_PX = 1.5
+DARK_SIDE_STEP_PX = 2.0
+# A dark region holding at least this many of the kept profiles' dark sides is
+# a shadow (one shadow, several profiles along its outline). When less than
+# DARK_MAIN_SHARE of the profiles with a dark side fall in such regions, the
+# evidence is scattered over unrelated dark blobs: a warning, not a drop
+# (see docs/edge_measure.md, "The dark side is one region").
+DARK_MAIN_MIN_PROFILES = 3
+DARK_MAIN_SHARE = 0.5
 STRUCTURE_LINK = 0.04          # profiles closer than this fraction of the image diagonal: one structure
 PROFILES_PER_STRUCTURE = 5     # more structures than kept / this (and than 2): scattered evidence
 
@@ -213,3 +232,53 @@ def outline_disagreement(log_rho: np.ndarray, labels: np.ndarray) -> tuple[float
     if len(medians) < 2 or max(medians) - min(medians) <= OUTLINE_DISAGREE_LOG:
         return None
     return min(medians), max(medians)
+
+
+def dark_side_regions(log_image: np.ndarray, valid: np.ndarray, dark_uv: np.ndarray,
+                      threshold_log: float) -> np.ndarray:
+    """(N,) label of the connected dark region each profile's dark side lies in (0: not in a dark region).
+
+    log_image: (H, W) log of the (working-scale) photo; valid: (H, W) bool, False = masked or clipped.
+    dark_uv: (N, 2) pixel (u, v) of each profile's dark-side sample.
+    threshold_log: pixels of the smoothed log image below this are dark (halfway between umbra and lit).
+    Regions are 8-connected components of the dark valid pixels (``scipy.ndimage.label``). A sample that
+    is not itself dark (texture, a pixel off the ramp's end) takes the label most of its 5x5 neighbours have.
+    """
+    log = np.asarray(log_image, float)
+    ok = np.asarray(valid, bool) & np.isfinite(log)
+    w = ndimage.gaussian_filter(ok.astype(float), DARK_SMOOTH_PX)
+    smooth = ndimage.gaussian_filter(np.where(ok, log, 0.0), DARK_SMOOTH_PX) / np.maximum(w, 1e-12)
+    labels, _ = ndimage.label(ok & (smooth < threshold_log), structure=np.ones((3, 3), int))
+    uv = np.rint(np.asarray(dark_uv, float).reshape(-1, 2)).astype(int)
+    h, wd = labels.shape
+    out = np.zeros(uv.shape[0], int)
+    for i, (u, v) in enumerate(uv):
+        if not (0 <= u < wd and 0 <= v < h):
+            continue
+        if labels[v, u]:
+            out[i] = labels[v, u]
+            continue
+        near = labels[max(v - 2, 0):v + 3, max(u - 2, 0):u + 3].ravel()
+        near = near[near > 0]
+        if near.size:
+            out[i] = int(np.bincount(near).argmax())
+    return out
+
+
+def scattered_dark_sides(region_labels: np.ndarray) -> str | None:
+    """The warning for kept profiles whose dark sides lie scattered over many separate dark regions, or None.
+
+    region_labels: (N,) from ``dark_side_regions`` (0: the dark side is not in a dark region; not judged).
+    A region holding at least DARK_MAIN_MIN_PROFILES dark sides is a shadow; when fewer than DARK_MAIN_SHARE
+    of the judged profiles lie in such regions, the profiles are on unrelated dark things.
+    """
+    lab = np.asarray(region_labels, int)
+    lab = lab[lab > 0]
+    if lab.size < DARK_MAIN_MIN_PROFILES:
+        return None
+    _, counts = np.unique(lab, return_counts=True)
+    in_main = int(counts[counts >= DARK_MAIN_MIN_PROFILES].sum())
+    if in_main >= DARK_MAIN_SHARE * lab.size:
+        return None
+    return (f"dark sides scattered: {lab.size} profiles' dark sides lie in {counts.size} separate dark regions "
+            f"({in_main} in regions of {DARK_MAIN_MIN_PROFILES}+), not one shadow")

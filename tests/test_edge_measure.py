@@ -19,6 +19,7 @@ import pytest
 from scipy import ndimage
 
 from datapaths import MITSUBA, WORKSPACE
+from fitting import attenuation_image, reference_at_profiles
 from fitting.edge_measure import (NO_EDGE_REASON, EdgeMeasurement, fit_edge_profile, measure_shadow_edges,
                                   ramp_alpha, ramp_log_model)
 
@@ -453,16 +454,7 @@ def test_real_pair_rho_matches_the_shadow_free_reference():
     gray, free_gray = rgb @ LUMA, free @ LUMA
     m = measure_shadow_edges(gray, linear_rgb=rgb, saturation_level=1.0, max_profiles=300)
     assert m.edges_found and m.n_profiles >= 30
-    ratio = ndimage.gaussian_filter(gray, 1.0) / np.maximum(ndimage.gaussian_filter(free_gray, 1.0), 1e-6)
-    refs = []
-    for p in m.profiles:
-        if not p.kept:
-            continue
-        pts = p.position_uv[None, :] + p.offsets_px[:, None] * p.normal_uv[None, :]
-        r = ndimage.map_coordinates(ratio, [pts[:, 1], pts[:, 0]], order=1)
-        umbra, lit = p.offsets_px < -0.5 * p.width_px - 1.0, p.offsets_px > 0.5 * p.width_px + 1.0
-        refs.append(np.median(r[umbra]) / np.median(r[lit]))
-    reference = float(np.median(refs))
+    reference = reference_at_profiles(m, attenuation_image(gray, free_gray))
     assert 0.15 < reference < 0.3, "kept profiles are not on the shadow's edge"
     assert m.rho == pytest.approx(reference, abs=0.02)
 
