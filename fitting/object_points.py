@@ -9,7 +9,7 @@ orientation, and the shadow map's depth test). Its light, relative to open
 horizontal ground's lit level, is that of any receiver
 (``fitting.receiver_light``): (1 - rho) c (1 - alpha) + rho v, with c the sun's
 incidence on its normal and v the sky it sees past the object and the receiver
-(``fitting.sky``).
+(``softshadow.open_sky_fraction``).
 
 Which pixels see the object is a visible-surface test: each pixel's ray from the
 camera is cast against the posed object and the receiver's blocker mesh
@@ -29,10 +29,10 @@ import dataclasses
 import numpy as np
 import trimesh
 
-from softshadow import PinholeCamera, Pose, ShadowParams, SoftShadowModel, Sun, posed_vertices
+from softshadow import (PinholeCamera, Pose, ShadowParams, SoftShadowModel, Sun, open_sky_fraction,
+                        posed_vertices)
 
 from .receiver_light import shadow_factor, sun_incidence
-from .sky import open_sky_fraction
 
 __all__ = ["ObjectPixels", "visible_object_pixels", "object_light"]
 

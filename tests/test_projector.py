@@ -35,7 +35,8 @@ from softshadow import (GROUND, NOTHING, GroundGrid, Pose, Projector, SceneLight
 
 @functools.lru_cache(maxsize=None)
 def model_of(name: str) -> SoftShadowModel:
-    return SoftShadowModel.from_mesh(name)
+    # The geometric model (pixel centres, no hidden sky), as the scene image samples it.
+    return SoftShadowModel.from_mesh(name, footprint=False, hidden_sky=False)
 
 
 def _within_a_pixel(mine: np.ndarray, truth: np.ndarray) -> tuple[int, int]:

@@ -153,7 +153,10 @@ def test_render_without_projectors_is_the_shadow_map_as_before(folder, capsys):
     assert code == 0, capsys.readouterr().err
     shading = np.load(npy)
     assert shading.shape == (64, 64)
-    np.testing.assert_allclose([shading.min(), shading.max()], [0.3, 1.0], atol=1e-6)
+    # Lit ground 1, the umbra at rho away from the pillar; nearer, the sky the pillar hides darkens it
+    # (0 on the ground under the pillar itself).
+    assert shading.min() >= -1e-9 and shading.max() == pytest.approx(1.0, abs=1e-3)
+    assert (np.abs(shading - 0.3) < 0.02).sum() > 100
 
 
 def test_render_a_scene_toml_with_a_projector_a_mesh_receiver_and_the_sun(tmp_path, capsys):
