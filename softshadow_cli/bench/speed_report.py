@@ -239,6 +239,21 @@ def _levels_off(name: str, cases: list[dict]) -> list[str]:
     return out
 
 
+def _save_loglog_panels(fig, axes, ylabel: str, path: Path, dpi: int) -> None:
+    """Log-log axes with a grid and a legend on every panel; the figure written to ``path``."""
+    import matplotlib.pyplot as plt
+    for ax in axes:
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_ylabel(ylabel)
+        ax.grid(True, which="both", lw=0.3)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+
+
 def fit_scaling_plot(fb: dict, path: Path) -> None:
     """The fit's time against photos per group and against samples (log-log), both solvers."""
     import matplotlib
@@ -252,16 +267,7 @@ def fit_scaling_plot(fb: dict, path: Path) -> None:
         axes[1].plot([v["samples"] for v in cp], [v[solver]["median_ms"] for v in cp], style, label=solver)
     axes[0].set_xlabel(f"photos per group ({fb['cap_for_photos']} samples per photo at most)")
     axes[1].set_xlabel("samples (one photo)")
-    for ax in axes:
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_ylabel("median ms per solve")
-        ax.grid(True, which="both", lw=0.3)
-        ax.legend(fontsize=7)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save_loglog_panels(fig, axes, "median ms per solve", path, dpi=110)
 
 
 def _fit_baseline_section(fb: dict) -> list[str]:
@@ -311,16 +317,7 @@ def scaling_plot(scaling: dict, path: Path) -> None:
                          label=f"{r}, {name}")
     axes[0].set_xlabel(f"faces ({scaling['pixels_for_faces']}^2 px map)")
     axes[1].set_xlabel("pixels")
-    for ax in axes:
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_ylabel("median ms")
-        ax.grid(True, which="both", lw=0.3)
-        ax.legend(fontsize=7)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    _save_loglog_panels(fig, axes, "median ms", path, dpi=120)
 
 
 def _scaling_section(scaling: dict) -> list[str]:
