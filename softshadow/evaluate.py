@@ -27,12 +27,14 @@ def _as_jax(plan: PointPlan) -> PointPlan:
 
 def plan_alpha(points: Float[Array, "n 3"], plan: PointPlan, pose: Pose, sun: Sun, range_k,
                rule: str = "edge", profile: str = "linear",
-               pixel_axes: Float[Array, "*n 2 3"] | None = None) -> Float[Array, " n"]:
+               pixel_axes: Float[Array, "*n 2 3"] | None = None, corners: bool = True) -> Float[Array, " n"]:
     """Alpha (n,) at the plan's points: the penumbra formula in bands, the hard shadow elsewhere.
 
     pixel_axes: (2, 3) or (n, 2, 3) offsets (m) across a pixel along its two sides: alpha
     is then the mean over each pixel's footprint (``footprint_profile_alpha``), else the
-    value at the point.
+    value at the point. corners: near a corner of the outline, the light's mass behind the
+    corner's wedge (``corner_alpha``, when the plan holds the outline's neighbours), else
+    the nearest edge's half-plane alone.
     """
     plan = _as_jax(plan)
     edges = plan.edges
@@ -40,7 +42,7 @@ def plan_alpha(points: Float[Array, "n 3"], plan: PointPlan, pose: Pose, sun: Su
     paper = pose.apply_direction(edges.paper_normal_local) if rule == "paper" else None
     alpha = edge_alpha(points, plan.edge_id, ev, edges.outward_sign, sun.light, range_k,
                        plan.hard, rule, profile, paper, near_boundary=plan.near_boundary,
-                       pixel_axes=pixel_axes)
+                       pixel_axes=pixel_axes, neighbours=edges.neighbours if corners else None)
     return jnp.where(plan.active, alpha, plan.hard)
 
 
@@ -72,4 +74,4 @@ def plan_coordinate_light(points: Float[Array, "n 3"], plan: PointPlan, pose: Po
     return u
 
 
-plan_alpha_jit = jax.jit(plan_alpha, static_argnames=("rule", "profile"))
+plan_alpha_jit = jax.jit(plan_alpha, static_argnames=("rule", "profile", "corners"))

@@ -38,7 +38,7 @@ from jaxtyping import Array, Float, Int
 
 __all__ = ["PROFILES", "RULES", "penumbra_coordinate", "profile_alpha", "edge_alpha", "edge_coordinate",
            "blurred_profile_alpha", "profile_slope", "profile_integral", "footprint_profile_alpha",
-           "occluded_disk_fraction", "shade"]
+           "occluded_disk_fraction", "corner_mass", "corner_alpha", "shade"]
 
 PROFILES = ("linear", "disk")
 RULES = ("edge", "paper")
@@ -176,7 +176,11 @@ def _coordinate(x, f: _EdgeFrame, light, inside, near_boundary):
         near_plane = near_plane & (near_boundary > 0.5)
     side = jnp.where(near_plane, jnp.where(num < 0, -1.0, 1.0), jnp.where(inside > 0.5, -1.0, 1.0))
     u = (2.0 * side * magnitude - f.t_out + f.t_in) / (f.t_out + f.t_in)
-    return jnp.clip(u, -1e6, 1e6), 2.0 / (f.t_out + f.t_in)
+    # The same coordinate against the edge's whole line, its side from the edge's own plane
+    # (beyond the segment too): what a corner's wedge is made of (``corner_mass``).
+    line_mag = jnp.where(upstream, 1e6, jnp.minimum(tan_plane, 1e6))
+    u_line = (2.0 * jnp.where(num < 0, -1.0, 1.0) * line_mag - f.t_out + f.t_in) / (f.t_out + f.t_in)
+    return jnp.clip(u, -1e6, 1e6), 2.0 / (f.t_out + f.t_in), jnp.clip(u_line, -1e6, 1e6), along
 
 
 def _range_k(range_k, dtype):
@@ -207,8 +211,39 @@ def penumbra_coordinate(points: Float[Array, "n 3"], a: Float[Array, "n 3"], b: 
     L = _split(light)
     f = _edge_frame(_split(a), _split(b), outward_sign, L, _range_k(range_k, points.dtype), rule,
                     None if paper_normal is None else _split(paper_normal))
-    u, slope = _coordinate(_split(points), f, L, inside, near_boundary)
+    u, slope, _, _ = _coordinate(_split(points), f, L, inside, near_boundary)
     return (u, slope) if with_slope else u
+
+
+def _choose(x, edge_ids, edge_vertices_world, outward_sign, light, k, inside, rule, paper, near_boundary):
+    """Index (n,) of each point's chosen candidate (smallest |u|), without gradients."""
+    n_pts, n_cand = edge_ids.shape
+    sg = jax.lax.stop_gradient
+    flat = edge_ids.reshape(-1)
+    rep = lambda v: jnp.repeat(v, n_cand, axis=0)
+    L_c = _split(sg(light) if light.ndim == 1 else rep(sg(light)))
+    # Each candidate's edge quantities from its gathered vertices: recomputing them costs less
+    # than gathering a per-edge table of them (gathers dominate on CPU).
+    ev = sg(edge_vertices_world).reshape(-1, 6)[flat]
+    f_c = _edge_frame((ev[:, 0], ev[:, 1], ev[:, 2]), (ev[:, 3], ev[:, 4], ev[:, 5]),
+                      sg(outward_sign)[flat], L_c, sg(k), rule,
+                      None if paper is None else _split(sg(paper)[flat]))
+    # Only the nearest boundary edge (the first candidate) may set the side from its plane.
+    nb_c = None if near_boundary is None else (
+        near_boundary[:, None] * (jnp.arange(n_cand) == 0)[None, :]).reshape(-1)
+    u_all = _coordinate(tuple(rep(sg(xi)) for xi in x), f_c, L_c, rep(inside), nb_c)[0]
+    # Ties (edges meeting at a vertex give the same u beyond it, with different slopes and
+    # gradients) go to the earlier candidate, so rounding cannot flip the choice: a fit's loss
+    # jumped under 1e-12 steps and its LM solver stalled on rejected steps.
+    abs_u = jnp.abs(u_all.reshape(n_pts, n_cand))
+    tie = 8 * jnp.finfo(abs_u.dtype).eps  # a few ulps, in float32 and float64 alike
+    return jnp.argmin(abs_u + tie * (1.0 + abs_u) * jnp.arange(n_cand), axis=1)
+
+
+def _pixel_directions(pixel_axes, x, dtype):
+    """The two pixel axes as per-point component tuples (tangents for ``jax.linearize``)."""
+    axes = jnp.asarray(pixel_axes, dtype)
+    return [tuple(jnp.broadcast_to(c, x[0].shape) for c in _split(axes[..., i, :])) for i in (0, 1)]
 
 
 def edge_coordinate(points, edge_ids: Int[Array, "n K"], edge_vertices_world: Float[Array, "s 2 3"],
@@ -230,31 +265,11 @@ def edge_coordinate(points, edge_ids: Int[Array, "n K"], edge_vertices_world: Fl
     differentiable), for ``footprint_profile_alpha``: (u, du_a, du_b), or
     (u, slope, du_a, du_b) with ``with_slope``.
     """
-    n_pts, n_cand = edge_ids.shape
     k = _range_k(range_k, points.dtype)
     x = _split(points)
-    sg = jax.lax.stop_gradient
     paper = paper_normal_world
-    # -- the choice: all candidates, no gradient --
-    flat = edge_ids.reshape(-1)
-    rep = lambda v: jnp.repeat(v, n_cand, axis=0)
-    L_c = _split(sg(light) if light.ndim == 1 else rep(sg(light)))
-    # Each candidate's edge quantities from its gathered vertices: recomputing them costs less
-    # than gathering a per-edge table of them (gathers dominate on CPU).
-    ev = sg(edge_vertices_world).reshape(-1, 6)[flat]
-    f_c = _edge_frame((ev[:, 0], ev[:, 1], ev[:, 2]), (ev[:, 3], ev[:, 4], ev[:, 5]),
-                      sg(outward_sign)[flat], L_c, sg(k), rule,
-                      None if paper is None else _split(sg(paper)[flat]))
-    # Only the nearest boundary edge (the first candidate) may set the side from its plane.
-    nb_c = None if near_boundary is None else (
-        near_boundary[:, None] * (jnp.arange(n_cand) == 0)[None, :]).reshape(-1)
-    u_all, _ = _coordinate(tuple(rep(sg(xi)) for xi in x), f_c, L_c, rep(inside), nb_c)
-    # Ties (edges meeting at a vertex give the same u beyond it, with different slopes and
-    # gradients) go to the earlier candidate, so rounding cannot flip the choice: a fit's loss
-    # jumped under 1e-12 steps and its LM solver stalled on rejected steps.
-    abs_u = jnp.abs(u_all.reshape(n_pts, n_cand))
-    tie = 8 * jnp.finfo(abs_u.dtype).eps  # a few ulps, in float32 and float64 alike
-    best = jnp.argmin(abs_u + tie * (1.0 + abs_u) * jnp.arange(n_cand), axis=1)
+    best = _choose(x, edge_ids, edge_vertices_world, outward_sign, light, k, inside, rule, paper,
+                   near_boundary)
     # -- the value and its gradient: the chosen edge only --
     eid = jnp.take_along_axis(edge_ids, best[:, None], axis=1)[:, 0]
     ev = edge_vertices_world[eid]
@@ -263,14 +278,13 @@ def edge_coordinate(points, edge_ids: Int[Array, "n K"], edge_vertices_world: Fl
                     None if paper is None else _split(paper[eid]))
     nb = None if near_boundary is None else jnp.where(best == 0, near_boundary, 0.0)
     if pixel_axes is None:
-        u, slope = _coordinate(x, f, L, inside, nb)
+        u, slope = _coordinate(x, f, L, inside, nb)[:2]
         return (u, slope) if with_slope else u
-    u_of = lambda xx: _coordinate(xx, f, L, inside, nb)
-    axes = jnp.asarray(pixel_axes, points.dtype)
-    along = lambda i: tuple(jnp.broadcast_to(c, x[0].shape) for c in _split(axes[..., i, :]))
+    u_of = lambda xx: _coordinate(xx, f, L, inside, nb)[:2]
     # One primal pass, its linearisation applied to both axes.
     (u, slope), lin = jax.linearize(u_of, x)
-    du_a, du_b = lin(along(0))[0], lin(along(1))[0]
+    dir_a, dir_b = _pixel_directions(pixel_axes, x, points.dtype)
+    du_a, du_b = lin(dir_a)[0], lin(dir_b)[0]
     return (u, slope, du_a, du_b) if with_slope else (u, du_a, du_b)
 
 
@@ -279,12 +293,19 @@ def edge_alpha(points, edge_ids: Int[Array, "n K"], edge_vertices_world: Float[A
                rule: str = "edge", profile: str = "linear",
                paper_normal_world: Float[Array, "s 3"] | None = None,
                near_boundary: Float[Array, " n"] | None = None,
-               pixel_axes: Float[Array, "*n 2 3"] | None = None):
+               pixel_axes: Float[Array, "*n 2 3"] | None = None,
+               neighbours: Int[Array, "s 2"] | None = None):
     """Alpha (n,) at points (n, 3) against their candidate edges (n, K); see ``edge_coordinate``.
 
     With ``pixel_axes`` (see there) alpha is averaged over each pixel's footprint
-    (``footprint_profile_alpha``), else sampled at the points.
+    (``footprint_profile_alpha``), else sampled at the points. With ``neighbours`` (s, 2),
+    each edge's outline neighbour sharing its first and its second vertex (-1: none), a
+    point near a corner of the outline gets the occluded mass of the corner's wedge
+    (``corner_alpha``) instead of its nearest edge's half-plane.
     """
+    if neighbours is not None:
+        return corner_alpha(points, edge_ids, edge_vertices_world, outward_sign, light, range_k, inside,
+                            neighbours, rule, profile, paper_normal_world, near_boundary, pixel_axes)
     out = edge_coordinate(points, edge_ids, edge_vertices_world, outward_sign, light, range_k, inside,
                           rule, paper_normal_world, near_boundary=near_boundary, pixel_axes=pixel_axes)
     if pixel_axes is None:
@@ -395,6 +416,186 @@ def footprint_profile_alpha(u, du_a, du_b, profile: str = "linear"):
     z, w = jnp.asarray(z, dtype), jnp.asarray(0.5 * w, dtype)
     values = _box_profile_alpha(v[..., None] + narrow[..., None] * z, wide[..., None], profile)
     return values @ w
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(2,))
+def _fan(psi, h, profile: str):
+    """Gamma(psi, h) = int_0^psi g(h / cos p) dp over the part where h / cos p < 1 (0 for h >= 1).
+
+    The light's deficit along a straight line at distance h >= 0 from the sun's centre (in sun
+    radii), swept from the foot of the perpendicular to the direction psi: g(R) = 1 - R^2 for
+    the uniform disk (``disk``), sqrt(1 - R^2) for the light of density 1 / (2 pi sqrt(1 - r^2))
+    whose edge profile is the linear ramp (``linear``). Closed forms: disk psi - h^2 tan psi;
+    linear asin(sin psi / sqrt(1 - h^2)) - h atan(h sin psi / sqrt(cos^2 psi - h^2)), psi
+    clipped to +-acos h. Gamma(pi / 2, h) / pi is the profile of a half-plane. The custom JVP
+    keeps the linear form's cancelling infinite slopes at psi = acos h out.
+    """
+    ok = h < 1.0
+    hs = jnp.where(ok, h, 0.0)
+    p = jnp.clip(psi, -jnp.arccos(hs), jnp.arccos(hs))
+    sp, cp = jnp.sin(p), jnp.cos(p)
+    if profile == "disk":
+        r = jnp.minimum(hs / jnp.maximum(cp, 1e-30), 1.0)
+        val = p - hs * sp * r  # h^2 tan p, finite at h = 0, p = pi / 2
+    elif profile == "linear":
+        q = jnp.sqrt(jnp.maximum(cp * cp - hs * hs, 0.0))
+        val = jnp.arctan2(sp, q) - hs * jnp.arctan2(hs * sp, q)
+    else:
+        raise ValueError(f"unknown penumbra profile {profile!r}; choose one of {PROFILES}")
+    return jnp.where(ok, val, 0.0)
+
+
+@_fan.defjvp
+def _fan_jvp(profile, primals, tangents):
+    (psi, h), (dpsi, dh) = primals, tangents
+    ok = h < 1.0
+    hs = jnp.where(ok, h, 0.0)
+    pm = jnp.arccos(hs)
+    p = jnp.clip(psi, -pm, pm)
+    sp, cp = jnp.sin(p), jnp.cos(p)
+    r = jnp.minimum(hs / jnp.maximum(cp, 1e-30), 1.0)
+    within = ok & (jnp.abs(psi) < pm)
+    if profile == "disk":
+        d_psi = 1.0 - r * r
+        d_h = -2.0 * sp * r
+    else:
+        d_psi = jnp.sqrt(jnp.maximum(1.0 - r * r, 0.0))
+        d_h = -jnp.arctan2(hs * sp, jnp.sqrt(jnp.maximum(cp * cp - hs * hs, 0.0)))
+    return _fan(psi, h, profile), jnp.where(within, d_psi, 0.0) * dpsi + jnp.where(ok, d_h, 0.0) * dh
+
+
+_VERTEX_U = 1e-6  # both lines nearer the sun's centre than this (sun radii): the vertex's own value
+
+
+def corner_mass(u1, u2, cos_n, sin_n, convex, profile: str = "linear"):
+    """Occluded fraction of the light behind a corner of two straight edges; all args broadcast.
+
+    u1, u2: the sun centre's signed distances (in penumbra units, +1 outer, -1 inner
+    silhouette: ``profile_alpha``'s u) to the two edges' lines, positive on the lit side;
+    cos_n, sin_n >= 0: cosine and |sine| of the angle between the lines' outward normals;
+    convex: the occluder is the intersection of the two half-planes (else their union).
+    In the sun's view (gnomonic, in sun radii) the sun is the unit disk D and each edge a
+    line; by Green's theorem the light's mass over a polygon P within D is
+    mass(P & D) = w + sum over edges of -(1 / 2 pi) int g(R(theta)) d theta over the edge's
+    signed angular span where R < 1 (w the winding number, R(theta) the distance to the edge
+    along theta, g as ``_fan``). For the wedge, with V its apex, the incoming ray on line 1
+    ends at V and the outgoing one on line 2 starts there; the result is symmetric in the
+    two lines. A single line (u2 far inside) gives ``profile_alpha(u1)``, two collinear
+    lines the same; a 90-degree corner at its apex 1/4.
+    """
+    sgn = lambda v: jnp.where(v < 0, -1.0, 1.0)
+    # A concave corner is 1 - the convex wedge of the lit complement (both normals flipped).
+    flip = jnp.where(convex, 1.0, -1.0)
+    v1, v2 = flip * u1, flip * u2
+    h1, h2 = jnp.abs(v1), jnp.abs(v2)
+    vertex = (h1 < _VERTEX_U) & (h2 < _VERTEX_U)
+
+    def apex_angle(y, x):
+        """The apex's direction from the line's foot, atan2(y, x) (x >= 0); 0 where undefined
+        (collinear lines: any point of the line serves as the apex)."""
+        ok = y * y + x * x > _VERTEX_U * _VERTEX_U * 1e-6
+        return jnp.arctan2(jnp.where(ok, y, 0.0), jnp.where(ok, x, 1.0))
+
+    # The apex V solves V . n1 = -v1, V . n2 = -v2; its position along each line from the foot
+    # of the perpendicular, times sin_n >= 0 (atan2 does not mind the positive factor).
+    a1 = apex_angle(v1 * cos_n - v2, h1 * sin_n)
+    a2 = apex_angle(v1 - v2 * cos_n, h2 * sin_n)
+    w = ((v1 < 0) & (v2 < 0)).astype(h1.dtype)
+    # Gamma(pi / 2, h) = pi profile_alpha(h) (h >= 0): the half-plane's own profile.
+    mass = w + (sgn(v1) * (_fan(a1, h1, profile) + np.pi * profile_alpha(h1, profile))
+                + sgn(v2) * (np.pi * profile_alpha(h2, profile) - _fan(a2, h2, profile))) / (2.0 * np.pi)
+    # At the apex itself: the wedge's angle over 2 pi, for any radially symmetric light.
+    mass = jnp.where(vertex, (np.pi - jnp.arctan2(sin_n, cos_n)) / (2.0 * np.pi), mass)
+    return jnp.clip(jnp.where(convex, mass, 1.0 - mass), 0.0, 1.0)
+
+
+_CORNER_NODES = 1  # Gauss-Legendre nodes per pixel axis for a corner's footprint correction (1: the centre)
+_APEX_REACH = 4.0  # sun radii from the corner's apex within which the wedge replaces the edge
+
+
+def corner_alpha(points, edge_ids: Int[Array, "n K"], edge_vertices_world: Float[Array, "s 2 3"],
+                 outward_sign: Float[Array, " s"], light, range_k, inside: Float[Array, " n"],
+                 neighbours: Int[Array, "s 2"], rule: str = "edge", profile: str = "linear",
+                 paper_normal_world: Float[Array, "s 3"] | None = None,
+                 near_boundary: Float[Array, " n"] | None = None,
+                 pixel_axes: Float[Array, "*n 2 3"] | None = None):
+    """Alpha (n,) at points (n, 3) with corners of the outline: see ``edge_alpha``.
+
+    Each point's chosen edge (as ``edge_coordinate``) and its outline neighbour at the chosen
+    edge's end nearer the point (``neighbours``) form a corner, convex where the neighbour's
+    far end lies on the occluder's side of the chosen edge's line; alpha is the light's mass
+    behind that wedge (``corner_mass``) from the two lines' coordinates. A point keeps the
+    single-edge alpha where there is no neighbour, or where the wedge's own inside/outside
+    at the point contradicts the plan's hard shadow away from the boundary (the wedge is
+    then not the local outline). Far from the corner the wedge is the chosen edge's
+    half-plane, so straight or finely tessellated outlines are unchanged.
+    With ``pixel_axes``, the single-edge alpha is averaged exactly over the footprint
+    (``footprint_profile_alpha``) and the wedge's difference from it with a 2 x 2
+    Gauss-Legendre rule over the pixel (the coordinates taken as linear over it).
+    """
+    k = _range_k(range_k, points.dtype)
+    x = _split(points)
+    sg = jax.lax.stop_gradient
+    paper = paper_normal_world
+    best = _choose(x, edge_ids, edge_vertices_world, outward_sign, light, k, inside, rule, paper,
+                   near_boundary)
+    eid = jnp.take_along_axis(edge_ids, best[:, None], axis=1)[:, 0]
+    L = _split(light)
+    frame = lambda e: _edge_frame(_split(edge_vertices_world[e][:, 0]), _split(edge_vertices_world[e][:, 1]),
+                                  outward_sign[e], L, k, rule, None if paper is None else _split(paper[e]))
+    f1 = frame(eid)
+    nb = None if near_boundary is None else jnp.where(best == 0, near_boundary, 0.0)
+    # The corner: the chosen edge's end nearer the point (seen along the light) and the outline
+    # neighbour sharing it (discrete choices, no gradient).
+    at_b = sg(_dot(tuple(xi - ai for xi, ai in zip(x, f1.a)), f1.along)) > 0.5
+    other = jnp.take_along_axis(neighbours[eid], at_b[:, None].astype(eid.dtype), axis=1)[:, 0]
+    has = other >= 0
+    f2 = frame(jnp.maximum(other, 0))
+    vtx = tuple(jnp.where(at_b, bi, ai) for ai, bi in zip(f1.a, f1.b))
+    dist2 = lambda p: sum((pi - vi) ** 2 for pi, vi in zip(p, vtx))
+    far = tuple(jnp.where(dist2(f2.a) < dist2(f2.b), bi, ai) for ai, bi in zip(f2.a, f2.b))
+    convex = sg(_dot(tuple(fi - vi for fi, vi in zip(far, vtx)), f1.n)) < 0
+    cos_n = _dot(f1.n, f2.n)
+    n_x = (f1.n[1] * f2.n[2] - f1.n[2] * f2.n[1], f1.n[2] * f2.n[0] - f1.n[0] * f2.n[2],
+           f1.n[0] * f2.n[1] - f1.n[1] * f2.n[0])
+    sin_n = _norm3(n_x)
+
+    def coords(xx):
+        u, _, u1, _ = _coordinate(xx, f1, L, inside, nb)
+        return u, u1, _coordinate(xx, f2, L, inside, None)[2]
+
+    mass = lambda a, b: corner_mass(a, b, cos_n, sin_n, convex, profile)
+    u, u1, u2 = coords(x)
+    # The wedge stands for the outline where it agrees with the plan's hard shadow, or where
+    # the plan trusts the edge's plane for the side (near the boundary).
+    inside_wedge = jnp.where(convex, (u1 < 0) & (u2 < 0), (u1 < 0) | (u2 < 0))
+    trusted = inside_wedge == (inside > 0.5)
+    if nb is not None:
+        trusted = trusted | (nb > 0.5)
+    # Only near the apex: farther than _APEX_REACH sun radii from it, the light sees one of the
+    # lines at most (or a sliver far out), and each edge's line, extended far beyond its segment
+    # or seen from upstream of it, bounds nothing there. |V|^2 sin^2 = u1^2 + u2^2 - 2 u1 u2 cos.
+    apex2 = u1 * u1 + u2 * u2 - 2.0 * u1 * u2 * cos_n
+    near_apex = apex2 < (_APEX_REACH * _APEX_REACH) * sin_n * sin_n
+    use = sg(has & trusted & near_apex)
+    if pixel_axes is None:
+        return jnp.where(use, mass(u1, u2), profile_alpha(u, profile))
+    # The single-edge alpha averaged exactly over the footprint (as ``edge_alpha``), plus the
+    # Gauss mean of the wedge's difference from it, with the coordinates computed at the nodes
+    # themselves (near a vertex on the ground they are far from linear over a pixel). Far from
+    # the corner both agree at every node, so the correction vanishes there.
+    _, lin = jax.linearize(lambda xx: _coordinate(xx, f1, L, inside, nb)[0], x)
+    dir_a, dir_b = _pixel_directions(pixel_axes, x, points.dtype)
+    base = footprint_profile_alpha(u, lin(dir_a), lin(dir_b), profile)
+    if _CORNER_NODES == 1:  # the pixel's centre: the coordinates are already there
+        return jnp.clip(base + jnp.where(use, mass(u1, u2) - profile_alpha(u, profile), 0.0), 0.0, 1.0)
+    z, wts = np.polynomial.legendre.leggauss(_CORNER_NODES)
+    corr = 0.0
+    for za, wa in zip(z, wts):
+        for zb, wb in zip(z, wts):
+            un, u1n, u2n = coords(tuple(xi + 0.5 * (za * ai + zb * bi) for xi, ai, bi in zip(x, dir_a, dir_b)))
+            corr = corr + (0.25 * wa * wb) * (mass(u1n, u2n) - profile_alpha(un, profile))
+    return jnp.clip(base + jnp.where(use, corr, 0.0), 0.0, 1.0)
 
 
 def shade(alpha, rho, sky_hidden=None):

@@ -46,12 +46,16 @@ def bucket_size(n: int, minimum: int = 64) -> int:
 class EdgeSet(eqx.Module):
     """Silhouette edges in the mesh frame, padded to a bucket size (NumPy leaves).
 
-    vertices_local (s, 2, 3) metres; outward_sign (s,); paper_normal_local (s, 3).
+    vertices_local (s, 2, 3) metres; outward_sign (s,); paper_normal_local (s, 3);
+    neighbours (s, 2) int32: the outline edge sharing each edge's first and second vertex
+    (-1: none; ``raster.ShadowRaster.edge_neighbours``), for the outline's corners
+    (``penumbra.corner_alpha``); None where the plan has none.
     """
 
     vertices_local: Float[np.ndarray, "s 2 3"]
     outward_sign: Float[np.ndarray, " s"]
     paper_normal_local: Float[np.ndarray, "s 3"]
+    neighbours: Int[np.ndarray, "s 2"] | None = None
 
 
 class PointPlan(eqx.Module):
@@ -82,10 +86,13 @@ def edge_band_widths(world_a: np.ndarray, world_b: np.ndarray, outward: np.ndarr
     return height * np.hypot(r[:, 0], r[:, 1])
 
 
-def _pack_edges(occ: Occluder, sil, dtype=np.float64):
-    """(vertices_local (s, 2, 3), outward_sign (s,), paper_normal_local (s, 3)) padded to a bucket."""
+def _pack_edges(occ: Occluder, sil, dtype=np.float64, raster: ShadowRaster | None = None) -> EdgeSet:
+    """The silhouette's EdgeSet padded to a bucket, with the raster's outline neighbours."""
     s = len(sil.vertex_ids)
     size = bucket_size(s, 16)
+    neighbours = -np.ones((size, 2), np.int32)
+    if raster is not None and raster.edge_neighbours is not None and s:
+        neighbours[:s] = raster.edge_neighbours
     verts = np.zeros((size, 2, 3), dtype)
     verts[:, 1, 0] = 1.0  # padding edges are unit segments, never referenced
     sign = np.ones(size, dtype)
@@ -95,7 +102,7 @@ def _pack_edges(occ: Occluder, sil, dtype=np.float64):
         verts[:s] = occ.vertices[sil.vertex_ids]
         sign[:s] = sil.outward_sign
         paper[:s] = sil.paper_normal_local
-    return verts, sign, paper
+    return EdgeSet(verts, sign, paper, neighbours)
 
 
 def _clean_outline(raster: ShadowRaster, label: np.ndarray) -> np.ndarray:
@@ -175,6 +182,7 @@ def plan_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k
     a, b, direction = posed.edge_geometry(rule)
     n = len(points)
     edge_id, hard, active, near_boundary = _empty_plan_arrays(pad_to or bucket_size(n))
+    raster = None
     if n and len(sil.vertex_ids):
         widths = edge_band_widths(a, b, direction, light, range_k_max)
         lo, hi = points[:, :2].min(0), points[:, :2].max(0)
@@ -200,7 +208,7 @@ def plan_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k
             active[:n] = ok & (dist <= band)
             near_boundary[:n] = ok & (dist <= 0.25 * widths[np.maximum(label, 0)]
                                       + 1.5 * raster.grid.pixel_m) & _clean_outline(raster, label)
-    return PointPlan(EdgeSet(*_pack_edges(occ, sil)), edge_id, hard, active, near_boundary)
+    return PointPlan(_pack_edges(occ, sil, raster=raster), edge_id, hard, active, near_boundary)
 
 
 def _within_reach(uv: np.ndarray, depth: np.ndarray, lo: np.ndarray, hi: np.ndarray, edge_depth: float,
@@ -261,7 +269,7 @@ def _plan_points_light(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, 
     edge_id, hard, active, near_boundary = _empty_plan_arrays(pad_to or bucket_size(n))
     attached = np.zeros(n, bool) if normals is None else faces_away(normals, light)
     hard[:n] = attached
-    edges = EdgeSet(*_pack_edges(occ, sil))
+    edges = _pack_edges(occ, sil)
     if not (n and len(sil.vertex_ids)):
         return PointPlan(edges, edge_id, hard, active, near_boundary)
     frame = LightFrame.of_light(light, 0.5 * (world.min(0) + world.max(0)))
@@ -358,7 +366,7 @@ def _plan_points_light(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, 
         edge_id[cand[sel]] = np.maximum(candidate_labels(raster.edge_label, cr[:, 1], cr[:, 0],
                                                          radii=CANDIDATE_RADII_PX, max_candidates=N_CANDIDATES,
                                                          neighbours=raster.edge_neighbours), 0)
-    return PointPlan(edges, edge_id, hard, active, near_boundary)
+    return PointPlan(_pack_edges(occ, sil, raster=raster), edge_id, hard, active, near_boundary)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -462,7 +470,7 @@ def plan_grid(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, range_k_max
     near[:m] = near_b
     # NumPy arrays, not device arrays: a jitted call takes them far more cheaply than
     # jax.device_put or jnp.asarray would.
-    plan = PointPlan(EdgeSet(*_pack_edges(occ, sil, ftype)), edge_id, hard_band, active, near)
+    plan = PointPlan(_pack_edges(occ, sil, ftype, raster), edge_id, hard_band, active, near)
     return GridPlan(grid, hard, index, plan, raster, m, len(sil.vertex_ids))
 
 
@@ -480,10 +488,13 @@ def concatenate_plans(plans: list[PointPlan], counts: list[int], pad_to: int | N
 
     counts: how many leading points of each plan are real (the rest is padding).
     """
-    verts, signs, papers, ids, hards, actives, nears = [], [], [], [], [], [], []
+    verts, signs, papers, ids, hards, actives, nears, neighbours = [], [], [], [], [], [], [], []
     offset = 0
     for plan, n in zip(plans, counts):
         e = plan.edges
+        if e.neighbours is not None:
+            nbr = np.asarray(e.neighbours)
+            neighbours.append(np.where(nbr >= 0, nbr + offset, -1).astype(np.int32))
         verts.append(np.asarray(e.vertices_local))
         signs.append(np.asarray(e.outward_sign))
         papers.append(np.asarray(e.paper_normal_local))
@@ -501,6 +512,7 @@ def concatenate_plans(plans: list[PointPlan], counts: list[int], pad_to: int | N
     v[offset:, 1, 0] = 1.0
     paper = pad(np.concatenate(papers), e_size, 0.0)
     paper[offset:, 2] = 1.0
-    edges = EdgeSet(v, pad(np.concatenate(signs), e_size, 1.0), paper)
+    nbr = pad(np.concatenate(neighbours), e_size, -1) if len(neighbours) == len(plans) and plans else None
+    edges = EdgeSet(v, pad(np.concatenate(signs), e_size, 1.0), paper, nbr)
     return PointPlan(edges, pad(np.concatenate(ids), size, 0), pad(np.concatenate(hards), size, 0.0),
                      pad(np.concatenate(actives), size, False), pad(np.concatenate(nears), size, 0.0))

@@ -40,10 +40,10 @@ def _band_k(params: ShadowParams, range_k_max: float | None) -> float:
         raise ValueError("pass range_k_max when k is traced (it sets the penumbra band)") from exc
 
 
-@functools.partial(jax.jit, static_argnames=("rule", "profile", "shape", "footprint"))
+@functools.partial(jax.jit, static_argnames=("rule", "profile", "shape", "footprint", "corners"))
 def _ground_map_core(hard, band_index, origin_x, origin_y, pixel_m, plan: PointPlan, pose: Pose,
                      sun: Sun, params: ShadowParams, sky_hidden, rule: str, profile: str, shape,
-                     footprint: bool):
+                     footprint: bool, corners: bool = True):
     dtype = params.rho.dtype
     # Band pixel centres from their flat indices (cheaper than shipping (m, 3) points).
     rows, cols = jnp.divmod(band_index, shape[1])
@@ -51,27 +51,30 @@ def _ground_map_core(hard, band_index, origin_x, origin_y, pixel_m, plan: PointP
                         jnp.zeros(band_index.shape, dtype)], axis=1)
     # A ground pixel's footprint is the square pixel_m along x and along y.
     axes = jnp.eye(2, 3, dtype=dtype) * jnp.asarray(pixel_m, dtype) if footprint else None
-    alpha_band = plan_alpha(points, plan, pose, sun, params.range_k, rule, profile, pixel_axes=axes)
+    alpha_band = plan_alpha(points, plan, pose, sun, params.range_k, rule, profile, pixel_axes=axes,
+                            corners=corners)
     # Padding entries index one past the end and are dropped.
     alpha = hard.reshape(-1).astype(dtype).at[band_index].set(alpha_band.astype(dtype), mode="drop")
     sky = None if sky_hidden is None else jnp.asarray(sky_hidden, dtype).reshape(-1)
     return shade(alpha, params.rho, sky).reshape(shape)
 
 
-@functools.partial(jax.jit, static_argnames=("rule", "profile"))
+@functools.partial(jax.jit, static_argnames=("rule", "profile", "corners"))
 def _band_points_core(band_points, band_plan: PointPlan, hard, band_index, pose, sun, params, rule, profile,
-                      pixel_axes=None):
+                      pixel_axes=None, corners: bool = True):
     """Shading at all of a plan's points (padded): the hard shadow, with the band points'
     alpha from the penumbra formula scattered in (padding indices are dropped)."""
     dtype = params.rho.dtype
-    alpha_band = plan_alpha(band_points, band_plan, pose, sun, params.range_k, rule, profile, pixel_axes)
+    alpha_band = plan_alpha(band_points, band_plan, pose, sun, params.range_k, rule, profile, pixel_axes,
+                            corners)
     alpha = hard.astype(dtype).at[band_index].set(alpha_band.astype(dtype), mode="drop")
     return shade(alpha, params.rho)
 
 
-@functools.partial(jax.jit, static_argnames=("rule", "profile"))
-def _points_core(points, plan: PointPlan, pose, sun, params, rule, profile, pixel_axes=None):
-    alpha = plan_alpha(points, plan, pose, sun, params.range_k, rule, profile, pixel_axes)
+@functools.partial(jax.jit, static_argnames=("rule", "profile", "corners"))
+def _points_core(points, plan: PointPlan, pose, sun, params, rule, profile, pixel_axes=None,
+                 corners: bool = True):
+    alpha = plan_alpha(points, plan, pose, sun, params.range_k, rule, profile, pixel_axes, corners)
     return shade(alpha, params.rho)
 
 
@@ -133,6 +136,8 @@ class SoftShadowModel:
     default on: it is what a camera sees within a few heights of the object). Cast once per
     pose and grid and kept (a few hundred ms for a 64 x 64 node grid); ``at_points`` leaves
     it to the caller.
+    corners: near a corner of the shadow's outline, alpha is the light's mass behind the
+    corner's wedge (``penumbra.corner_alpha``; default on), not the nearest edge's half-plane.
     """
 
     occluder: Occluder
@@ -140,6 +145,7 @@ class SoftShadowModel:
     profile: str = "linear"
     footprint: bool = True
     hidden_sky: bool = True
+    corners: bool = True
     _sky_cache: dict = dataclasses.field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self):
@@ -150,17 +156,20 @@ class SoftShadowModel:
 
     @classmethod
     def from_mesh(cls, mesh: str | trimesh.Trimesh, rule: str = "edge", profile: str = "linear",
-                  base_dir=None, footprint: bool = True, hidden_sky: bool = True) -> "SoftShadowModel":
+                  base_dir=None, footprint: bool = True, hidden_sky: bool = True,
+                  corners: bool = True) -> "SoftShadowModel":
         """From a built-in name, a mesh file path, or a trimesh.Trimesh."""
         if not isinstance(mesh, trimesh.Trimesh):
             mesh = load_mesh(mesh, base_dir)
-        return cls(Occluder.from_trimesh(mesh), rule, profile, footprint, hidden_sky)
+        return cls(Occluder.from_trimesh(mesh), rule, profile, footprint, hidden_sky, corners)
 
     def with_options(self, rule: str | None = None, profile: str | None = None,
-                     footprint: bool | None = None, hidden_sky: bool | None = None) -> "SoftShadowModel":
+                     footprint: bool | None = None, hidden_sky: bool | None = None,
+                     corners: bool | None = None) -> "SoftShadowModel":
         return dataclasses.replace(self, rule=rule or self.rule, profile=profile or self.profile,
                                    footprint=self.footprint if footprint is None else footprint,
-                                   hidden_sky=self.hidden_sky if hidden_sky is None else hidden_sky)
+                                   hidden_sky=self.hidden_sky if hidden_sky is None else hidden_sky,
+                                   corners=self.corners if corners is None else corners)
 
     # -- discrete plans (NumPy) -------------------------------------------------------------
     def plan_grid(self, sun: Sun, pose: Pose, grid: GroundGrid, range_k_max: float) -> GridPlan:
@@ -221,7 +230,7 @@ class SoftShadowModel:
         return _ground_map_core(plan.hard, plan.band_index, grid.origin_m[0], grid.origin_m[1],
                                 grid.pixel_m, plan.plan, pose, sun, params,
                                 plan.sky_hidden if self.hidden_sky else None, self.rule, self.profile,
-                                (grid.height, grid.width), self.footprint)
+                                (grid.height, grid.width), self.footprint, self.corners)
 
     def at_points(self, params: ShadowParams, sun: Sun, pose: Pose, points, normals=None,
                   plan: PointPlan | None = None, range_k_max: float | None = None,
@@ -259,7 +268,7 @@ class SoftShadowModel:
             if pixel_axes is not None:
                 axes = jnp.asarray(pixel_axes if pixel_axes.ndim == 2 else pixel_axes[take], dtype)
             out = _band_points_core(jnp.asarray(points[take], dtype), sub, plan.hard, index, pose, sun,
-                                    params, self.rule, self.profile, axes)
+                                    params, self.rule, self.profile, axes, self.corners)
             return out[:n]
         size = plan.edge_id.shape[0]
         padded = np.zeros((size, 3))
@@ -271,7 +280,7 @@ class SoftShadowModel:
         elif pixel_axes is not None:
             axes = pixel_axes
         out = _points_core(jnp.asarray(padded, dtype), plan, pose, sun, params, self.rule, self.profile,
-                           None if axes is None else jnp.asarray(axes, dtype))
+                           None if axes is None else jnp.asarray(axes, dtype), self.corners)
         return out[:n]
 
     def camera_image(self, params: ShadowParams, sun: Sun, pose: Pose,
