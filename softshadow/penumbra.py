@@ -418,28 +418,45 @@ def footprint_profile_alpha(u, du_a, du_b, profile: str = "linear"):
     return values @ w
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(2,))
-def _fan(psi, h, profile: str):
+def _fan_parts(y, d, h):
+    """Shared pieces of ``_fan``: whether the apex direction lies within the disk's chord, the
+    clipped angle psi_c, r2 = y^2 + (h d)^2 (guarded) and d^2 - r2 (>= 0)."""
+    r2 = y * y + (h * d) ** 2
+    ok = h < 1.0
+    # |psi| < acos h  <=>  d^2 (1 - h^2) > y^2 (for h > 0, and its limit at h = 0).
+    within = ok & (d * d * (1.0 - h * h) > y * y)
+    safe = r2 > 1e-300
+    psi = jnp.arctan2(jnp.where(safe, y, 0.0), jnp.where(safe, h * d, 1.0))
+    hs = jnp.where(ok, h, 1.0)
+    psi_c = jnp.where(within, psi, jnp.sign(y) * jnp.arccos(hs))
+    return ok, within, psi_c, jnp.where(safe, r2, 1.0), jnp.maximum(d * d - r2, 0.0), hs
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(3,))
+def _fan(y, d, h, profile: str):
     """Gamma(psi, h) = int_0^psi g(h / cos p) dp over the part where h / cos p < 1 (0 for h >= 1).
 
     The light's deficit along a straight line at distance h >= 0 from the sun's centre (in sun
-    radii), swept from the foot of the perpendicular to the direction psi: g(R) = 1 - R^2 for
-    the uniform disk (``disk``), sqrt(1 - R^2) for the light of density 1 / (2 pi sqrt(1 - r^2))
-    whose edge profile is the linear ramp (``linear``). Closed forms: disk psi - h^2 tan psi;
-    linear asin(sin psi / sqrt(1 - h^2)) - h atan(h sin psi / sqrt(cos^2 psi - h^2)), psi
-    clipped to +-acos h. Gamma(pi / 2, h) / pi is the profile of a half-plane. The custom JVP
-    keeps the linear form's cancelling infinite slopes at psi = acos h out.
+    radii), swept from the foot of the perpendicular to the direction psi = atan2(y, h d) of a
+    point on it (y: its position along the line from the foot, times d > 0): g(R) = 1 - R^2
+    for the uniform disk (``disk``), sqrt(1 - R^2) for the light of density
+    1 / (2 pi sqrt(1 - r^2)) whose edge profile is the linear ramp (``linear``). Closed forms
+    (psi clipped to +-acos h): disk psi - h^2 tan psi; linear asin(sin psi / sqrt(1 - h^2))
+    - h atan(h sin psi / sqrt(cos^2 psi - h^2)). Written in (y, d, h), not psi, so that values
+    and derivatives have their limits at h = 0 (a point on the line). Gamma(pi / 2, h) / pi is
+    the half-plane's profile. The custom JVP keeps the closed forms' cancelling infinite
+    slopes at psi = +-acos h out.
     """
-    ok = h < 1.0
-    hs = jnp.where(ok, h, 0.0)
-    p = jnp.clip(psi, -jnp.arccos(hs), jnp.arccos(hs))
-    sp, cp = jnp.sin(p), jnp.cos(p)
+    ok, within, psi_c, r2, rest, hs = _fan_parts(y, d, h)
+    sy = jnp.sign(y)
     if profile == "disk":
-        r = jnp.minimum(hs / jnp.maximum(cp, 1e-30), 1.0)
-        val = p - hs * sp * r  # h^2 tan p, finite at h = 0, p = pi / 2
+        # h^2 tan psi: h y / d within, h sqrt(1 - h^2) (with y's sign) where clipped.
+        val = psi_c - jnp.where(within, hs * y / jnp.where(within, d, 1.0),
+                                sy * hs * jnp.sqrt(jnp.maximum(1.0 - hs * hs, 0.0)))
     elif profile == "linear":
-        q = jnp.sqrt(jnp.maximum(cp * cp - hs * hs, 0.0))
-        val = jnp.arctan2(sp, q) - hs * jnp.arctan2(hs * sp, q)
+        root = jnp.sqrt(rest)
+        val = jnp.where(within, jnp.arctan2(y, hs * root) - hs * jnp.arctan2(y, root),
+                        sy * 0.5 * np.pi * (1.0 - hs))
     else:
         raise ValueError(f"unknown penumbra profile {profile!r}; choose one of {PROFILES}")
     return jnp.where(ok, val, 0.0)
@@ -447,21 +464,19 @@ def _fan(psi, h, profile: str):
 
 @_fan.defjvp
 def _fan_jvp(profile, primals, tangents):
-    (psi, h), (dpsi, dh) = primals, tangents
-    ok = h < 1.0
-    hs = jnp.where(ok, h, 0.0)
-    pm = jnp.arccos(hs)
-    p = jnp.clip(psi, -pm, pm)
-    sp, cp = jnp.sin(p), jnp.cos(p)
-    r = jnp.minimum(hs / jnp.maximum(cp, 1e-30), 1.0)
-    within = ok & (jnp.abs(psi) < pm)
+    (y, d, h), (dy, dd, dh) = primals, tangents
+    ok, within, psi_c, r2, rest, hs = _fan_parts(y, d, h)
+    sy = jnp.sign(y)
+    d_safe = jnp.where(within, d, 1.0)
+    rr = jnp.where(within, r2 / (d_safe * d_safe), 1.0)  # R^2 at the apex direction
+    g = 1.0 - rr if profile == "disk" else jnp.sqrt(jnp.maximum(1.0 - rr, 0.0))
+    dpsi = (h * d * dy - y * (d * dh + h * dd)) / r2
     if profile == "disk":
-        d_psi = 1.0 - r * r
-        d_h = -2.0 * sp * r
+        g_h = jnp.where(within, -2.0 * y / d_safe, -2.0 * sy * jnp.sqrt(jnp.maximum(1.0 - hs * hs, 0.0)))
     else:
-        d_psi = jnp.sqrt(jnp.maximum(1.0 - r * r, 0.0))
-        d_h = -jnp.arctan2(hs * sp, jnp.sqrt(jnp.maximum(cp * cp - hs * hs, 0.0)))
-    return _fan(psi, h, profile), jnp.where(within, d_psi, 0.0) * dpsi + jnp.where(ok, d_h, 0.0) * dh
+        g_h = -jnp.arctan2(y, jnp.sqrt(rest))
+    tangent = jnp.where(within, g * dpsi, 0.0) + g_h * dh
+    return _fan(y, d, h, profile), jnp.where(ok, tangent, 0.0)
 
 
 _VERTEX_U = 1e-6  # both lines nearer the sun's centre than this (sun radii): the vertex's own value
@@ -487,25 +502,21 @@ def corner_mass(u1, u2, cos_n, sin_n, convex, profile: str = "linear"):
     # A concave corner is 1 - the convex wedge of the lit complement (both normals flipped).
     flip = jnp.where(convex, 1.0, -1.0)
     v1, v2 = flip * u1, flip * u2
-    h1, h2 = jnp.abs(v1), jnp.abs(v2)
+    s1, s2 = sgn(v1), sgn(v2)
+    h1, h2 = s1 * v1, s2 * v2  # |v|, with the derivative of the side taken at v = 0
     vertex = (h1 < _VERTEX_U) & (h2 < _VERTEX_U)
-
-    def apex_angle(y, x):
-        """The apex's direction from the line's foot, atan2(y, x) (x >= 0); 0 where undefined
-        (collinear lines: any point of the line serves as the apex)."""
-        ok = y * y + x * x > _VERTEX_U * _VERTEX_U * 1e-6
-        return jnp.arctan2(jnp.where(ok, y, 0.0), jnp.where(ok, x, 1.0))
-
     # The apex V solves V . n1 = -v1, V . n2 = -v2; its position along each line from the foot
-    # of the perpendicular, times sin_n >= 0 (atan2 does not mind the positive factor).
-    a1 = apex_angle(v1 * cos_n - v2, h1 * sin_n)
-    a2 = apex_angle(v1 - v2 * cos_n, h2 * sin_n)
+    # of the perpendicular, times sin_n >= 0, is y1 and y2.
+    y1 = v1 * cos_n - v2
+    y2 = v1 - v2 * cos_n
     w = ((v1 < 0) & (v2 < 0)).astype(h1.dtype)
     # Gamma(pi / 2, h) = pi profile_alpha(h) (h >= 0): the half-plane's own profile.
-    mass = w + (sgn(v1) * (_fan(a1, h1, profile) + np.pi * profile_alpha(h1, profile))
-                + sgn(v2) * (np.pi * profile_alpha(h2, profile) - _fan(a2, h2, profile))) / (2.0 * np.pi)
+    mass = w + (s1 * (_fan(y1, sin_n, h1, profile) + np.pi * profile_alpha(h1, profile))
+                + s2 * (np.pi * profile_alpha(h2, profile) - _fan(y2, sin_n, h2, profile))) / (2.0 * np.pi)
     # At the apex itself: the wedge's angle over 2 pi, for any radially symmetric light.
-    mass = jnp.where(vertex, (np.pi - jnp.arctan2(sin_n, cos_n)) / (2.0 * np.pi), mass)
+    unit = sin_n * sin_n + cos_n * cos_n > 0.25  # a zero-length edge has no normal
+    angle = jnp.arctan2(jnp.where(unit, sin_n, 0.0), jnp.where(unit, cos_n, 1.0))
+    mass = jnp.where(vertex, (np.pi - angle) / (2.0 * np.pi), mass)
     return jnp.clip(jnp.where(convex, mass, 1.0 - mass), 0.0, 1.0)
 
 
@@ -559,6 +570,7 @@ def corner_alpha(points, edge_ids: Int[Array, "n K"], edge_vertices_world: Float
     n_x = (f1.n[1] * f2.n[2] - f1.n[2] * f2.n[1], f1.n[2] * f2.n[0] - f1.n[0] * f2.n[2],
            f1.n[0] * f2.n[1] - f1.n[1] * f2.n[0])
     sin_n = _norm3(n_x)
+    has = has & (cos_n * cos_n + sin_n * sin_n > 0.25)  # both normals are unit vectors: no zero-length edge
 
     def coords(xx):
         u, _, u1, _ = _coordinate(xx, f1, L, inside, nb)
@@ -569,7 +581,8 @@ def corner_alpha(points, edge_ids: Int[Array, "n K"], edge_vertices_world: Float
     # The wedge stands for the outline where it agrees with the plan's hard shadow, or where
     # the plan trusts the edge's plane for the side (near the boundary).
     inside_wedge = jnp.where(convex, (u1 < 0) & (u2 < 0), (u1 < 0) | (u2 < 0))
-    trusted = inside_wedge == (inside > 0.5)
+    # (Within the penumbra of both lines the plan's side is a guess: the wedge decides there.)
+    trusted = (inside_wedge == (inside > 0.5)) | ((jnp.abs(u1) < 1.0) & (jnp.abs(u2) < 1.0))
     if nb is not None:
         trusted = trusted | (nb > 0.5)
     # Only near the apex: farther than _APEX_REACH sun radii from it, the light sees one of the
