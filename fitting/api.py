@@ -24,12 +24,12 @@ import jax
 import numpy as np
 
 from scene import CameraSpec, SceneError, SceneSpec, load_scene, photo_sun
-from softshadow import (MeshError, Pose, SoftShadowModel, SunBelowHorizonError, check_sun_above_horizon, load_mesh,
+from softshadow import (MeshError, Pose, SunBelowHorizonError, check_sun_above_horizon, load_mesh,
                         one_blas_thread)
 
 from .files import software_versions
 from .grouping import PhotoGroup, group_photos, photo_time
-from .lod import LevelsOfDetail
+from .lod import levels_of_detail
 from .ignore_masks import IgnoreMaskError, ignore_mask_path, read_ignore_mask
 from .photo_check import judge, photo_agreement
 from .photos import Photo, PhotoError, list_photos, read_photo
@@ -271,10 +271,12 @@ def _fit_photos(photos, scene, options, half_size, progress, store, on_group, jo
             raise FolderError(str(exc)) from exc
     try:
         mesh = load_mesh(scene.object.mesh, scene.base_dir)
-        model = SoftShadowModel.from_mesh(mesh, rule=options.rule)
+        # The full mesh's model and its levels of detail, built once per mesh and kept between
+        # fits (a level is decimated when a group first needs it).
+        lods = levels_of_detail(mesh, options.rule)
     except MeshError as exc:
         raise FolderError(f"cannot use the mesh: {exc}") from exc
-    lods = LevelsOfDetail(mesh, model)  # decimated once, when a group first needs a level
+    model = lods.full
     lod_lock = threading.Lock()
     pose = Pose(scene.object.position, scene.object.rotation_deg, scene.object.scale)
     timed = {n: times[n] for n in times}
