@@ -142,11 +142,12 @@ def _run_fit(args) -> int:
 
 
 # -- synth / demo / bench -----------------------------------------------------------------------
-def _add_synth(sub):
+def _add_synth(sub, with_arguments: bool):
     p = sub.add_parser("synth", help="write a synthetic photo folder with known truth",
                        description="Synthesise a photo folder (images, scene.toml, truth.json).")
     from .synth_command import add_arguments, run
-    add_arguments(p)
+    if with_arguments:  # their choices come from data_synth, which loads trimesh and JAX (seconds)
+        add_arguments(p)
     p.set_defaults(func=run)
 
 
@@ -195,13 +196,14 @@ def _run_bench(args) -> int:
 
 
 def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
     parser = argparse.ArgumentParser(prog="softshadow", description=__doc__)
     from softshadow import __version__
     parser.add_argument("--version", action="version", version=f"softshadow {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     _add_render(sub)
     _add_fit(sub)
-    _add_synth(sub)
+    _add_synth(sub, with_arguments="synth" in argv)
     _add_demo(sub)
     _add_bench(sub)
     args = parser.parse_args(argv)
