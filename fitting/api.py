@@ -273,8 +273,8 @@ def _fit_groups(photos, scene, options, half_size, progress, store, on_group, jo
     ``_in_float64``); photos left out are added to ``skipped``."""
     # Imported here, not at the top: photos without geometry need none of this, and JAX,
     # optimistix and trimesh take seconds to import.
-    from softshadow import MeshError, Pose, SoftShadowModel, SunBelowHorizonError, load_mesh
-    from .lod import LevelsOfDetail
+    from softshadow import MeshError, Pose, SunBelowHorizonError, load_mesh
+    from .lod import levels_of_detail
     from .receiver_points import ReceiverError, load_receiver_mesh, receiver_for_photo
 
     by_name = {p.name: p for p in photos}
@@ -286,10 +286,12 @@ def _fit_groups(photos, scene, options, half_size, progress, store, on_group, jo
             raise FolderError(str(exc)) from exc
     try:
         mesh = load_mesh(scene.object.mesh, scene.base_dir)
-        model = SoftShadowModel.from_mesh(mesh, rule=options.rule)
+        # The full mesh's model and its levels of detail, built once per mesh and kept between
+        # fits (a level is decimated when a group first needs it).
+        lods = levels_of_detail(mesh, options.rule)
     except MeshError as exc:
         raise FolderError(f"cannot use the mesh: {exc}") from exc
-    lods = LevelsOfDetail(mesh, model)  # decimated once, when a group first needs a level
+    model = lods.full
     lod_lock = threading.Lock()
     pose = Pose(scene.object.position, scene.object.rotation_deg, scene.object.scale)
     timed = {n: times[n] for n in times}
