@@ -198,7 +198,8 @@ def _mitsuba_section(mitsuba: dict) -> list[str]:
     L += [f"Mitsuba 3 (`{runs[0]['variant']}` variant) path-traces the same scene: the mesh on a Lambertian "
           "ground, a uniform sun disk (a disk light 100 km away subtending the sun's radius; at 1 km, as "
           "before 2026-11-24 evening, its parallax moved the pillar's shadow tip by two pixels and Mitsuba's "
-          "band error levelled off at 0.060) and a uniform sky (a constant emitter), direct light only (`direct` integrator), an orthographic top-down camera over "
+          "band error levelled off at 0.060; the rest of that gap was the truth's sky next to the walls, now "
+          "traced) and a uniform sky (a constant emitter), direct light only (`direct` integrator), an orthographic top-down camera over "
           "the same square with a box pixel filter and a low-discrepancy sampler, at the truth's size. Time is "
           "the wall time of a render after a warm-up render at the same samples per pixel (spp), its "
           "kernel compiled, except where the table says \"first\" (high spp: the first render at that spp, "
@@ -237,10 +238,7 @@ def _levels_off(name: str, cases: list[dict]) -> list[str]:
             out.append(f"- {name}: from {a['spp']} to {b['spp']} spp Mitsuba's {label} error fell {drop:.2f}x "
                        f"where noise alone falls {noise_drop:.1f}x: it levels off near {b['error'][metric]:.4f} "
                        "against this truth (a difference between the two physical renders, not noise), so an "
-                       "extrapolated time above is a lower bound at best. A known part of it: the truth's "
-                       "hidden sky is interpolated from a grid of nodes several pixels apart "
-                       "(`data_synth.sky_visibility_map`), which reads too dark within a few pixels of the "
-                       "object's walls, where Mitsuba traces the sky per pixel.")
+                       "extrapolated time above is a lower bound at best.")
     return out
 
 
@@ -404,7 +402,9 @@ def write_report(result: dict, md_path: Path, json_name: str | None = None) -> N
          f"A top-down ground map of each mesh's shadow: sun azimuth {s['sun_azimuth_deg']} deg, elevation "
          f"{s['sun_elevation_deg']} deg, the real sun's disk (radius {s['sun_radius_deg']} deg), a uniform sky "
          f"with rho = {s['rho']}. The truth is a physical render by `data_synth`'s ray caster (sun disk plus "
-         f"sky, direct light, pixel areas integrated) at {s['reference_pixels']} x {s['reference_pixels']} "
+         f"sky, direct light, pixel areas integrated; the hidden sky from `data_synth`'s sky map, traced "
+         f"pixel by pixel next to the object, where the map's interpolation between nodes inside and "
+         f"outside the object read up to 0.13 too dark before 2026-11-24 evening) at {s['reference_pixels']} x {s['reference_pixels']} "
          f"with {s['reference_samples']} sun rays per pixel, cached on disk. Its own noise, measured as half "
          "the RMS difference of two independent halves, in the penumbra band:", "",
          "| mesh | faces | sun rays per pixel | reference noise (RMS, band) | band pixels | pixel (mm) | ray-casting s |",
