@@ -29,7 +29,7 @@ class FitOptions:
     overlays: str = "first"  # overlay plots for the "first" photo of each group, or "all"
     verbose: bool = False
     # Level of detail of the object's mesh (``fitting.lod``): "auto" (the coarsest level that moves
-    # k and rho by at most lod_tolerance of their standard errors), "off" (the mesh as it is), or
+    # k and rho by at most lod_tolerance of their stated standard errors), "off" (the mesh as it is), or
     # a face count (that level, decimated).
     lod: str | int = "auto"
     lod_tolerance: float = 0.1

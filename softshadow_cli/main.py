@@ -118,8 +118,8 @@ def _add_fit(sub):
                         "moves k and rho by at most --lod-tolerance of their standard errors), off "
                         "(the mesh as given), or a face count to decimate to")
     p.add_argument("--lod-tolerance", type=float, default=0.1, metavar="SE",
-                   help="with --lod auto: the largest shift of k or rho allowed, in their standard "
-                        "errors (default 0.1)")
+                   help="with --lod auto: the largest shift of k or rho allowed, in their stated "
+                        "standard errors, systematic part included (default 0.1)")
     p.set_defaults(func=_run_fit)
 
 

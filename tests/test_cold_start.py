@@ -100,3 +100,17 @@ def test_every_public_name_resolves_to_its_module_object(package):
             assert getattr(sys.modules[home], name.split(".")[-1], value) is value
     with pytest.raises(AttributeError):
         getattr(pkg, "no_such_name")
+
+
+def test_one_blas_thread_entered_first_still_limits_every_blas():
+    # The CLI enters it before anything has loaded NumPy, SciPy or OpenCV (each brings its own
+    # OpenBLAS); threadpoolctl limits only libraries already loaded.
+    code = ("from softshadow import one_blas_thread\nfrom threadpoolctl import threadpool_info\n"
+            "with one_blas_thread():\n    import numpy, scipy.linalg, cv2\n"
+            "    blas = [i['num_threads'] for i in threadpool_info() if i['user_api'] == 'blas']\n"
+            "print(blas)\n")
+    run = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120,
+                         env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert run.returncode == 0, run.stderr[-2000:]
+    blas = json.loads(run.stdout.strip().splitlines()[-1])
+    assert len(blas) >= 2 and set(blas) == {1}

@@ -88,11 +88,13 @@ def _shifts(row: dict, full: dict) -> None:
         row["speedup_warm"] = full["seconds"] / row["seconds"]
 
 
-def bench_lod(quick: bool = False, seed: int = 0, progress=None, fresh: bool = True) -> dict:
+def bench_lod(quick: bool = False, seed: int = 0, progress=None, fresh: bool = True,
+              scenes: tuple[str, ...] | None = None) -> dict:
     """Per scene: the truth, and per setting (off, auto, fixed levels) the faces fitted, the fit
     time (first run and warm second run, seconds, in this process), k and rho with their stated
     and statistical errors, their shifts from the full mesh's fit in its standard errors, the
-    warm speed-up; the full mesh refitted with sample seeds 1 and 2; fresh-process times."""
+    warm speed-up; the full mesh refitted with sample seeds 1 and 2; fresh-process times.
+    scenes: names of ``SCENES`` to run (default: all, or those marked for --quick)."""
     from data_synth import synthesize
 
     from .meshes import mit_dragon
@@ -102,7 +104,7 @@ def bench_lod(quick: bool = False, seed: int = 0, progress=None, fresh: bool = T
     levels = (LEVELS[0], LEVELS[-1]) if quick else LEVELS
     with tempfile.TemporaryDirectory() as tmp:
         for name, size, radius, in_quick in SCENES:
-            if quick and not in_quick:
+            if (scenes is not None and name not in scenes) or (scenes is None and quick and not in_quick):
                 continue
             folder = Path(tmp) / name
             synthesize(folder, preset="dragon", seed=seed, size=size, progress=False, object_mesh=mesh,
