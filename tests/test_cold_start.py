@@ -126,7 +126,7 @@ def test_no_plots_asks_the_fit_for_no_overlay(monkeypatch):
     from fitting import FitOptions, GroupResult, PhotoGroup
     asked = []
 
-    def fit_group(model, pose, views, label, time, options):
+    def fit_group(model, pose, views, label, time, options, *more):
         asked.append((options.plots, options.overlays))
         return GroupResult(label, time, [v.name for v in views], error="stopped here")
     monkeypatch.setattr(solve, "fit_group", fit_group)
