@@ -27,6 +27,7 @@ from softshadow import GroundGrid, Pose, SoftShadowModel, Sun, bucket_size, conc
 
 from .model import (K_SCALE, FitConfig, FitParams, GroupArrays, Prediction, angular_pixel_gradient, predict,
                     raw_from_k, raw_from_rho, residuals, residuals_of)
+from .options import FitOptions
 from .overlay import fitted_alpha_image
 from .receiver_light import shadow_factor
 from .results import GroupResult, OverlayPlotData, ProfilePlotData
@@ -46,33 +47,6 @@ LM_RTOL, LM_ATOL = 1e-4, 1e-4
 COV_RCOND = 1e-6
 #: Not identifiable below this penumbra width (pixels) or above this relative error of k.
 MIN_PENUMBRA_PX, MAX_K_REL_STDERR = 0.8, 0.5
-
-@dataclasses.dataclass
-class FitOptions:
-    """Choices of the fit. profiles / blur: candidates compared by BIC.
-
-    The default profile is ``disk``: the sun is a disk, and with it k reads tan(sun radius),
-    the truth convention of CONVENTIONS and the Mitsuba renders. ("linear", "disk") lets BIC
-    choose; a linear ramp fitted to a real sun reads about 0.854 of that k.
-    """
-
-    profiles: tuple[str, ...] = ("disk",)
-    blur: tuple[bool, ...] = (False, True)
-    rule: str = "edge"
-    range_k_max: float = 0.03
-    max_samples_per_photo: int = 1300  # three photos fill a 4,096 bucket
-    robust: bool = True
-    max_steps: int = 60
-    seed: int = 0
-    sky_occlusion: bool = True  # model the sky the object hides from each sample (softshadow.sky)
-    plots: bool = True
-    overlays: str = "first"  # overlay plots for the "first" photo of each group, or "all"
-    verbose: bool = False
-    # Level of detail of the object's mesh (``fitting.lod``): "auto" (the coarsest level that moves
-    # k and rho by at most lod_tolerance of their standard errors), "off" (the mesh as it is), or
-    # a face count (that level, decimated).
-    lod: str | int = "auto"
-    lod_tolerance: float = 0.1
 
 
 def _group_arrays(samples: list[PhotoSamples], views: list[PhotoView]) -> GroupArrays:
@@ -107,16 +81,17 @@ def _group_arrays(samples: list[PhotoSamples], views: list[PhotoView]) -> GroupA
                                      else np.ones(len(s.observed)) for s in samples]), 1.0)))
 
 
-def sample_views(model: SoftShadowModel, pose: Pose, views: list[PhotoView], options: FitOptions
-                 ) -> tuple[list[PhotoSamples], list[PhotoView], list[str]]:
-    """Step 1: each photo's samples (``select_samples``). Returns the samples, the views they
-    come from, and a one-line warning for each photo with no shadow in view."""
+def sample_views(model: SoftShadowModel, pose: Pose, views: list[PhotoView], options: FitOptions,
+                 sky_model: SoftShadowModel | None = None) -> tuple[list[PhotoSamples], list[PhotoView], list[str]]:
+    """Step 1: each photo's samples (``select_samples``; ``sky_model``: the mesh the hidden sky
+    is cast from, default ``model``). Returns the samples, the views they come from, and a
+    one-line warning for each photo with no shadow in view."""
     samples, used, warnings = [], [], []
     for i, view in enumerate(views):
         try:
             samples.append(select_samples(model, pose, view, options.range_k_max,
                                           max_samples=options.max_samples_per_photo, seed=options.seed + i,
-                                          sky_occlusion=options.sky_occlusion))
+                                          sky_occlusion=options.sky_occlusion, sky_model=sky_model))
             used.append(view)
         except NoShadowInView as exc:
             warnings.append(f"{view.name}: {exc}")
@@ -442,13 +417,15 @@ def _overlay(model: SoftShadowModel, pose: Pose, view: PhotoView, params: FitPar
 
 
 def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label: str,
-              time_label: str | None, options: FitOptions | None = None) -> GroupResult:
+              time_label: str | None, options: FitOptions | None = None,
+              sky_model: SoftShadowModel | None = None) -> GroupResult:
     """Fit k and rho shared by ``views`` (one time of day). Never raises for bad data:
-    failures come back as a GroupResult with ``error`` set."""
+    failures come back as a GroupResult with ``error`` set. sky_model: the mesh the hidden sky
+    is cast from (a coarse level of detail, ``fitting.lod``; default ``model``)."""
     options = options or FitOptions()
     start = _time.perf_counter()
     result = GroupResult(label=label, time=time_label, photos=[v.name for v in views])
-    samples, used, result.warnings = sample_views(model, pose, views, options)
+    samples, used, result.warnings = sample_views(model, pose, views, options, sky_model)
     if not samples:
         result.error = "no shadow in view: " + "; ".join(result.warnings)
         result.seconds = _time.perf_counter() - start
@@ -494,7 +471,8 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
         result.plot_profiles = profile_plot_data(samples, sol.prediction, est.rho, np.asarray(arrays.sky_hidden),
                                                   np.asarray(arrays.sun_cos))
         result.plot_overlays = [_overlay(model, pose, used[i], sol.params, cfg, samples[i])
-                                for i in range(len(samples)) if options.overlays == "all" or i == 0]
+                                for i in range(len(samples))
+                                if options.overlays == "all" or (options.overlays == "first" and i == 0)]
     if not sol.converged:
         result.warnings.append("the solver stopped before converging")
     if few_profiles_warning(result.n_profiles):
