@@ -264,7 +264,7 @@ def test_corner_alpha_is_finite_at_the_hard_cases(profile):
                                   hard.astype(float))
 
 
-@settings(max_examples=25, deadline=None)
+@settings(max_examples=15, deadline=None)
 @given(dx=st.floats(-2.0, 2.0), dy=st.floats(-2.0, 2.0), k=st.floats(0.005, 0.05),
        tilt=st.floats(-0.1, 0.1), angle=st.floats(30.0, 150.0), concave=st.booleans(),
        profile=st.sampled_from(["disk", "linear"]))
@@ -288,10 +288,14 @@ def test_corner_alpha_gradients_match_finite_differences(dx, dy, k, tilt, angle,
             f"parameter {i}: {grad[i]} vs {fd[i]}")
 
 
-_plate_rows = jax.jit(jax.vmap(lambda th, *a, profile: plate_eval(th, *a, profile=profile)[0],
-                               in_axes=(0, None, None, None, None, None, None)), static_argnames="profile")
-_plate_grad = jax.jit(jax.grad(lambda th, *a, profile: plate_eval(th, *a, profile=profile)[0]),
-                      static_argnames="profile")
+@functools.partial(jax.jit, static_argnames="profile")
+def _plate_rows(rows, *args, profile):
+    return jax.vmap(lambda th: plate_eval(th, *args, profile=profile)[0])(rows)
+
+
+@functools.partial(jax.jit, static_argnames="profile")
+def _plate_grad(theta, *args, profile):
+    return jax.grad(lambda th: plate_eval(th, *args, profile=profile)[0])(theta)
 
 
 def test_corner_alpha_float32_matches_float64():
