@@ -27,7 +27,7 @@ def _as_jax(plan: PointPlan) -> PointPlan:
 
 def plan_alpha(points: Float[Array, "n 3"], plan: PointPlan, pose: Pose, sun: Sun, range_k,
                rule: str = "edge", profile: str = "linear",
-               pixel_axes: Float[Array, "*n 2 3"] | None = None, corners: bool = True) -> Float[Array, " n"]:
+               pixel_axes: Float[Array, "*n 2 3"] | None = None, corners: bool = False) -> Float[Array, " n"]:
     """Alpha (n,) at the plan's points: the penumbra formula in bands, the hard shadow elsewhere.
 
     pixel_axes: (2, 3) or (n, 2, 3) offsets (m) across a pixel along its two sides: alpha

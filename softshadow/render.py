@@ -43,7 +43,7 @@ def _band_k(params: ShadowParams, range_k_max: float | None) -> float:
 @functools.partial(jax.jit, static_argnames=("rule", "profile", "shape", "footprint", "corners"))
 def _ground_map_core(hard, band_index, origin_x, origin_y, pixel_m, plan: PointPlan, pose: Pose,
                      sun: Sun, params: ShadowParams, sky_hidden, rule: str, profile: str, shape,
-                     footprint: bool, corners: bool = True):
+                     footprint: bool, corners: bool = False):
     dtype = params.rho.dtype
     # Band pixel centres from their flat indices (cheaper than shipping (m, 3) points).
     rows, cols = jnp.divmod(band_index, shape[1])
@@ -61,7 +61,7 @@ def _ground_map_core(hard, band_index, origin_x, origin_y, pixel_m, plan: PointP
 
 @functools.partial(jax.jit, static_argnames=("rule", "profile", "corners"))
 def _band_points_core(band_points, band_plan: PointPlan, hard, band_index, pose, sun, params, rule, profile,
-                      pixel_axes=None, corners: bool = True):
+                      pixel_axes=None, corners: bool = False):
     """Shading at all of a plan's points (padded): the hard shadow, with the band points'
     alpha from the penumbra formula scattered in (padding indices are dropped)."""
     dtype = params.rho.dtype
@@ -73,7 +73,7 @@ def _band_points_core(band_points, band_plan: PointPlan, hard, band_index, pose,
 
 @functools.partial(jax.jit, static_argnames=("rule", "profile", "corners"))
 def _points_core(points, plan: PointPlan, pose, sun, params, rule, profile, pixel_axes=None,
-                 corners: bool = True):
+                 corners: bool = False):
     alpha = plan_alpha(points, plan, pose, sun, params.range_k, rule, profile, pixel_axes, corners)
     return shade(alpha, params.rho)
 
@@ -137,7 +137,9 @@ class SoftShadowModel:
     pose and grid and kept (a few hundred ms for a 64 x 64 node grid); ``at_points`` leaves
     it to the caller.
     corners: near a corner of the shadow's outline, alpha is the light's mass behind the
-    corner's wedge (``penumbra.corner_alpha``; default on), not the nearest edge's half-plane.
+    corner's wedge (``penumbra.corner_alpha``), not the nearest edge's half-plane. Off by default:
+    right at a box's corners (the pillar's band error falls 2-4x) but wrong on the dragon's
+    complex outline (band error 0.067 -> 0.17), see docs/renderer.md.
     """
 
     occluder: Occluder
@@ -145,7 +147,7 @@ class SoftShadowModel:
     profile: str = "linear"
     footprint: bool = True
     hidden_sky: bool = True
-    corners: bool = True
+    corners: bool = False
     _sky_cache: dict = dataclasses.field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self):
@@ -157,7 +159,7 @@ class SoftShadowModel:
     @classmethod
     def from_mesh(cls, mesh: str | trimesh.Trimesh, rule: str = "edge", profile: str = "linear",
                   base_dir=None, footprint: bool = True, hidden_sky: bool = True,
-                  corners: bool = True) -> "SoftShadowModel":
+                  corners: bool = False) -> "SoftShadowModel":
         """From a built-in name, a mesh file path, or a trimesh.Trimesh."""
         if not isinstance(mesh, trimesh.Trimesh):
             mesh = load_mesh(mesh, base_dir)

@@ -318,7 +318,7 @@ def test_pillar_tip_in_a_ground_map_against_ray_casting():
     of the sun's disk by ray casting (trimesh): the corners' error falls several-fold."""
     sun, pose, params = Sun(200.0, 40.0), Pose(rotation_deg=(0.0, 0.0, 7.0)), ShadowParams(0.02, 0.0)
     mesh = builtin_mesh("pillar")
-    model = SoftShadowModel.from_mesh(mesh, profile="disk", footprint=False, hidden_sky=False)
+    model = SoftShadowModel.from_mesh(mesh, profile="disk", footprint=False, hidden_sky=False, corners=True)
     light = np.asarray(sun.light)
     world = mesh.copy()
     world.apply_transform(trimesh.transformations.rotation_matrix(np.radians(7.0), (0, 0, 1)))
