@@ -14,8 +14,11 @@ ground, where rho and level are defined) and c the sun's incidence on the
 receiver over the open ground's (1 on the ground; ``fitting.receiver_light``).
 On the ground this is level (1 - alpha (1 - rho) - rho h). Bounds
 are kept by reparameterisation: k = K_SCALE softplus(raw_k),
-rho = sigmoid(raw_rho), blur variance = raw_blur (pixels^2, added to the
-pixel's 1/12).
+rho = sigmoid(raw_rho), blur variance = raw_blur[p] (pixels^2, added to the
+pixel's 1/12), one per photo: photos of one group are shot with different focus
+and shake, and with a penumbra of one or two pixels a blur shared by all of them
+is confounded with k (3 photos blurred 0.61/0.66/0.87 px read k 65 % high with
+one blur, within 1 % with the same blur in all three).
 """
 
 from __future__ import annotations
@@ -147,8 +150,8 @@ class FitParams(eqx.Module):
     """The fit's parameters (float64 scalars and arrays), bounds kept by reparameterisation.
 
     raw_k: k = K_SCALE softplus(raw_k). raw_rho: rho = sigmoid(raw_rho).
-    raw_blur: the camera blur's variance (pixels^2, added to the pixel's own 1/12; free in
-    sign). sun_delta_deg (2,): azimuth and elevation corrections (degrees) to every photo's
+    raw_blur (P,): each photo's camera blur variance (pixels^2, added to the pixel's own 1/12;
+    free in sign). sun_delta_deg (2,): azimuth and elevation corrections (degrees) to every photo's
     sun. log_level (P, 2): each photo's log lit level of the ground (0) and paper (1) classes.
     gradient (P, 2): each photo's linear brightness gradient over the normalised image
     coordinates (exposure, vignetting).
@@ -159,15 +162,15 @@ class FitParams(eqx.Module):
 
     raw_k: Float[Array, ""]
     raw_rho: Float[Array, ""]
-    raw_blur: Float[Array, ""]
+    raw_blur: Float[Array, " P"]
     sun_delta_deg: Float[Array, "2"]
     log_level: Float[Array, "P 2"]
     gradient: Float[Array, "P 2"]
 
     @staticmethod
     def layout(n_photos: int) -> dict[str, slice]:
-        """Where each parameter sits in ``vector`` (p = 5 + 4 n_photos entries)."""
-        sizes = {"raw_k": 1, "raw_rho": 1, "raw_blur": 1, "sun_delta_deg": 2,
+        """Where each parameter sits in ``vector`` (p = 4 + 5 n_photos entries)."""
+        sizes = {"raw_k": 1, "raw_rho": 1, "raw_blur": n_photos, "sun_delta_deg": 2,
                  "log_level": 2 * n_photos, "gradient": 2 * n_photos}
         out, start = {}, 0
         for name, size in sizes.items():
@@ -188,7 +191,7 @@ class FitParams(eqx.Module):
     def from_vector(cls, x, n_photos: int) -> "FitParams":
         """Inverse of ``vector`` (x (p,), JAX or NumPy)."""
         lay = cls.layout(n_photos)
-        shapes = {"raw_k": (), "raw_rho": (), "raw_blur": (), "sun_delta_deg": (2,),
+        shapes = {"raw_k": (), "raw_rho": (), "raw_blur": (n_photos,), "sun_delta_deg": (2,),
                   "log_level": (n_photos, 2), "gradient": (n_photos, 2)}
         return cls(**{name: x[lay[name]].reshape(shapes[name]) for name in lay})
 
@@ -249,36 +252,44 @@ def angular_pixel_gradient(group: GroupArrays, pose: Pose, k, rule: str = "edge"
     return jnp.where(ok, slope / jnp.where(ok, dudt, 1.0), 0.0)
 
 
-def _shape_vector(params: FitParams) -> Float[Array, "4"]:
+def _shape_vector(params: FitParams) -> Float[Array, "3+P"]:
     """The parameters the shadow's shape depends on: raw_k, sun azimuth and elevation
-    corrections (degrees) and raw_blur. The rest (levels, gradients, rho) enter linearly."""
-    return jnp.stack([params.raw_k, params.sun_delta_deg[0], params.sun_delta_deg[1],
-                      params.raw_blur])
+    corrections (degrees), then each photo's raw_blur (P,). The rest (levels, gradients, rho)
+    enter linearly."""
+    return jnp.concatenate([jnp.stack([params.raw_k, params.sun_delta_deg[0], params.sun_delta_deg[1]]),
+                            jnp.reshape(params.raw_blur, -1)])
 
 
-def edge_terms(shape: Float[Array, "4"], group: GroupArrays, pose: Pose, config: FitConfig):
-    """Alpha (n,), penumbra coordinate u (n,) and |du/dpixel| (n,) from the shape vector."""
-    k = k_from_raw(shape[0])
-    light = sample_light(group, shape[1:3], config.fit_sun)
+def _edge_terms_per_sample(geometry: Float[Array, "3"], raw_blur: Float[Array, " n"], group: GroupArrays,
+                           pose: Pose, config: FitConfig):
+    """``edge_terms`` from raw_k and the sun corrections (3,) and each sample's own raw blur (n,)."""
+    k = k_from_raw(geometry[0])
+    light = sample_light(group, geometry[1:3], config.fit_sun)
     u, dudt = plan_coordinate_light(group.ground, group.plan, pose, light, k, config.rule,
                                     with_slope=True)
     # Blur variance (px^2) added to the pixel's own 1/12, free in sign so that "no blur" is an
     # interior point (a regular minimum, quick to converge) rather than a boundary.
-    variance = 1.0 / 12.0 + config.fit_blur * shape[3]
+    variance = 1.0 / 12.0 + config.fit_blur * raw_blur
     slope = dudt * group.grad_t_pixel
     tau = jnp.sqrt(jnp.maximum(variance, 1e-3)) * slope
     return pixel_profile_alpha(u, tau, config.profile), u, slope
 
 
+def edge_terms(shape: Float[Array, "3+P"], group: GroupArrays, pose: Pose, config: FitConfig):
+    """Alpha (n,), penumbra coordinate u (n,) and |du/dpixel| (n,) from the shape vector."""
+    return _edge_terms_per_sample(shape[:3], shape[3:][group.photo], group, pose, config)
+
+
 @jax.custom_jvp
-def shadow_terms(shape: Float[Array, "4"], group: GroupArrays, pose: Pose, config: FitConfig):
+def shadow_terms(shape: Float[Array, "3+P"], group: GroupArrays, pose: Pose, config: FitConfig):
     """Alpha, u and |du/dpixel| (n,) each, as ``edge_terms``, differentiable in ``shape`` only
     (the fit's constants group, pose and config get no derivative).
 
-    Its JVP forms the (n, 4) Jacobians once, in the primal pass; the solver's Jacobian with
-    respect to all the fit's parameters (4 + 4 per photo + rho) then costs one small
-    matrix product per column instead of a pass through the edge geometry each (the
-    tangents of outputs nobody uses are dropped by XLA).
+    Its JVP forms the (n, 3) Jacobians of the geometry and the (n,) derivatives in each
+    sample's own blur once, in the primal pass (a photo's blur moves only its own samples, so
+    P blurs cost one pass, not P); the solver's Jacobian with respect to all the fit's
+    parameters (3 + 5 per photo + rho) then costs one small product per column instead of a
+    pass through the edge geometry each (the tangents of outputs nobody uses are dropped by XLA).
     """
     return edge_terms(shape, group, pose, config)
 
@@ -286,12 +297,17 @@ def shadow_terms(shape: Float[Array, "4"], group: GroupArrays, pose: Pose, confi
 @shadow_terms.defjvp
 def _shadow_terms_jvp(primals, tangents):
     shape, group, pose, config = primals
-    out, linear = jax.linearize(lambda s: edge_terms(s, group, pose, config), shape)
-    jacs = jax.vmap(linear, out_axes=1)(jnp.eye(shape.shape[0], dtype=shape.dtype))
-    return out, tuple(j @ tangents[0] for j in jacs)
+    (tangent,) = tangents[:1]
+    blur = shape[3:][group.photo]
+    out, linear = jax.linearize(lambda g, b: _edge_terms_per_sample(g, b, group, pose, config), shape[:3], blur)
+    jacs = jax.vmap(lambda e: linear(e, jnp.zeros_like(blur)), out_axes=1)(jnp.eye(3, dtype=shape.dtype))
+    # Sample i depends on its own blur only: one pass with all ones gives every derivative.
+    dblur = linear(jnp.zeros(3, dtype=shape.dtype), jnp.ones_like(blur))
+    tangent_blur = tangent[3:][group.photo]
+    return out, tuple(j @ tangent[:3] + d * tangent_blur for j, d in zip(jacs, dblur))
 
 
-def shadow_alpha(shape: Float[Array, "4"], group: GroupArrays, pose: Pose, config: FitConfig):
+def shadow_alpha(shape: Float[Array, "3+P"], group: GroupArrays, pose: Pose, config: FitConfig):
     """Alpha (n,) of ``shadow_terms``."""
     return shadow_terms(shape, group, pose, config)[0]
 
