@@ -9,33 +9,27 @@ runs many folders on Dask, and
 the fitting call (``jax.enable_x64``), so the caller's own precision is kept.
 """
 
-from .api import FolderError, fit_and_report, fit_folder, fit_photos
-from .edge_measure import EdgeMeasurement, measure_shadow_edges
-from .exif import intrinsics_from_exif, photo_time_from_exif, read_exif
-from .grouping import NO_TIME_REASON, PhotoGroup, group_photos, photo_time
-from .many import DONE_MARKER, SUMMARY_COLUMNS, find_photo_folders, fit_many, write_summary
-from .markers import (Registration, RegistrationError, board_from_spec, board_outline_world,
-                      board_world_points, register_board)
-from .pair_reference import attenuation_image, reference_at_profiles
-from .problem import GroupProblem, SolveOutcome, group_problem
-from .photos import (IMAGE_EXTENSIONS, RAW_EXTENSIONS, Photo, PhotoError, linear_to_srgb, list_photos,
-                     read_photo, srgb_to_linear)
-from .report import PAPER_TABLE2, format_table, write_report, write_results_json, write_table2
-from .results import FitResults, GroupResult
-from .samples import NoShadowInView
-from .solve import FitOptions, fit_group
-from .views import PhotoView
+import lazy_loader as _lazy
 
-__all__ = [
-    "attenuation_image", "reference_at_profiles",
-    "DONE_MARKER", "EdgeMeasurement", "FitOptions", "fit_and_report", "FitResults", "FolderError", "GroupResult",
-    "IMAGE_EXTENSIONS",
-    "NO_TIME_REASON", "NoShadowInView", "PAPER_TABLE2", "Photo", "PhotoError", "PhotoGroup",
-    "PhotoView", "RAW_EXTENSIONS", "Registration", "RegistrationError", "board_from_spec",
-    "board_outline_world", "board_world_points", "find_photo_folders", "fit_folder", "fit_group", "fit_many",
-    "fit_photos", "GroupProblem", "group_problem", "SolveOutcome",
-    "format_table", "group_photos", "intrinsics_from_exif", "linear_to_srgb", "list_photos",
-    "measure_shadow_edges", "photo_time", "photo_time_from_exif", "read_exif", "read_photo",
-    "register_board", "srgb_to_linear", "SUMMARY_COLUMNS", "write_report", "write_results_json", "write_summary",
-    "write_table2",
-]
+# The public names, by the module that defines them, each imported on first use (PEP 562,
+# ``lazy_loader``): a folder of photos without geometry is measured without loading JAX,
+# optimistix or trimesh, whose imports take seconds.
+__getattr__, __dir__, __all__ = _lazy.attach(__name__, submod_attrs={
+    "api": ["FolderError", "fit_and_report", "fit_folder", "fit_photos"],
+    "edge_measure": ["EdgeMeasurement", "measure_shadow_edges"],
+    "exif": ["intrinsics_from_exif", "photo_time_from_exif", "read_exif"],
+    "grouping": ["NO_TIME_REASON", "PhotoGroup", "group_photos", "photo_time"],
+    "many": ["DONE_MARKER", "SUMMARY_COLUMNS", "find_photo_folders", "fit_many", "write_summary"],
+    "markers": ["Registration", "RegistrationError", "board_from_spec", "board_outline_world", "board_world_points",
+                "register_board"],
+    "options": ["FitOptions"],
+    "pair_reference": ["attenuation_image", "reference_at_profiles"],
+    "photos": ["IMAGE_EXTENSIONS", "RAW_EXTENSIONS", "Photo", "PhotoError", "linear_to_srgb", "list_photos",
+               "read_photo", "srgb_to_linear"],
+    "problem": ["GroupProblem", "SolveOutcome", "group_problem"],
+    "report": ["PAPER_TABLE2", "format_table", "write_report", "write_results_json", "write_table2"],
+    "results": ["FitResults", "GroupResult"],
+    "samples": ["NoShadowInView"],
+    "solve": ["fit_group"],
+    "views": ["PhotoView"],
+})

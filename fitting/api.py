@@ -20,23 +20,19 @@ from pathlib import Path
 from typing import Callable
 
 import cv2
-import jax
 import numpy as np
 
 from scene import CameraSpec, SceneError, SceneSpec, load_scene, photo_sun
-from softshadow import (MeshError, Pose, SoftShadowModel, SunBelowHorizonError, check_sun_above_horizon, load_mesh,
-                        one_blas_thread)
+from softshadow import one_blas_thread
 
 from .files import software_versions
 from .grouping import PhotoGroup, group_photos, photo_time
-from .lod import LevelsOfDetail
 from .ignore_masks import IgnoreMaskError, ignore_mask_path, read_ignore_mask
+from .options import FitOptions
 from .photo_check import judge, photo_agreement
 from .photos import Photo, PhotoError, list_photos, read_photo
-from .receiver_points import ReceiverError, load_receiver_mesh, receiver_for_photo
 from .resume import GroupStore, group_key, photo_digest
 from .results import FitResults, GroupResult
-from .solve import FitOptions, fit_group
 from .uncertainty import edge_rho_errors, profile_spread
 from .views import PhotoView
 
@@ -116,6 +112,7 @@ def _camera_view(photo: Photo, spec: CameraSpec | None, view: PhotoView) -> None
 
 
 def _sun_view(name: str, when: _dt.datetime | None, scene: SceneSpec, view: PhotoView) -> None:
+    from softshadow import check_sun_above_horizon  # with JAX (see _fit_groups)
     sun = photo_sun(scene, name, when)
     if sun is None:
         view.sun_source = "fitted"
@@ -126,6 +123,7 @@ def _sun_view(name: str, when: _dt.datetime | None, scene: SceneSpec, view: Phot
 
 def _fit_group_with_sun(model, pose, views, group: PhotoGroup, options: FitOptions) -> GroupResult:
     """Fit a group; when the sun is unknown, search for it coarsely, then fit and re-plan."""
+    from .solve import fit_group  # with JAX (see _fit_groups)
     if all(v.sun_source != "fitted" for v in views):
         return fit_group(model, pose, views, group.label, group.time, options)
     from .sun_search import search_sun
@@ -230,15 +228,17 @@ def fit_photos(photos: list[Photo], scene: SceneSpec | None = None, options: Fit
     progress: a callable returning a progress bar (tqdm-like: update, close) for the groups.
     jobs: groups fitted at once (threads).
     """
-    # Fits run in float64 (LM in float32 stalls short of its tolerances), scoped to this call so
-    # that a caller's own JAX code keeps its precision; one BLAS thread (softshadow.one_blas_thread).
-    with jax.enable_x64(True), one_blas_thread():
+    # One BLAS thread (softshadow.one_blas_thread); fits with geometry run in float64 (_in_float64).
+    with one_blas_thread():
         return _fit_photos(photos, scene, options or FitOptions(), half_size, progress, store, on_group,
                            jobs)
 
 
 def _in_float64(fn, *args):
-    """fn(*args) in float64 and one BLAS thread: JAX's precision switch is per thread."""
+    """fn(*args) in float64 and one BLAS thread: JAX's precision switch is per thread. Fits run
+    in float64 (LM in float32 stalls short of its tolerances), scoped to the call so that a
+    caller's own JAX code keeps its precision."""
+    import jax
     with jax.enable_x64(True), one_blas_thread():
         return fn(*args)
 
@@ -246,7 +246,6 @@ def _in_float64(fn, *args):
 def _fit_photos(photos, scene, options, half_size, progress, store, on_group, jobs) -> FitResults:
     skipped: list[dict] = []
     software = software_versions()
-    by_name = {p.name: p for p in photos}
     times = {}
     for p in photos:
         try:
@@ -254,15 +253,31 @@ def _fit_photos(photos, scene, options, half_size, progress, store, on_group, jo
         except SceneError as exc:
             # One entry per photo: the unreadable time, not also "no time" from the grouping.
             skipped.append({"photo": p.name, "reason": str(exc)})
-    groups_out: list[GroupResult] = []
     if scene is None or scene.object is None:
         # No geometry: each photo on its own (CONVENTIONS).
+        groups_out: list[GroupResult] = []
         for p in photos:
             result = _measure_without_scene(p, times.get(p.name), scene)
             groups_out.append(result)
             if on_group:
                 on_group(result)
         return FitResults(groups_out, skipped, software)
+    groups_out = _in_float64(_fit_groups, photos, scene, options, half_size, progress, store, on_group, jobs,
+                             times, skipped, software)
+    return FitResults(groups_out, skipped, software)
+
+
+def _fit_groups(photos, scene, options, half_size, progress, store, on_group, jobs, times, skipped, software
+                ) -> list[GroupResult]:
+    """The groups of photos of a scene with geometry, fitted in time order (call it through
+    ``_in_float64``); photos left out are added to ``skipped``."""
+    # Imported here, not at the top: photos without geometry need none of this, and JAX,
+    # optimistix and trimesh take seconds to import.
+    from softshadow import MeshError, Pose, SunBelowHorizonError, load_mesh
+    from .lod import levels_of_detail
+    from .receiver_points import ReceiverError, load_receiver_mesh, receiver_for_photo
+
+    by_name = {p.name: p for p in photos}
     receiver_meshes: dict = {}
     if scene.receiver.kind == "mesh":
         try:  # one mesh for every photo: a receiver that cannot be read stops the folder
@@ -271,10 +286,12 @@ def _fit_photos(photos, scene, options, half_size, progress, store, on_group, jo
             raise FolderError(str(exc)) from exc
     try:
         mesh = load_mesh(scene.object.mesh, scene.base_dir)
-        model = SoftShadowModel.from_mesh(mesh, rule=options.rule)
+        # The full mesh's model and its levels of detail, built once per mesh and kept between
+        # fits (a level is decimated when a group first needs it).
+        lods = levels_of_detail(mesh, options.rule)
     except MeshError as exc:
         raise FolderError(f"cannot use the mesh: {exc}") from exc
-    lods = LevelsOfDetail(mesh, model)  # decimated once, when a group first needs a level
+    model = lods.full
     lod_lock = threading.Lock()
     pose = Pose(scene.object.position, scene.object.rotation_deg, scene.object.scale)
     timed = {n: times[n] for n in times}
@@ -358,8 +375,7 @@ def _fit_photos(photos, scene, options, half_size, progress, store, on_group, jo
     finally:
         if bar is not None:  # also when interrupted: the next line starts on a line of its own
             bar.close()
-    groups_out += [ordered[i] for i in range(len(groups))]
-    return FitResults(groups_out, skipped, software)
+    return [ordered[i] for i in range(len(groups))]
 
 
 def fit_folder(path, scene: SceneSpec | str | Path | None = None, options: FitOptions | None = None,

@@ -16,15 +16,25 @@ errs on the side of detail); rho is the group's starting value. sigma comes from
 pixels (``pixel_noise``): it leaves out the texture and model error that the fit's residuals
 also hold, so it is smaller than the fit's residual RMS and the test errs on the side of detail.
 
+The standard errors are the ones the fit states (``fitting.uncertainty``): the statistical part
+predicted from the pixel noise, and the systematic floor, which depends only on k and rho and
+so is known before the fit. Its part that grows as the penumbra narrows is left out (the
+penumbra's width in pixels is known only after the fit) and it is taken at ``k_ref`` (below the
+k the photos show): both make the errors smaller, so the test errs on the side of detail.
+
 Levels are the face count halved from the mesh down to ``LOD_COARSEST_FACES``, decimated only
-when checked. The choice assumes that a coarser level never hides less: it checks the finest
-decimated level first (if it fails, the full mesh is kept after one check), then bisects.
+when checked, and kept per mesh across fits (``levels_of_detail``). The choice assumes that a
+coarser level never hides less: it checks the finest decimated level first (if it fails, the
+full mesh is kept after one check), then bisects.
 """
 
 from __future__ import annotations
 
+import collections
 import dataclasses
+import hashlib
 import math
+import threading
 from typing import Callable
 
 import numpy as np
@@ -33,10 +43,11 @@ import trimesh
 from softshadow import Pose, ShadowParams, SoftShadowModel, Sun, bucket_size, concatenate_plans, decimate
 
 from .samples import PhotoSamples, select_samples
+from .uncertainty import systematic_errors
 from .views import PhotoView
 
 __all__ = ["LOD_MIN_FACES", "LOD_COARSEST_FACES", "LevelCheck", "LodChoice", "LevelsOfDetail",
-           "ShadowReference", "fitter_face_counts", "pixel_noise", "choice_samples"]
+           "ShadowReference", "fitter_face_counts", "pixel_noise", "choice_samples", "levels_of_detail"]
 
 #: Meshes with at most this many faces are fitted as they are (a level would save nothing).
 LOD_MIN_FACES = 2000
@@ -101,15 +112,21 @@ def pixel_noise(view: PhotoView, samples: PhotoSamples) -> float:
 
 
 def choice_samples(model: SoftShadowModel, pose: Pose, views: list[PhotoView], range_k_max: float,
-                   max_samples: int, seed: int = 0) -> tuple[list[PhotoSamples], list[PhotoView]]:
+                   max_samples: int, seed: int = 0, mask_model: SoftShadowModel | None = None
+                   ) -> tuple[list[PhotoSamples], list[PhotoView]]:
     """Each view's samples as the fit draws them (``select_samples``, same count and seeds) on
     ``model`` (the full mesh), without the sky and the white sheet (the choice needs neither);
-    views with no shadow in view are left out. Returns the samples and their views."""
+    views with no shadow in view are left out. Returns the samples and their views.
+
+    mask_model: the object's pixels are left out with this model's mesh (a level of detail):
+    the mask only keeps the object itself out of the samples (dilated by 2 pixels), which a
+    coarser mesh does as well for the choice, at a fraction of the cost of rasterising every
+    face of the full mesh."""
     samples, used = [], []
     for i, v in enumerate(views):
         try:
             samples.append(select_samples(model, pose, v, range_k_max, max_samples=max_samples, seed=seed + i,
-                                          sky_occlusion=False, albedo=False))
+                                          sky_occlusion=False, albedo=False, mask_model=mask_model))
             used.append(v)
         except ValueError:  # NoShadowInView: the fit will say so
             continue
@@ -145,7 +162,8 @@ def _lit_fit_sse(shading: np.ndarray, s: PhotoSamples) -> float:
 
 class ShadowReference:
     """The full mesh's shading at a group's samples and the fit's first-order sensitivity there;
-    ``check`` compares a level with it.
+    ``check`` compares a level with it, in the standard errors the fit states (``se``: the
+    statistical ``se_stat`` and the systematic ``se_sys``, in quadrature).
 
     full: the full mesh's model (the fit's rule and profile); views, samples: the group's views
     with a shadow and their samples (``choice_samples``); rho: the starting rho; range_k_max:
@@ -189,7 +207,13 @@ class ShadowReference:
             rows.append(block / self.sigmas[p])
         self.jacobian = np.concatenate(rows)
         self.cov = np.linalg.pinv(self.jacobian.T @ self.jacobian)
-        self.se = np.sqrt(np.maximum(np.diag(self.cov)[:2], 1e-300))
+        #: Statistical standard errors of (k, rho) predicted from the pixel noise.
+        self.se_stat = np.sqrt(np.maximum(np.diag(self.cov)[:2], 1e-300))
+        # The stated errors (``fitting.uncertainty.combine_errors``): the systematic floor at
+        # k_ref without its narrow-penumbra part (penumbra_px infinite), both smaller than what
+        # the fit will state, in quadrature with the statistical part.
+        self.se_sys = np.array(systematic_errors(self.k_ref, self.rho, float("inf")))
+        self.se = np.hypot(self.se_stat, self.se_sys)
 
     def check(self, faces: int, model: SoftShadowModel) -> LevelCheck:
         """``model`` (a level with ``faces`` faces) against the full mesh."""
@@ -207,14 +231,15 @@ class LevelsOfDetail:
     """The object's levels of detail for a folder's fit, decimated once when first needed and
     shared by its groups; ``for_group`` gives one group's model under ``FitOptions.lod``.
 
-    mesh: the object's mesh as given; model: its SoftShadowModel (the fit's rule). Groups fitted
-    in threads must call it under a lock (``fitting.api`` does).
+    mesh: the object's mesh as given; model: its SoftShadowModel (the fit's rule). Levels are
+    built under a lock; ``for_group`` is called under the folder's lock (``fitting.api``).
     """
 
     def __init__(self, mesh: trimesh.Trimesh, model: SoftShadowModel):
         self.mesh = mesh
         self.full_faces = len(model.occluder.faces)
         self._models: dict[int, tuple[int, SoftShadowModel]] = {self.full_faces: (self.full_faces, model)}
+        self._lock = threading.Lock()  # kept between fits (``levels_of_detail``), which may run in threads
 
     @property
     def full(self) -> SoftShadowModel:
@@ -224,11 +249,12 @@ class LevelsOfDetail:
         """(faces, model) of the level decimated to about ``target`` faces (the full mesh when
         it has no more); decimated and built once."""
         target = min(int(target), self.full_faces)
-        if target not in self._models:
-            mesh = decimate(self.mesh, target)
-            self._models[target] = (len(mesh.faces), SoftShadowModel.from_mesh(mesh, rule=self.full.rule,
-                                                                               profile=self.full.profile))
-        return self._models[target]
+        with self._lock:
+            if target not in self._models:
+                mesh = decimate(self.mesh, target)
+                self._models[target] = (len(mesh.faces), SoftShadowModel.from_mesh(mesh, rule=self.full.rule,
+                                                                                   profile=self.full.profile))
+            return self._models[target]
 
     def choose(self, reference: ShadowReference, tolerance: float, profile: str | None = None,
                log: Callable[[str], None] | None = None) -> LodChoice:
@@ -270,8 +296,11 @@ class LevelsOfDetail:
         if any(v.sun_source == "fitted" for v in views):
             return self.full, self.full_faces  # the sun moves during the fit: no fixed shadow to compare
         from .solve import initial_params
+        counts = fitter_face_counts(self.full_faces)
+        # The object's mask from the finest decimated level, which the choice checks first anyway.
         samples, used = choice_samples(self.full, pose, views, options.range_k_max,
-                                       options.max_samples_per_photo, options.seed)
+                                       options.max_samples_per_photo, options.seed,
+                                       mask_model=self.level(counts[1])[1] if len(counts) > 1 else None)
         if not samples:
             return self.full, self.full_faces  # no shadow in view: the fit says so
         profile = options.profiles[0]
@@ -280,3 +309,34 @@ class LevelsOfDetail:
         log = (lambda line: print(f"  {line}")) if options.verbose else None
         choice = self.choose(reference, options.lod_tolerance, profile, log)
         return choice.model, choice.faces
+
+
+#: Meshes whose levels are kept between fits (``levels_of_detail``), most recent last.
+_KEPT_MESHES = 4
+_kept: collections.OrderedDict = collections.OrderedDict()
+_kept_lock = threading.Lock()
+
+
+def _mesh_key(mesh: trimesh.Trimesh, rule: str) -> str:
+    h = hashlib.sha1()
+    for a in (np.ascontiguousarray(mesh.vertices, np.float64), np.ascontiguousarray(mesh.faces, np.int64)):
+        h.update(a.tobytes())
+    return f"{h.hexdigest()}:{rule}"
+
+
+def levels_of_detail(mesh: trimesh.Trimesh, rule: str = "edge") -> LevelsOfDetail:
+    """The ``LevelsOfDetail`` of ``mesh`` under expansion ``rule``, kept (by the mesh's vertices
+    and faces) for the next fit of the same mesh, up to ``_KEPT_MESHES`` meshes: building the
+    full mesh's occluder (0.3 s for the 41k-face dragon) and decimating a level (0.1-0.2 s) are
+    paid once per process, not once per fit."""
+    key = _mesh_key(mesh, rule)
+    with _kept_lock:
+        if key in _kept:
+            _kept.move_to_end(key)
+            return _kept[key]
+    lods = LevelsOfDetail(mesh, SoftShadowModel.from_mesh(mesh, rule=rule))
+    with _kept_lock:
+        lods = _kept.setdefault(key, lods)
+        while len(_kept) > _KEPT_MESHES:
+            _kept.popitem(last=False)
+    return lods

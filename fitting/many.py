@@ -35,7 +35,7 @@ from softshadow import use_compilation_cache
 
 from .photos import list_photos
 from .results import FitResults
-from .solve import FitOptions
+from .options import FitOptions
 
 __all__ = ["SUMMARY_COLUMNS", "DONE_MARKER", "find_photo_folders", "fit_many", "folder_rows",
            "write_summary"]

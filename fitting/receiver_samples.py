@@ -90,7 +90,7 @@ def select_receiver_samples(model: SoftShadowModel, pose: Pose, view: PhotoView,
     the sky hidden from each point and the sun's incidence on it). Raises NoShadowInView
     when no usable boundary pixel is in the frame.
     """
-    from .samples import NoShadowInView, PhotoSamples, paper_mask
+    from .samples import NoShadowInView, PhotoSamples, paper_mask, stable_pick
 
     h, w = view.shape
     sun = Sun(view.sun_azimuth_deg, view.sun_elevation_deg)
@@ -136,10 +136,10 @@ def select_receiver_samples(model: SoftShadowModel, pose: Pose, view: PhotoView,
     if paper is not None:
         exclude |= cv2.morphologyEx(paper.astype(np.uint8), cv2.MORPH_GRADIENT, np.ones((13, 13), np.uint8)) > 0
     rows, cols = np.nonzero(band & ~exclude)
-    rng = np.random.default_rng(seed)
-    if len(rows) > 3 * max_samples:  # the checks below drop some: keep a few times what is needed
-        pick = np.sort(rng.choice(len(rows), 3 * max_samples, replace=False))
-        rows, cols = rows[pick], cols[pick]
+    # The checks below drop some: keep a few times what is needed (``stable_pick``: a slightly
+    # different band keeps the same pixels where it overlaps).
+    pick = stable_pick(rows, cols, (h, w), 3 * max_samples, seed)
+    rows, cols = rows[pick], cols[pick]
     p, n, v, j = receiver.at_pixels(view, cols, rows)
     v &= _crease_free(receiver, view, cols, rows, p, n)
     sun_cos = sun_incidence(n, s_dir)
@@ -150,7 +150,7 @@ def select_receiver_samples(model: SoftShadowModel, pose: Pose, view: PhotoView,
     if len(rows) < 50:
         raise NoShadowInView(f"only {len(rows)} usable receiver pixels near the predicted shadow boundary")
     if len(rows) > max_samples:
-        pick = np.sort(rng.choice(len(rows), max_samples, replace=False))
+        pick = stable_pick(rows, cols, (h, w), max_samples, seed)
         rows, cols, p, n, j, sun_cos = rows[pick], cols[pick], p[pick], n[pick], j[pick], sun_cos[pick]
     b_uv = np.column_stack([bc * f, br * f]).astype(np.float64)
     _, nearest = cKDTree(b_uv).query(np.column_stack([cols, rows]))

@@ -22,7 +22,22 @@ from softshadow import (PointPlan, Pose, PosedOccluder, SoftShadowModel, Sun, ed
 from softshadow import hidden_sky_fraction
 from .views import PhotoView
 
-__all__ = ["PhotoSamples", "select_samples", "NoShadowInView", "paper_mask"]
+__all__ = ["PhotoSamples", "select_samples", "NoShadowInView", "paper_mask", "stable_pick"]
+
+
+def stable_pick(rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int], n: int, seed: int) -> np.ndarray:
+    """Indices (sorted, at most ``n``) of the pixels (rows, cols) (m,) to keep: the ``n`` with the
+    smallest value of one fixed random image (``shape``, drawn from ``seed``).
+
+    Common random numbers: two candidate sets that overlap keep the same pixels where they
+    overlap, so a slightly different band (a level of detail of the mesh, ``fitting.lod``, or a
+    nudged sun) changes the fit by what the model changes, not by a new random draw of pixels
+    (a fresh ``rng.choice`` moved k of the 41k dragon by 1-2 % between seeds, as much as halving
+    the mesh did)."""
+    if len(rows) <= n:
+        return np.arange(len(rows))
+    u = np.random.default_rng(seed).random(shape, dtype=np.float32)[rows, cols]
+    return np.sort(np.argpartition(u, n)[:n])
 
 
 class NoShadowInView(ValueError):
@@ -134,12 +149,15 @@ def _boundary_ground_points(model: SoftShadowModel, pose: Pose, sun: Sun, spacin
 def select_samples(model: SoftShadowModel, pose: Pose, view: PhotoView, range_k_max: float = 0.03,
                    sun_margin_deg: float = 0.3, max_samples: int = 12000, seed: int = 0,
                    min_band_px: int = 5, max_band_px: int = 80,
-                   sky_occlusion: bool = True, albedo: bool = True) -> PhotoSamples:
+                   sky_occlusion: bool = True, albedo: bool = True,
+                   mask_model: SoftShadowModel | None = None) -> PhotoSamples:
     """Pixels in a band around the predicted shadow boundary of one photo.
 
     sky_occlusion: also find, per sample, the sky fraction the object hides (else 0).
     albedo: find the white sheet (``paper_mask``: two albedo classes, the sheet's border left
     out); False: one class, faster (for a look at the shadow alone, ``fitting.lod``).
+    mask_model: the object's own pixels are left out with this model's mesh (default ``model``;
+    ``fitting.lod`` passes a level of detail, which leaves the object out as well).
 
     Raises NoShadowInView when no usable boundary pixel is in the frame. A view whose
     receiver is not the plane is sampled on it (``fitting.receiver_samples``).
@@ -183,7 +201,7 @@ def select_samples(model: SoftShadowModel, pose: Pose, view: PhotoView, range_k_
     exclude = view.saturated.copy() | ~np.isfinite(view.gray)
     if view.ignore is not None:
         exclude |= view.ignore
-    obj = object_mask(model.occluder, pose, view.camera if view.camera is not None else view.grid)
+    obj = object_mask((mask_model or model).occluder, pose, view.camera if view.camera is not None else view.grid)
     exclude |= cv2.dilate(obj.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
     paper = paper_mask(view.gray, exclude) if albedo else None
     if paper is not None:
@@ -195,10 +213,8 @@ def select_samples(model: SoftShadowModel, pose: Pose, view: PhotoView, range_k_
     rows, cols = np.nonzero(band & ~exclude)
     if len(rows) < 50:
         raise NoShadowInView(f"only {len(rows)} usable pixels near the predicted shadow boundary")
-    rng = np.random.default_rng(seed)
-    if len(rows) > max_samples:
-        pick = np.sort(rng.choice(len(rows), max_samples, replace=False))
-        rows, cols = rows[pick], cols[pick]
+    pick = stable_pick(rows, cols, (h, w), max_samples, seed)
+    rows, cols = rows[pick], cols[pick]
     ground, valid, jac = view.ground_of_pixels(cols, rows)
     rows, cols, ground, jac = rows[valid], cols[valid], ground[valid], jac[valid]
     # Profile id: the nearest boundary point (every 8th one counts as a profile).

@@ -27,6 +27,7 @@ from softshadow import GroundGrid, Pose, SoftShadowModel, Sun, bucket_size, conc
 
 from .model import (K_SCALE, FitConfig, FitParams, GroupArrays, Prediction, angular_pixel_gradient, predict,
                     raw_from_k, raw_from_rho, residuals, residuals_of)
+from .options import FitOptions
 from .overlay import fitted_alpha_image
 from .receiver_light import shadow_factor
 from .results import GroupResult, OverlayPlotData, ProfilePlotData
@@ -46,33 +47,6 @@ LM_RTOL, LM_ATOL = 1e-4, 1e-4
 COV_RCOND = 1e-6
 #: Not identifiable below this penumbra width (pixels) or above this relative error of k.
 MIN_PENUMBRA_PX, MAX_K_REL_STDERR = 0.8, 0.5
-
-@dataclasses.dataclass
-class FitOptions:
-    """Choices of the fit. profiles / blur: candidates compared by BIC.
-
-    The default profile is ``disk``: the sun is a disk, and with it k reads tan(sun radius),
-    the truth convention of CONVENTIONS and the Mitsuba renders. ("linear", "disk") lets BIC
-    choose; a linear ramp fitted to a real sun reads about 0.854 of that k.
-    """
-
-    profiles: tuple[str, ...] = ("disk",)
-    blur: tuple[bool, ...] = (False, True)
-    rule: str = "edge"
-    range_k_max: float = 0.03
-    max_samples_per_photo: int = 1300  # three photos fill a 4,096 bucket
-    robust: bool = True
-    max_steps: int = 60
-    seed: int = 0
-    sky_occlusion: bool = True  # model the sky the object hides from each sample (softshadow.sky)
-    plots: bool = True
-    overlays: str = "first"  # overlay plots for the "first" photo of each group, or "all"
-    verbose: bool = False
-    # Level of detail of the object's mesh (``fitting.lod``): "auto" (the coarsest level that moves
-    # k and rho by at most lod_tolerance of their standard errors), "off" (the mesh as it is), or
-    # a face count (that level, decimated).
-    lod: str | int = "auto"
-    lod_tolerance: float = 0.1
 
 
 def _group_arrays(samples: list[PhotoSamples], views: list[PhotoView]) -> GroupArrays:

@@ -7,6 +7,7 @@ second worker process loads the compiled solvers and renderers instead of compil
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 __all__ = ["default_cache_dir", "use_compilation_cache"]
@@ -20,12 +21,21 @@ def default_cache_dir() -> Path:
 def use_compilation_cache(cache_dir=None) -> None:
     """Turn on JAX's persistent compilation cache in this process, in ``cache_dir``
     (``default_cache_dir()`` when None). Programs that compile in under 0.5 s are not
-    kept. A folder that cannot be created leaves the cache off (never an error)."""
-    import jax
+    kept. A folder that cannot be created leaves the cache off (never an error).
+
+    JAX is not imported here: importing it takes seconds, and a process that never needs it (a
+    photo without geometry) should not pay for it. If JAX is not loaded yet, the settings go
+    into JAX's environment variables, which JAX reads when it is first imported (and which
+    processes started from this one inherit); if it is, they go into its config."""
     cache = Path(cache_dir) if cache_dir is not None else default_cache_dir()
     try:
         cache.mkdir(parents=True, exist_ok=True)
-        jax.config.update("jax_compilation_cache_dir", str(cache))
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
     except OSError:
-        pass
+        return
+    settings = {"jax_compilation_cache_dir": str(cache), "jax_persistent_cache_min_compile_time_secs": 0.5}
+    jax = sys.modules.get("jax")
+    for name, value in settings.items():
+        if jax is not None:
+            jax.config.update(name, value)
+        else:
+            os.environ[name.upper()] = str(value)

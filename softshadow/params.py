@@ -18,8 +18,7 @@ from jaxtyping import Array, Float
 
 from .sun import light_direction
 
-__all__ = ["ShadowParams", "Sun", "Pose", "rotation_matrix_xyz",
-           "range_to_paper", "brightness_to_paper", "paper_to_range_k", "paper_to_rho"]
+__all__ = ["ShadowParams", "Sun", "Pose", "rotation_matrix_xyz"]
 
 
 def _leaf(value, shape=()):
@@ -96,21 +95,3 @@ class Pose(eqx.Module):
     def apply_direction(self, vectors: Float[Array, "*n 3"]) -> Float[Array, "*n 3"]:
         """Rotate mesh-frame directions (normals) into the world."""
         return vectors @ self.rotation.T
-
-
-def range_to_paper(range_k):
-    """Paper units of the range of the soft shadow: 100 k."""
-    return 100.0 * range_k
-
-
-def brightness_to_paper(rho):
-    """Paper units of the brightness: 255 rho^(1/2.2) (lit = 255)."""
-    return 255.0 * rho ** (1.0 / 2.2)
-
-
-def paper_to_range_k(range_paper):
-    return range_paper / 100.0
-
-
-def paper_to_rho(brightness_paper):
-    return (brightness_paper / 255.0) ** 2.2

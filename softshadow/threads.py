@@ -18,4 +18,10 @@ def one_blas_thread():
     threads than with one (2 cores). The arrays BLAS sees here are small or tall and thin, so
     one thread costs nothing.
     """
+    # threadpoolctl limits only the libraries loaded at that moment, and with the packages'
+    # imports deferred (softshadow and fitting load modules on first use) an entry point may run
+    # before any of them: load the three OpenBLAS copies a fit uses (NumPy's, SciPy's, OpenCV's).
+    import cv2  # noqa: F401
+    import numpy  # noqa: F401
+    import scipy.linalg  # noqa: F401
     return threadpool_limits(limits=1, user_api="blas")

@@ -188,3 +188,21 @@ def test_mitsuba_peer_renders_the_bench_scene(tmp_path, monkeypatch):
     assert run["variant"] in ("llvm_ad_rgb", "scalar_rgb") and [c["spp"] for c in run["cases"]] == [16, 64]
     # The same scene: a mirrored or misplaced shadow would read tenths, not hundredths.
     assert errs[1] < 0.03 and run["time_to_reach"]["x"]["rms"]["mitsuba_ms"] > 0
+
+
+def test_truth_traces_the_sky_next_to_walls_where_the_sky_map_is_coarse():
+    """Beside the pillar the sky map's bilinear cells mix nodes inside the post with nodes outside:
+    there the truth traces each point (as Mitsuba does), elsewhere it keeps the map."""
+    from data_synth import PlaneReceiver, sky_visibility, sky_visibility_map
+    from softshadow_cli.bench.reference import ground_sky
+    mesh = bench_mesh("pillar")  # 0.2 x 0.2 m, centred on the origin
+    n = 64
+    pts = np.array([[0.11, 0.0, 0.0], [0.0, -0.12, 0.0], [1.9, 1.5, 0.0], [-2.5, 0.4, 0.0]])
+    up = np.tile([0.0, 0.0, 1.0], (len(pts), 1))
+    traced = sky_visibility(mesh, pts, up, n)
+    mapped = sky_visibility_map(mesh, PlaneReceiver(), mesh.bounds, n_samples=n).at(pts[:, :2])
+    got = ground_sky(mesh, pts, n)
+    assert np.all(traced[:2] - mapped[:2] > 0.1)  # the map reads far too dark at the wall
+    np.testing.assert_allclose(got[:2], traced[:2], atol=1e-12)
+    np.testing.assert_allclose(got[2:], mapped[2:], atol=1e-12)
+    assert np.all(np.abs(traced[2:] - mapped[2:]) < 0.01)

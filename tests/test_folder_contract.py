@@ -260,13 +260,13 @@ def test_ctrl_c_prints_one_line_and_resumes(one_group, tmp_path):
         # A child inherits an ignored SIGINT from its parent (the test runner may run with one),
         # and Python then never raises KeyboardInterrupt: start as a shell would start it.
         "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
-        "import fitting.api as api\n"
-        "fit_group = api.fit_group\n"
+        "import fitting.solve as solve\n"
+        "fit_group = solve.fit_group\n"
         "def waiting_fit_group(*args, **kwargs):\n"
         "    print('test: fitting a group', file=sys.stderr, flush=True)\n"
         "    time.sleep(120)\n"
         "    return fit_group(*args, **kwargs)\n"
-        "api.fit_group = waiting_fit_group\n"
+        "solve.fit_group = waiting_fit_group\n"
         "from softshadow_cli.main import main\n"
         "sys.exit(main(sys.argv[1:]))\n")
     cmd = [sys.executable, "-c", driver, "fit", str(one_group), "--out", str(out), "--no-plots"]

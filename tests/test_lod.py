@@ -114,10 +114,44 @@ def test_noise_lets_a_coarser_level_through(ball_folder, tmp_path):
             reference = ShadowReference(full, Pose(), used, samples, 0.3, 0.03)
             chosen[noise] = lods.choose(reference, 1.0, "disk")
         assert 0.005 < reference.k_ref < 0.02  # one grid step below the k the photo shows (0.02)
+        # The tolerance is in the errors the fit states: the systematic floor (8 % of k, 0.002 in
+        # rho, known before the fit) in quadrature with the statistical part.
+        np.testing.assert_allclose(reference.se_sys, [0.08 * reference.k_ref, 0.002])
+        np.testing.assert_allclose(reference.se, np.hypot(reference.se_stat, reference.se_sys))
     quiet, noisy = chosen[0.004], chosen[0.06]
     assert noisy.faces < quiet.faces
     for choice in (quiet, noisy):
         assert all((c.worst <= 1.0) == (c.faces >= choice.faces) for c in choice.checks)
+
+
+def test_levels_are_kept_per_mesh_between_fits():
+    from fitting.lod import levels_of_detail
+    ball = _ball()
+    lods = levels_of_detail(ball)
+    faces, level = lods.level(1000)
+    again = levels_of_detail(ball.copy())  # the same vertices and faces: the same levels
+    assert again is lods and again.level(1000)[1] is level and abs(faces - 1000) <= 10
+    assert levels_of_detail(ball, "paper") is not lods  # another rule, another model
+    moved = ball.copy()
+    moved.apply_translation([0.0, 0.0, 0.1])
+    assert levels_of_detail(moved) is not lods
+
+
+def test_stable_pick_keeps_the_same_pixels_when_the_band_moves():
+    """Common random numbers: a band one row wider keeps almost every pixel the narrower band's
+    draw kept, where a fresh random draw would keep about half of them."""
+    from fitting.samples import stable_pick
+    rows, cols = np.nonzero(np.ones((100, 200), bool))
+    wide_rows, wide_cols = np.nonzero(np.ones((101, 200), bool))
+    a = stable_pick(rows, cols, (120, 200), 5000, seed=3)
+    b = stable_pick(wide_rows, wide_cols, (120, 200), 5000, seed=3)
+    assert len(a) == len(b) == 5000 and np.all(np.diff(a) > 0)
+    kept = set(zip(rows[a], cols[a]))
+    shared = sum((r, c) in kept for r, c in zip(wide_rows[b], wide_cols[b]))
+    assert shared >= 0.97 * 5000
+    other = stable_pick(rows, cols, (120, 200), 5000, seed=4)
+    assert len(np.intersect1d(a, other)) < 0.4 * 5000  # another seed, other pixels
+    assert len(stable_pick(rows[:10], cols[:10], (120, 200), 5000, seed=3)) == 10  # fewer than asked: all
 
 
 def test_cli_reports_the_level_in_results_and_table(ball_folder, tmp_path):

@@ -6,7 +6,7 @@ import json
 import sys
 from pathlib import Path
 
-__all__ = ["run_bench", "sweep_and_report"]
+__all__ = ["run_bench", "sweep_and_report", "overview_and_report"]
 
 
 def _progress(msg: str) -> None:
@@ -19,13 +19,29 @@ def sweep_and_report(settings, result: dict | None = None, fit: bool = True, jso
     per mesh, ``paper``, the peers, each timed case with its ``error``), with the date, machine,
     load (at the start and the end) and versions, written to ``json_path``; and the report made
     from that JSON alone, written to ``report_path`` (its plots in ``img/`` beside it)."""
+    from .speed_report import write_report
+    from .sweep import run_sweep
+    return _run_and_report(lambda: run_sweep(settings, fit=fit, progress=_progress), write_report, result,
+                           json_path, report_path)
+
+
+def overview_and_report(settings, result: dict | None = None, json_path=None, report_path=None) -> dict:
+    """The plain ``softshadow bench`` (``overview.run_overview``: keys ``pillar``, ``ball``,
+    ``dragon``, ``paper``, ``naive``, ``mitsuba``, ``summary``, each timed case with its
+    ``error``), with the environment as ``sweep_and_report``; its short report to ``report_path``."""
+    from .overview import run_overview
+    from .speed_report import write_overview_report
+    return _run_and_report(lambda: run_overview(settings, progress=_progress), write_overview_report, result,
+                           json_path, report_path)
+
+
+def _run_and_report(run, write, result, json_path, report_path) -> dict:
     import datetime
     import time
     from .environment import environment, load_average
-    from .sweep import run_sweep
     t0 = time.perf_counter()
     result = {"environment": environment(), **(result or {})}
-    result.update(run_sweep(settings, fit=fit, progress=_progress))
+    result.update(run())
     result["environment"]["load_average_at_end"] = load_average()
     result["environment"]["run_minutes"] = round((time.perf_counter() - t0) / 60.0, 1)
     result["environment"]["finished_utc"] = datetime.datetime.now(datetime.timezone.utc).strftime(
@@ -34,9 +50,7 @@ def sweep_and_report(settings, result: dict | None = None, fit: bool = True, jso
         Path(json_path).parent.mkdir(parents=True, exist_ok=True)
         Path(json_path).write_text(json.dumps(result, indent=1) + "\n")
     if report_path:
-        from .speed_report import write_report
-        write_report(json.loads(json.dumps(result)), Path(report_path),
-                     Path(json_path).name if json_path else None)
+        write(json.loads(json.dumps(result)), Path(report_path), Path(json_path).name if json_path else None)
     return result
 
 
@@ -46,6 +60,12 @@ def run_bench(args) -> int:
     dtype = str(jnp.result_type(float))
     result = {"jax": jax.__version__, "devices": [str(d) for d in jax.devices()], "dtype": dtype,
               "settings": f"top-down map, k=0.01, rho=0.3, sun az 200 el 40, {dtype}"}
+    if args.what == "overview":
+        from .overview import overview_settings
+        result = overview_and_report(overview_settings(quick=args.quick), result, json_path=args.json_path,
+                                     report_path=getattr(args, "report", None))
+        print(json.dumps(result, indent=1))
+        return 0
     if args.what == "sweep":
         from .sweep import SweepSettings
         result = sweep_and_report(SweepSettings(quick=args.quick), result, fit=getattr(args, "fit", True),

@@ -2,53 +2,110 @@
 
 The real Stanford dragon (MIT remesh, 41,384 faces, vendored undecimated) stands in the
 ``dragon`` preset's scene (physical renderer, two handheld photos and a top-down map at 10:30);
-the folder is fitted in this process with the full mesh (``--lod off``), with the automatic
-choice (``--lod auto``) and with fixed levels (``--lod FACES``). Each is fitted twice: the
-first run compiles what it has not seen (new array shapes), the second is the warm time.
-Scenes: ``sun``, the real sun (radius 0.2665 deg), and ``haze``, a sun disk of 1 deg radius
-(a hazy sky's wider penumbra, which hides more of the mesh).
+each scene's folder is fitted in this process with the full mesh (``--lod off``), with the
+automatic choice (``--lod auto``) and with fixed levels (``--lod FACES``). Each is fitted twice:
+the first run compiles what it has not seen (new array shapes), the second is the warm time.
+
+Scenes (``SCENES``): ``sun-1600``, the preset's 1600 x 1200 photos under the real sun (radius
+0.2665 deg), where the photos show the dragon's detail; ``sun-640`` and ``haze-640``, the same
+scene in 640 x 480 photos, under the real sun and under a 1 deg sun disk (a hazy sky's wider
+penumbra), where they show less of it.
+
+Per scene it also reports the full mesh's k and rho refitted with other sample seeds
+(``FitOptions.seed``: other pixels of the same band), the spread a level's shift must be read
+against, and (``fresh=True``) the wall time of ``softshadow fit`` in fresh processes, which
+includes importing and loading (or compiling) the programs.
 """
 
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
 
 __all__ = ["bench_lod", "SCENES"]
 
-#: (name, sun radius in degrees or None for the preset's real sun)
-SCENES = (("sun", None), ("haze", 1.0))
+#: (name, (width, height), sun radius in degrees or None for the preset's real sun, in --quick)
+SCENES = (("sun-1600", (1600, 1200), None, False),
+          ("sun-640", (640, 480), None, True),
+          ("haze-640", (640, 480), 1.0, True))
+
+#: Fixed levels fitted besides off and auto (full run; --quick fits the first and last only).
+LEVELS = (20692, 5000, 1000)
 
 
-def _fit_twice(folder: Path, lod) -> dict:
+def _fit_twice(folder: Path, lod, seed: int = 0) -> dict:
     from fitting import FitOptions, fit_folder
-    options = FitOptions(plots=False, lod=lod)
+    options = FitOptions(plots=False, lod=lod, seed=seed)
     runs = []
     for _ in range(2):
         t = time.perf_counter()
         (g,) = fit_folder(folder, options=options).groups
         runs.append(time.perf_counter() - t)
     return {"lod": lod, "faces": g.lod_faces, "seconds_first": round(runs[0], 2), "seconds": round(runs[1], 2),
-            "range_k": g.range_k, "range_stderr": g.range_stderr, "rho": g.rho, "rho_stderr": g.rho_stderr,
+            "range_k": g.range_k, "range_stderr": g.range_stderr, "range_stderr_stat": g.range_stderr_stat,
+            "rho": g.rho, "rho_stderr": g.rho_stderr, "rho_stderr_stat": g.rho_stderr_stat,
             "rmse": g.rmse, "error": g.error}
 
 
-def bench_lod(quick: bool = False, seed: int = 0, progress=None) -> dict:
+def _fresh_fit(folder: Path, lod: str, out: Path, cache: Path) -> float:
+    """Wall time (s) of ``softshadow fit`` in a new process, with the compilation cache ``cache``."""
+    env = dict(os.environ, SOFTSHADOW_JAX_CACHE=str(cache))
+    t = time.perf_counter()
+    subprocess.run([sys.executable, "-m", "softshadow_cli", "fit", str(folder), "--out", str(out), "--force",
+                    "--no-plots", "--lod", lod], check=True, env=env, stdout=subprocess.DEVNULL,
+                   stderr=subprocess.DEVNULL)
+    return round(time.perf_counter() - t, 2)
+
+
+def _fresh(folder: Path, tmp: Path) -> dict:
+    """Fresh-process wall times: ``off`` with an empty compilation cache (compiles everything),
+    then ``off`` and ``auto`` twice each with the cache kept (the later run of each counts: the
+    first ``auto`` may compile a level's new shapes into the cache)."""
+    cache = tmp / "jax-cache"
+    out = tmp / "fresh-out"
+    cold = _fresh_fit(folder, "off", out, cache)
+    times = {"off_empty_cache": cold}
+    for lod in ("off", "auto"):
+        _fresh_fit(folder, lod, out, cache)
+        times[lod] = _fresh_fit(folder, lod, out, cache)
+    times["speedup"] = round(times["off"] / times["auto"], 3)
+    return times
+
+
+def _shifts(row: dict, full: dict) -> None:
+    """The row's shifts of k and rho from the full mesh's fit in its stated (and statistical)
+    standard errors, and the warm speed-up."""
+    if row["error"] is None and full["error"] is None:
+        dk, dr = row["range_k"] - full["range_k"], row["rho"] - full["rho"]
+        row["k_shift_se"], row["rho_shift_se"] = dk / full["range_stderr"], dr / full["rho_stderr"]
+        row["k_shift_se_stat"] = dk / full["range_stderr_stat"]
+        row["rho_shift_se_stat"] = dr / full["rho_stderr_stat"]
+        row["speedup_warm"] = full["seconds"] / row["seconds"]
+
+
+def bench_lod(quick: bool = False, seed: int = 0, progress=None, fresh: bool = True,
+              scenes: tuple[str, ...] | None = None) -> dict:
     """Per scene: the truth, and per setting (off, auto, fixed levels) the faces fitted, the fit
-    time (first run and warm second run, seconds, in this process), k and rho with their errors,
-    their shifts from the full mesh's fit in its standard errors, and the warm speed-up."""
+    time (first run and warm second run, seconds, in this process), k and rho with their stated
+    and statistical errors, their shifts from the full mesh's fit in its standard errors, the
+    warm speed-up; the full mesh refitted with sample seeds 1 and 2; fresh-process times.
+    scenes: names of ``SCENES`` to run (default: all, or those marked for --quick)."""
     from data_synth import synthesize
 
     from .meshes import mit_dragon
-    size = (800, 600) if quick else (1600, 1200)
-    levels = (5000, 1000, 300) if quick else (20692, 10346, 5000, 1000, 300)
     mesh = mit_dragon(full=True)
     out = {"mesh": {"name": "MIT Stanford dragon remesh (wassersplines)", "faces": len(mesh.faces),
-                    "watertight": bool(mesh.is_watertight)}, "size": list(size), "seed": seed, "scenes": {}}
+                    "watertight": bool(mesh.is_watertight)}, "seed": seed, "scenes": {}}
+    levels = (LEVELS[0], LEVELS[-1]) if quick else LEVELS
     with tempfile.TemporaryDirectory() as tmp:
-        for name, radius in SCENES:
+        for name, size, radius, in_quick in SCENES:
+            if (scenes is not None and name not in scenes) or (scenes is None and quick and not in_quick):
+                continue
             folder = Path(tmp) / name
             synthesize(folder, preset="dragon", seed=seed, size=size, progress=False, object_mesh=mesh,
                        sun_radius_deg=radius)
@@ -60,10 +117,17 @@ def bench_lod(quick: bool = False, seed: int = 0, progress=None) -> dict:
                 rows.append(_fit_twice(folder, lod))
             full = rows[0]
             for r in rows:
-                if r["error"] is None and full["error"] is None:
-                    r["k_shift_se"] = (r["range_k"] - full["range_k"]) / full["range_stderr"]
-                    r["rho_shift_se"] = (r["rho"] - full["rho"]) / full["rho_stderr"]
-                    r["speedup_warm"] = full["seconds"] / r["seconds"]
-            out["scenes"][name] = {"sun_radius_deg": radius or 0.2665, "truth_range_k": truth["range_k"],
-                                   "truth_rho": truth["rho"], "fits": rows}
+                _shifts(r, full)
+            reseeded = []
+            for s in (1, 2):
+                r = _fit_twice(folder, "off", seed=s)
+                _shifts(r, full)
+                reseeded.append({key: r.get(key) for key in ("range_k", "rho", "k_shift_se", "rho_shift_se")})
+            scene = {"size": list(size), "sun_radius_deg": radius or 0.2665, "truth_range_k": truth["range_k"],
+                     "truth_rho": truth["rho"], "fits": rows, "full_mesh_other_seeds": reseeded}
+            if fresh and in_quick:
+                if progress:
+                    progress(f"bench lod: {name} fresh processes")
+                scene["fresh_process_seconds"] = _fresh(folder, Path(tmp) / f"{name}-fresh")
+            out["scenes"][name] = scene
     return out

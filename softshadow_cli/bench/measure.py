@@ -1,18 +1,24 @@
 """Measuring one case: the median wall time of repeated runs after a warm-up, and its peak memory.
 
-Peak memory is the process's resident-set high-water mark (``VmHWM``) during the timed runs,
-reset before them through ``/proc/self/clear_refs`` (Linux); ``peak_mb`` is that mark and
-``peak_extra_mb`` how far it rose above the resident set before the case (what the case itself
-needed, XLA's buffers included, which Python's tracemalloc does not see). Elsewhere both are None.
+Peak memory is the process's resident-set high-water mark (``VmHWM``) over one more run after
+the timed ones, reset before it through ``/proc/self/clear_refs`` (Linux); ``peak_mb`` is that
+mark and ``peak_extra_mb`` how far it rose above the resident set before the run (what the case
+itself needed, XLA's CPU buffers included, which Python's tracemalloc does not see). Before that
+run the garbage is collected and glibc's free heap pages are handed back (``malloc_trim``): else
+the run reuses pages the warm-up already faulted in, and its peak reads 0 (as it did before
+2026-11-24). That run is not timed: pages faulted afresh would slow it. Elsewhere both are None.
 """
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
+import gc
 import statistics
 import time
 from pathlib import Path
 
-__all__ = ["Timing", "timed"]
+__all__ = ["Timing", "timed", "peak_memory"]
 
 _STATUS = Path("/proc/self/status")
 
@@ -27,6 +33,14 @@ def _status_kb(field: str) -> int | None:
     return None
 
 
+def _trim_heap() -> None:
+    """Hand glibc's free heap pages back to the system (no-op where libc has no malloc_trim)."""
+    try:
+        ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):
+        pass
+
+
 def _reset_peak() -> bool:
     try:
         Path("/proc/self/clear_refs").write_text("5")
@@ -39,18 +53,30 @@ class Timing(dict):
     """{"median_ms", "min_ms", "repeats", "peak_mb", "peak_extra_mb"}."""
 
 
-def timed(fn, repeats: int = 5, warmup: int = 1) -> Timing:
-    """Run ``fn`` ``warmup`` times (compilation), then ``repeats`` times timed."""
+def timed(fn, repeats: int = 5, warmup: int = 1, memory: bool = True) -> Timing:
+    """Run ``fn`` ``warmup`` times (compilation), then ``repeats`` times timed, then (``memory``)
+    once more for its peak memory (else the peaks are None)."""
     for _ in range(warmup):
         fn()
-    before = _status_kb("VmRSS")
-    can_reset = _reset_peak()
     times = []
     for _ in range(repeats):
         t = time.perf_counter()
         fn()
         times.append(time.perf_counter() - t)
-    peak = _status_kb("VmHWM") if can_reset else None
+    peak_mb, extra_mb = peak_memory(fn) if memory else (None, None)
     return Timing(median_ms=round(1000.0 * statistics.median(times), 3), min_ms=round(1000.0 * min(times), 3),
-                  repeats=repeats, peak_mb=None if peak is None else round(peak / 1024.0, 1),
-                  peak_extra_mb=None if peak is None or before is None else round((peak - before) / 1024.0, 1))
+                  repeats=repeats, peak_mb=peak_mb, peak_extra_mb=extra_mb)
+
+
+def peak_memory(fn) -> tuple[float | None, float | None]:
+    """(peak_mb, peak_extra_mb) of one run of ``fn`` (module docstring); (None, None) off Linux."""
+    gc.collect(1)  # the young generations: a full collection takes ~0.3 s with JAX loaded
+    _trim_heap()
+    before = _status_kb("VmRSS")
+    if not _reset_peak():
+        return None, None
+    fn()
+    peak = _status_kb("VmHWM")
+    if peak is None:
+        return None, None
+    return round(peak / 1024.0, 1), None if before is None else round((peak - before) / 1024.0, 1)

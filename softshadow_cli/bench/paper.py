@@ -89,7 +89,7 @@ def bench_paper_table3(scenes: dict, settings) -> dict:
         soft = renderer.render(s_dir, grid, fit["range_px"], rho, fit["expand"])
         k = linear_equivalent_k(math.tan(sc.light.radius_rad))
         # The renderer as the sweep times it (linear profile, its float precision).
-        linear = sc.model.with_options(profile="linear")
+        linear = sc.model_for("linear")
         ours = np.asarray(linear.ground_map(ShadowParams(k, rho), sc.sun, sc.pose, grid))
         band = sc.reference.band() if grid.width == ref_grid.width else np.zeros(hard.shape, bool)
         faces, paper_hard, paper_soft = PAPER_TABLE3[name]

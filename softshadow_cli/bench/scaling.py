@@ -102,9 +102,12 @@ def bench_scaling(face_counts=(176, 1472, 5000, 26584, 106336, 200000), pixel_si
     """Time and peak memory against faces (at ``pixels_for_faces``^2, default the second of
     ``pixel_sizes``) and against map size (the pillar and the largest dragon up to 26,584
     faces), with log-log slopes, and the cost law (``cost_model``)."""
+    import math
     from softshadow import Sun
-    from .sweep import scene_grid
-    sun, k, rho = Sun(200.0, 40.0), 0.01, 0.2
+    from .sweep import RHO, SUN_AZIMUTH, SUN_ELEVATION, SUN_RADIUS_DEG, linear_equivalent_k, scene_grid
+    # The sweep's light and linear ramp (the real sun's): the same programs as its cases, compiled once.
+    sun, rho = Sun(SUN_AZIMUTH, SUN_ELEVATION), RHO
+    k = linear_equivalent_k(math.tan(math.radians(SUN_RADIUS_DEG)))
     s_dir = -np.asarray(sun.light_np)
     pixels = pixels_for_faces or pixel_sizes[min(1, len(pixel_sizes) - 1)]
     meshes = scaling_meshes(face_counts)

@@ -27,7 +27,7 @@ from .measure import timed
 from .meshes import BENCH_MESHES, bench_mesh, decimated
 from .reference import block_mean, physical_reference
 
-__all__ = ["SweepSettings", "run_sweep", "linear_equivalent_k", "scene_grid", "image_error"]
+__all__ = ["SweepSettings", "build_scenes", "run_sweep", "linear_equivalent_k", "scene_grid", "image_error"]
 
 SUN_AZIMUTH, SUN_ELEVATION, SUN_RADIUS_DEG, RHO = 200.0, 40.0, 0.2665, 0.2
 
@@ -149,6 +149,7 @@ class _Scene:
         self.samples = settings.reference_samples_for.get(name, settings.reference_samples)
         self.reference = physical_reference(truth, self.light, self.ref_grid, self.samples)
         self.model = SoftShadowModel.from_mesh(mesh)
+        self._models = {}
         self._object_mask = object_mask
         self.faces = int(len(mesh.faces))
         self.name = name
@@ -160,6 +161,13 @@ class _Scene:
         centre = (g.origin_m[0] + (g.width - 1) / 2 * g.pixel_m, g.origin_m[1] - (g.height - 1) / 2 * g.pixel_m)
         return GroundGrid.around(centre, extent, pixels)
 
+    def model_for(self, profile: str):
+        """The model with ``profile``, one per profile: each holds its hidden-sky maps (a second or
+        so of ray casting on the dragon), so the cases and the paper's comparison share them."""
+        if profile not in self._models:
+            self._models[profile] = self.model.with_options(profile=profile)
+        return self._models[profile]
+
     def footprint(self, grid) -> np.ndarray:
         return self._object_mask(self.truth_model.occluder, self.pose, grid)
 
@@ -170,7 +178,7 @@ class _Scene:
         k_true = math.tan(math.radians(SUN_RADIUS_DEG))
         k = k_true if profile == "disk" else linear_equivalent_k(k_true)
         grid = self.grid(pixels)
-        model = self.model.with_options(profile=profile)
+        model = self.model_for(profile)
         with jax.enable_x64(dtype == "float64"):
             params = ShadowParams(k, self.light.rho)
 
@@ -185,8 +193,9 @@ class _Scene:
         return out
 
 
-def run_sweep(settings: SweepSettings, fit: bool = True, progress=print) -> dict:
-    """All sweeps; returns the JSON-ready result (cases grouped by sweep, and per mesh)."""
+def build_scenes(settings: SweepSettings, progress=print) -> tuple[dict, dict]:
+    """({"settings", "reference"} of the result, {mesh: _Scene}) for ``settings.meshes``: each
+    mesh under the bench's light with its physical truth (made or read from the cache)."""
     out = {"settings": {"sun_azimuth_deg": SUN_AZIMUTH, "sun_elevation_deg": SUN_ELEVATION,
                         "sun_radius_deg": SUN_RADIUS_DEG, "rho": RHO,
                         "reference_pixels": settings.reference_pixels,
@@ -195,13 +204,19 @@ def run_sweep(settings: SweepSettings, fit: bool = True, progress=print) -> dict
     scenes = {}
     references = {}
     for name in settings.meshes:
-        progress(f"bench sweep: reference for {name}")
+        progress(f"bench: reference for {name}")
         scenes[name] = _Scene(bench_mesh(name), settings, name=name)
         ref = scenes[name].reference
         references[name] = {"noise_rms_band": ref.noise_rms, "seconds": round(ref.seconds, 2),
                             "pixels": settings.reference_pixels, "samples": scenes[name].samples,
                             "pixel_m": scenes[name].ref_grid.pixel_m, "band_pixels": int(ref.band().sum())}
     out["reference"] = references
+    return out, scenes
+
+
+def run_sweep(settings: SweepSettings, fit: bool = True, progress=print) -> dict:
+    """All sweeps; returns the JSON-ready result (cases grouped by sweep, and per mesh)."""
+    out, scenes = build_scenes(settings, progress)
     for name, scene in scenes.items():
         progress(f"bench sweep: {name}")
         out[name] = scene.case(settings.base_pixels, repeats=settings.repeats)
