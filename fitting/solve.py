@@ -33,7 +33,7 @@ from .receiver_light import shadow_factor
 from .results import GroupResult, OverlayPlotData, ProfilePlotData
 from .samples import NoShadowInView, PhotoSamples, select_samples
 from .shadow_cues import few_profiles_warning
-from .uncertainty import cluster_covariance, combine_errors, edge_clusters
+from .uncertainty import cluster_covariance, combine_errors, edge_clusters, resolution_warning
 from .views import PhotoView
 
 __all__ = ["FitOptions", "fit_group", "Solution", "Trial", "KRho", "Identifiability", "sample_views",
@@ -465,6 +465,8 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
     result.identifiable, result.range_k = ident.identifiable, ident.range_k
     if ident.warning:
         result.warnings.append(ident.warning)
+    elif resolution_warning(result.penumbra_px, result.blur_px):
+        result.warnings.append(resolution_warning(result.penumbra_px, result.blur_px))
     if options.plots:
         result.plot_profiles = profile_plot_data(samples, sol.prediction, est.rho, np.asarray(arrays.sky_hidden),
                                                   np.asarray(arrays.sun_cos))
