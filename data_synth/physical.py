@@ -14,7 +14,8 @@ is open sky (upwards, d_z > 0, and not blocked); 1 on open horizontal ground.
 Speed: the direct sun is wholly visible except near the shadow, so sun rays
 are cast only for points inside the shadow's reach (``shadow_reach``). The
 hidden sky is smooth, so it is computed on coarse world grids
-(``SkyVisibilityMap``) and interpolated.
+(``SkyVisibilityMap``) and interpolated, except next to the object's walls
+(where it jumps): there it is traced point by point.
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from .lighting import SunSky, limb_darkening_weight
 from .sampling import (bilinear, cap_directions, cosine_hemisphere_directions, orthonormal_basis,
                        stratified_square, strata_side)
 
-__all__ = ["RAY_OFFSET_M", "shadow_reach", "sun_visibility", "sky_visibility", "SkyGrid",
+__all__ = ["RAY_OFFSET_M", "SKY_SPREAD", "shadow_reach", "sun_visibility", "sky_visibility", "SkyGrid",
            "SkyVisibilityMap", "sky_visibility_map", "irradiance", "combined_mesh"]
 
 RAY_OFFSET_M = 1e-3   # ray origins move this far along the ray to avoid hitting their own surface
@@ -200,16 +201,47 @@ class SkyGrid:
         j = (xy[:, 1] - self.y0) / self.step
         return bilinear(self.values, j, i).astype(np.float64)
 
+    def spread(self, xy: np.ndarray) -> np.ndarray:
+        """Largest minus smallest of the four nodes of each point's cell (N,); 0 outside the grid."""
+        ny, nx = self.values.shape
+        i = np.clip(np.floor((xy[:, 0] - self.x0) / self.step).astype(np.int64), 0, nx - 2)
+        j = np.clip(np.floor((xy[:, 1] - self.y0) / self.step).astype(np.int64), 0, ny - 2)
+        v = self.values
+        corners = np.stack([v[j, i], v[j, i + 1], v[j + 1, i], v[j + 1, i + 1]])
+        return np.where(self.contains(xy), corners.max(axis=0) - corners.min(axis=0), 0.0)
+
+
+#: A cell of the finest sky grid whose four nodes differ by more than this is traced point by
+#: point: bilinear interpolation across the object's wall (a node inside it sees no sky, one
+#: beside it about half) reads up to 0.65 of the sky too dark in the first pixels beside it.
+SKY_SPREAD = 0.05
+
 
 @dataclasses.dataclass(frozen=True)
 class SkyVisibilityMap:
-    """Nested sky grids, finest first; points outside all grids see the open sky (``outside``)."""
+    """Nested sky grids, finest first; points outside all grids see the open sky (``outside``).
+
+    With ``mesh`` and ``receiver``, points in cells of the finest grid whose nodes differ by
+    more than ``spread`` (next to the object's walls) are traced one by one with the grids'
+    directions (``sky_visibility``, n_samples, seed) instead of interpolated."""
 
     grids: tuple[SkyGrid, ...]
     outside: float = 1.0
+    mesh: trimesh.Trimesh | None = dataclasses.field(default=None, repr=False)
+    receiver: object = dataclasses.field(default=None, repr=False)
+    n_samples: int = 1024
+    seed: int | None = 0
+    spread: float = SKY_SPREAD
+
+    def steep(self, xy: np.ndarray) -> np.ndarray:
+        """Points (N,) that ``at`` traces rather than interpolates."""
+        xy = np.asarray(xy, dtype=np.float64).reshape(len(xy), -1)[:, :2]
+        if self.mesh is None or self.receiver is None or not self.grids:
+            return np.zeros(len(xy), bool)
+        return self.grids[0].spread(xy) > self.spread
 
     def at(self, xy: np.ndarray) -> np.ndarray:
-        """Open-sky fraction (N,) at world points xy (N, 2 or 3), bilinear."""
+        """Open-sky fraction (N,) at world points xy (N, 2 or 3), bilinear (traced where steep)."""
         xy = np.asarray(xy, dtype=np.float64).reshape(len(xy), -1)[:, :2]
         out = np.full(len(xy), self.outside)
         todo = np.ones(len(xy), bool)
@@ -218,13 +250,19 @@ class SkyVisibilityMap:
             if inside.any():
                 out[inside] = g.sample(xy[inside])
             todo &= ~inside
+        steep = self.steep(xy)
+        if steep.any():
+            p = xy[steep]
+            pts = np.concatenate([p, self.receiver.height(p)[:, None]], -1)
+            out[steep] = sky_visibility(self.mesh, pts, self.receiver.normal(p), self.n_samples, self.seed)
         return out
 
 
 def sky_visibility_map(mesh: trimesh.Trimesh | None, receiver, object_bounds: np.ndarray,
                        n_samples: int = 1024, seed: int = 0, fine_nodes: int = 96,
                        fine_margin_m: float | None = None, coarse_margin_m: float = 10.0,
-                       coarse_step_m: float = 0.4, outside: float = 1.0) -> SkyVisibilityMap:
+                       coarse_step_m: float = 0.4, outside: float = 1.0,
+                       spread: float = SKY_SPREAD) -> SkyVisibilityMap:
     """Sky visibility of a receiver near an object: a fine grid around it and a coarse one further out.
 
     object_bounds (2, 3): the occluder's bounding box. The fine grid covers it
@@ -232,7 +270,8 @@ def sky_visibility_map(mesh: trimesh.Trimesh | None, receiver, object_bounds: np
     ``fine_nodes`` nodes a side; the coarse grid extends ``coarse_margin_m``
     beyond. Beyond that the object hides under ~0.1 % of the sky of a 3 m post;
     ``outside`` is used there (1 for the plane; pass the receiver's own open-sky
-    level when it hides sky from itself).
+    level when it hides sky from itself). Points in fine cells whose nodes differ
+    by more than ``spread`` are traced when looked up (``SkyVisibilityMap.at``).
     """
     lo, hi = np.asarray(object_bounds, dtype=np.float64)
     height = float(hi[2] - min(lo[2], 0.0))
@@ -250,7 +289,8 @@ def sky_visibility_map(mesh: trimesh.Trimesh | None, receiver, object_bounds: np
         pts = np.concatenate([xy, receiver.height(xy)[:, None]], -1)
         vals = sky_visibility(mesh, pts, receiver.normal(xy), n_samples, seed)
         grids.append(SkyGrid(float(x0), float(y0), float(step), vals.reshape(ny, nx)))
-    return SkyVisibilityMap(tuple(grids), outside)
+    return SkyVisibilityMap(tuple(grids), outside, mesh, receiver if mesh is not None else None, n_samples, seed,
+                            spread)
 
 
 def irradiance(sun: SunSky, normals: np.ndarray, sun_vis: np.ndarray, sky_vis: np.ndarray) -> np.ndarray:

@@ -121,18 +121,18 @@ def _sun_view(name: str, when: _dt.datetime | None, scene: SceneSpec, view: Phot
     check_sun_above_horizon(view.sun_elevation_deg)
 
 
-def _fit_group_with_sun(model, pose, views, group: PhotoGroup, options: FitOptions) -> GroupResult:
+def _fit_group_with_sun(model, pose, views, group: PhotoGroup, options: FitOptions, sky_model=None) -> GroupResult:
     """Fit a group; when the sun is unknown, search for it coarsely, then fit and re-plan."""
     from .solve import fit_group  # with JAX (see _fit_groups)
     if all(v.sun_source != "fitted" for v in views):
-        return fit_group(model, pose, views, group.label, group.time, options)
+        return fit_group(model, pose, views, group.label, group.time, options, sky_model)
     from .sun_search import search_sun
     az, el, _ = search_sun(model, pose, views[0])
     for v in views:
         v.sun_azimuth_deg, v.sun_elevation_deg = az, el
     result = None
     for _ in range(3):  # re-plan around the refined sun
-        result = fit_group(model, pose, views, group.label, group.time, options)
+        result = fit_group(model, pose, views, group.label, group.time, options, sky_model)
         if not result.fitted:
             return result
         moved = abs(result.sun_azimuth_deg - views[0].sun_azimuth_deg) + abs(
@@ -172,7 +172,7 @@ def _measure_without_scene(photo: Photo, when, scene: SceneSpec | None) -> Group
 
 
 def _fit_checked(model, pose, views: list[PhotoView], group: PhotoGroup,
-                 options: FitOptions) -> tuple[GroupResult, list[dict]]:
+                 options: FitOptions, sky_model=None) -> tuple[GroupResult, list[dict]]:
     """Fit a group, then check each photo against the fit (``photo_check``): a photo that does not
     fit is left out (a ``skipped`` entry naming the group and why) and the group refitted without
     it; a group where no photo shows a shadow gets "no shadow in view" and no values; a doubt that
@@ -183,7 +183,7 @@ def _fit_checked(model, pose, views: list[PhotoView], group: PhotoGroup,
     left_out: list[dict] = []
     while True:
         result = _fit_group_with_sun(model, pose, views, PhotoGroup(group.label, group.time,
-                                                                    [v.name for v in views]), checked)
+                                                                    [v.name for v in views]), checked, sky_model)
         if not result.fitted:
             break
         verdict = judge(photo_agreement(result))
@@ -331,13 +331,14 @@ def _fit_groups(photos, scene, options, half_size, progress, store, on_group, jo
             try:
                 with lod_lock:
                     group_model, faces = lods.for_group(pose, views, options)
+                    sky_model = lods.sky_level(faces) if options.lod == "auto" else None
                 lod_note = None
             except Exception as exc:  # a failed choice costs the saving, never the group
-                group_model, faces = model, lods.full_faces
+                group_model, faces, sky_model = model, lods.full_faces, None
                 lod_note = f"level of detail not chosen ({type(exc).__name__}: {exc}); the full mesh is used"
             lod_seconds = _time.perf_counter() - lod_start
             try:
-                result, left_out = _fit_checked(group_model, pose, views, group, options)
+                result, left_out = _fit_checked(group_model, pose, views, group, options, sky_model)
                 result.seconds += lod_seconds
                 result.lod_faces, result.mesh_faces = faces, lods.full_faces
                 if lod_note:

@@ -46,13 +46,17 @@ from .samples import PhotoSamples, select_samples
 from .uncertainty import systematic_errors
 from .views import PhotoView
 
-__all__ = ["LOD_MIN_FACES", "LOD_COARSEST_FACES", "LevelCheck", "LodChoice", "LevelsOfDetail",
+__all__ = ["LOD_MIN_FACES", "LOD_COARSEST_FACES", "LOD_SKY_FACES", "LevelCheck", "LodChoice", "LevelsOfDetail",
            "ShadowReference", "fitter_face_counts", "pixel_noise", "choice_samples", "levels_of_detail"]
 
 #: Meshes with at most this many faces are fitted as they are (a level would save nothing).
 LOD_MIN_FACES = 2000
 #: The coarsest level tried.
 LOD_COARSEST_FACES = 300
+#: With ``--lod auto``, the sky the object hides is cast from the level nearest this many faces
+#: (at most half the level fitted, at least a quarter of this): an integral over the sky, smooth
+#: in the shape.
+LOD_SKY_FACES = 5000
 
 
 def fitter_face_counts(n_faces: int, coarsest: int = LOD_COARSEST_FACES) -> list[int]:
@@ -255,6 +259,19 @@ class LevelsOfDetail:
                 self._models[target] = (len(mesh.faces), SoftShadowModel.from_mesh(mesh, rule=self.full.rule,
                                                                                    profile=self.full.profile))
             return self._models[target]
+
+    def sky_level(self, faces: int) -> SoftShadowModel | None:
+        """The model the hidden sky is cast from when ``faces`` faces are fitted: the fitter's
+        level (``fitter_face_counts``) nearest ``LOD_SKY_FACES`` among those with at most half of
+        ``faces`` and at least a quarter of ``LOD_SKY_FACES``; None (the fitted level itself) when
+        there is none. The hidden sky is the
+        fraction of the sky the object covers seen from each ground point, a solid angle that a
+        level with 0.5 % less volume changes by about as much, while the shadow's edges can
+        need every face (the benchmark checks k and rho against ``--lod off``)."""
+        counts = [c for c in fitter_face_counts(self.full_faces) if 2 * c <= faces and 4 * c >= LOD_SKY_FACES]
+        if not counts or self.full_faces <= LOD_MIN_FACES:
+            return None
+        return self.level(min(counts, key=lambda c: abs(math.log(c / LOD_SKY_FACES))))[1]
 
     def choose(self, reference: ShadowReference, tolerance: float, profile: str | None = None,
                log: Callable[[str], None] | None = None) -> LodChoice:

@@ -17,7 +17,7 @@ import numpy as np
 import trimesh
 
 from softshadow import (PointPlan, Pose, PosedOccluder, SoftShadowModel, Sun, edge_band_widths, object_mask,
-                        project_to_ground)
+                        posed_vertices, project_to_ground)
 
 from softshadow import hidden_sky_fraction
 from .views import PhotoView
@@ -150,7 +150,8 @@ def select_samples(model: SoftShadowModel, pose: Pose, view: PhotoView, range_k_
                    sun_margin_deg: float = 0.3, max_samples: int = 12000, seed: int = 0,
                    min_band_px: int = 5, max_band_px: int = 80,
                    sky_occlusion: bool = True, albedo: bool = True,
-                   mask_model: SoftShadowModel | None = None) -> PhotoSamples:
+                   mask_model: SoftShadowModel | None = None,
+                   sky_model: SoftShadowModel | None = None) -> PhotoSamples:
     """Pixels in a band around the predicted shadow boundary of one photo.
 
     sky_occlusion: also find, per sample, the sky fraction the object hides (else 0).
@@ -158,6 +159,9 @@ def select_samples(model: SoftShadowModel, pose: Pose, view: PhotoView, range_k_
     out); False: one class, faster (for a look at the shadow alone, ``fitting.lod``).
     mask_model: the object's own pixels are left out with this model's mesh (default ``model``;
     ``fitting.lod`` passes a level of detail, which leaves the object out as well).
+    sky_model: the sky the object hides is cast from this model's mesh (default ``model``; on the
+    ground plane): an integral over the sky, smooth in the shape, for which ``fitting.lod`` passes a
+    coarse level even when the shadow's edges need the full mesh.
 
     Raises NoShadowInView when no usable boundary pixel is in the frame. A view whose
     receiver is not the plane is sampled on it (``fitting.receiver_samples``).
@@ -231,5 +235,13 @@ def select_samples(model: SoftShadowModel, pose: Pose, view: PhotoView, range_k_
         albedo_class=(np.zeros(len(rows), int) if paper is None else (~paper[rows, cols]).astype(int)),
         uv_norm=np.column_stack([cols / w - 0.5, rows / h - 0.5]),
         profile_id=profile_id, plan=plan, n_profiles=int(len(np.unique(profile_id))), band_px=band_px,
-        sky_hidden=(hidden_sky_fraction(trimesh.Trimesh(world, model.occluder.faces, process=False),
-                                        ground) if sky_occlusion else np.zeros(len(ground))))
+        sky_hidden=(_hidden_sky(world, model, sky_model, pose, ground) if sky_occlusion else np.zeros(len(ground))))
+
+
+def _hidden_sky(world: np.ndarray, model: SoftShadowModel, sky_model: SoftShadowModel | None, pose: Pose,
+                ground: np.ndarray) -> np.ndarray:
+    """The sky fraction (n,) the object hides from each ground point (n, 3), cast from
+    ``sky_model``'s mesh when given, else from ``model``'s posed vertices ``world`` (V, 3)."""
+    if sky_model is not None:
+        world, model = posed_vertices(sky_model.occluder, pose)[0], sky_model
+    return hidden_sky_fraction(trimesh.Trimesh(world, model.occluder.faces, process=False), ground)

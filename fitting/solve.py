@@ -81,16 +81,17 @@ def _group_arrays(samples: list[PhotoSamples], views: list[PhotoView]) -> GroupA
                                      else np.ones(len(s.observed)) for s in samples]), 1.0)))
 
 
-def sample_views(model: SoftShadowModel, pose: Pose, views: list[PhotoView], options: FitOptions
-                 ) -> tuple[list[PhotoSamples], list[PhotoView], list[str]]:
-    """Step 1: each photo's samples (``select_samples``). Returns the samples, the views they
-    come from, and a one-line warning for each photo with no shadow in view."""
+def sample_views(model: SoftShadowModel, pose: Pose, views: list[PhotoView], options: FitOptions,
+                 sky_model: SoftShadowModel | None = None) -> tuple[list[PhotoSamples], list[PhotoView], list[str]]:
+    """Step 1: each photo's samples (``select_samples``; ``sky_model``: the mesh the hidden sky
+    is cast from, default ``model``). Returns the samples, the views they come from, and a
+    one-line warning for each photo with no shadow in view."""
     samples, used, warnings = [], [], []
     for i, view in enumerate(views):
         try:
             samples.append(select_samples(model, pose, view, options.range_k_max,
                                           max_samples=options.max_samples_per_photo, seed=options.seed + i,
-                                          sky_occlusion=options.sky_occlusion))
+                                          sky_occlusion=options.sky_occlusion, sky_model=sky_model))
             used.append(view)
         except NoShadowInView as exc:
             warnings.append(f"{view.name}: {exc}")
@@ -416,13 +417,15 @@ def _overlay(model: SoftShadowModel, pose: Pose, view: PhotoView, params: FitPar
 
 
 def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label: str,
-              time_label: str | None, options: FitOptions | None = None) -> GroupResult:
+              time_label: str | None, options: FitOptions | None = None,
+              sky_model: SoftShadowModel | None = None) -> GroupResult:
     """Fit k and rho shared by ``views`` (one time of day). Never raises for bad data:
-    failures come back as a GroupResult with ``error`` set."""
+    failures come back as a GroupResult with ``error`` set. sky_model: the mesh the hidden sky
+    is cast from (a coarse level of detail, ``fitting.lod``; default ``model``)."""
     options = options or FitOptions()
     start = _time.perf_counter()
     result = GroupResult(label=label, time=time_label, photos=[v.name for v in views])
-    samples, used, result.warnings = sample_views(model, pose, views, options)
+    samples, used, result.warnings = sample_views(model, pose, views, options, sky_model)
     if not samples:
         result.error = "no shadow in view: " + "; ".join(result.warnings)
         result.seconds = _time.perf_counter() - start

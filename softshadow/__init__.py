@@ -32,7 +32,7 @@ __getattr__, __dir__, __all__ = _lazy.attach(__name__, submod_attrs={
     "render": ["CameraRender", "SoftShadowModel", "object_mask"],
     "scene_render": ["SceneLights", "SceneRender", "SceneSetup", "prepare_scene", "render_scene", "shade_scene"],
     "shadowmap": ["BIAS_PX", "LightFrame", "ShadowMap", "depth_bias", "faces_away", "rasterise_depth", "shadow_map"],
-    "sky": ["SkyNodes", "cosine_weighted_directions", "hidden_sky_fraction", "hidden_sky_map", "hidden_sky_nodes",
+    "sky": ["SkyNodes", "SkyPatch", "cosine_weighted_directions", "hidden_sky_fraction", "hidden_sky_map", "hidden_sky_nodes",
             "open_sky_fraction"],
     "slides": ["DEFAULT_SLIDE_PX", "PAPER_SLIDES", "SlideError", "load_slide", "sine_slide", "slide_from_text",
                "spot_slide"],

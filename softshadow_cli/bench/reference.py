@@ -23,8 +23,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from data_synth import (PlaneReceiver, SunSky, irradiance, shadow_reach, sky_visibility, sky_visibility_map,
-                        sun_visibility)
+from data_synth import PlaneReceiver, SunSky, irradiance, shadow_reach, sky_visibility_map, sun_visibility
 from softshadow import GroundGrid
 
 __all__ = ["PhysicalReference", "bench_cache_dir", "physical_reference", "ground_sky", "block_mean"]
@@ -34,8 +33,6 @@ __all__ = ["PhysicalReference", "bench_cache_dir", "physical_reference", "ground
 # so it is read from a version-1 file when there is one.
 _VERSION = "2"
 _SUN_VERSION = "1"
-#: A fine sky-map cell whose four nodes differ by more than this is traced per pixel.
-SKY_SPREAD = 0.05
 
 
 def bench_cache_dir() -> Path:
@@ -77,27 +74,11 @@ def ground_sky(mesh: trimesh.Trimesh, pts: np.ndarray, n_samples: int) -> np.nda
     """Open-sky fraction (N,) of ground points pts (N, 3) beside the mesh.
 
     ``data_synth.sky_visibility_map`` interpolates between nodes several pixels apart (6.5 cm
-    for the pillar): in a cell with nodes inside the object and outside it, bilinear
-    interpolation reads far too dark next to the walls (beside the pillar by up to 0.65 of the
-    sky, 0.13 in shading; Mitsuba, tracing each pixel, disagreed with the truth there). Points
-    in fine cells whose nodes differ by more than ``SKY_SPREAD`` are traced one by one with the
-    same directions (``data_synth.sky_visibility``); elsewhere the map is within 0.003 of tracing.
+    for the pillar) and traces point by point the cells whose nodes differ by more than
+    ``data_synth.SKY_SPREAD`` (next to the walls, where interpolation read up to 0.65 of the
+    sky, 0.13 in shading, too dark; Mitsuba, tracing each pixel, disagreed with the map there).
     """
-    smap = sky_visibility_map(mesh, PlaneReceiver(), mesh.bounds, n_samples=n_samples)
-    sky = smap.at(pts[:, :2])
-    fine = smap.grids[0]
-    ny, nx = fine.values.shape
-    i, j = (pts[:, 0] - fine.x0) / fine.step, (pts[:, 1] - fine.y0) / fine.step
-    inside = (i >= 0) & (i <= nx - 1) & (j >= 0) & (j <= ny - 1)
-    i0 = np.clip(np.floor(i).astype(int), 0, nx - 2)
-    j0 = np.clip(np.floor(j).astype(int), 0, ny - 2)
-    v = fine.values
-    corners = np.stack([v[j0, i0], v[j0, i0 + 1], v[j0 + 1, i0], v[j0 + 1, i0 + 1]])
-    steep = inside & (corners.max(axis=0) - corners.min(axis=0) > SKY_SPREAD)
-    if steep.any():
-        up = np.broadcast_to(np.array([0.0, 0.0, 1.0]), (int(steep.sum()), 3))
-        sky[steep] = sky_visibility(mesh, pts[steep], up, n_samples)
-    return sky
+    return sky_visibility_map(mesh, PlaneReceiver(), mesh.bounds, n_samples=n_samples).at(pts[:, :2])
 
 
 def physical_reference(mesh: trimesh.Trimesh, sun: SunSky, grid: GroundGrid, n_samples: int = 1024,
