@@ -474,7 +474,8 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
         result.plot_profiles = profile_plot_data(samples, sol.prediction, est.rho, np.asarray(arrays.sky_hidden),
                                                   np.asarray(arrays.sun_cos))
         result.plot_overlays = [_overlay(model, pose, used[i], sol.params, cfg, samples[i])
-                                for i in range(len(samples)) if options.overlays == "all" or i == 0]
+                                for i in range(len(samples))
+                                if options.overlays == "all" or (options.overlays == "first" and i == 0)]
     if not sol.converged:
         result.warnings.append("the solver stopped before converging")
     if few_profiles_warning(result.n_profiles):
