@@ -26,7 +26,7 @@ class FitOptions:
     seed: int = 0
     sky_occlusion: bool = True  # model the sky the object hides from each sample (softshadow.sky)
     plots: bool = True
-    overlays: str = "first"  # overlay plots for the "first" photo of each group, or "all"
+    overlays: str = "first"  # overlay plots for the "first" photo of each group, "all", or "none"
     verbose: bool = False
     # Level of detail of the object's mesh (``fitting.lod``): "auto" (the coarsest level that moves
     # k and rho by at most lod_tolerance of their stated standard errors), "off" (the mesh as it is), or

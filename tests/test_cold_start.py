@@ -114,3 +114,23 @@ def test_one_blas_thread_entered_first_still_limits_every_blas():
     assert run.returncode == 0, run.stderr[-2000:]
     blas = json.loads(run.stdout.strip().splitlines()[-1])
     assert len(blas) >= 2 and set(blas) == {1}
+
+
+def test_no_plots_asks_the_fit_for_no_overlay(monkeypatch):
+    # The photo check needs the fit's profile data (plots=True inside), not its overlays (a render
+    # of the fitted shadow, 0.4-0.5 s a group): under --no-plots none is drawn.
+    import types
+
+    import fitting.api as api
+    import fitting.solve as solve
+    from fitting import FitOptions, GroupResult, PhotoGroup
+    asked = []
+
+    def fit_group(model, pose, views, label, time, options, *more):
+        asked.append((options.plots, options.overlays))
+        return GroupResult(label, time, [v.name for v in views], error="stopped here")
+    monkeypatch.setattr(solve, "fit_group", fit_group)
+    views = [types.SimpleNamespace(name="a.jpg", sun_source="scene")]
+    for plots in (False, True):
+        api._fit_checked(None, None, views, PhotoGroup("10:30", "10:30", ["a.jpg"]), FitOptions(plots=plots))
+    assert asked == [(True, "none"), (True, "first")]
