@@ -33,7 +33,7 @@ from .receiver_light import shadow_factor
 from .results import GroupResult, OverlayPlotData, ProfilePlotData
 from .samples import NoShadowInView, PhotoSamples, select_samples
 from .shadow_cues import few_profiles_warning
-from .uncertainty import cluster_covariance, combine_errors, edge_clusters
+from .uncertainty import cluster_covariance, combine_errors, edge_clusters, resolution_warning
 from .views import PhotoView
 
 __all__ = ["FitOptions", "fit_group", "Solution", "Trial", "KRho", "Identifiability", "sample_views",
@@ -118,7 +118,7 @@ def initial_params(samples: list[PhotoSamples]) -> tuple[FitParams, float]:
                 log_level[i, c] = np.log(max(np.percentile(other, 75) if len(other) else 1.0, 1e-9))
     rho0 = float(np.clip(np.median(ratios) if ratios else 0.3, 0.02, 0.98))
     f64 = lambda x: jnp.asarray(x, dtype=jnp.float64)  # not weakly typed: one compiled solver
-    params = FitParams(raw_k=f64(0.0), raw_rho=f64(raw_from_rho(rho0)), raw_blur=f64(0.0),
+    params = FitParams(raw_k=f64(0.0), raw_rho=f64(raw_from_rho(rho0)), raw_blur=f64(np.zeros(len(samples))),
                        sun_delta_deg=f64(np.zeros(2)), log_level=f64(log_level),
                        gradient=f64(np.zeros((len(samples), 2))))
     return params, rho0
@@ -157,7 +157,7 @@ def _bic(rss: float, n: int, n_free: int) -> float:
 
 def _n_free(config: FitConfig, n_photos: int) -> int:
     """Parameters a configuration really fits (switched-off terms do not count)."""
-    return 2 + 4 * n_photos + int(float(config.fit_blur)) + 2 * int(float(config.fit_sun))
+    return 2 + 4 * n_photos + n_photos * int(float(config.fit_blur)) + 2 * int(float(config.fit_sun))
 
 
 def _k_np(raw) -> float:
@@ -291,12 +291,12 @@ def choose_model(arrays: GroupArrays, pose: Pose, start: FitParams, options: Fit
     cov, s2 = covariance(best.solution.residuals, best.solution.jacobian, n_eff)
     if blur_first and False in options.blur:
         # BIC without blur, from the fit with it: the nested model's residual sum of squares is
-        # RSS + b^2 / [(J^T J)^-1]_bb to second order (exact for a linear model), so a solve
-        # without blur is needed only when BIC prefers it.
-        i_blur = FitParams.layout(n_photos)["raw_blur"].start
+        # RSS + b^T ([(J^T J)^-1]_bb)^-1 b to second order (b: the photos' blurs; exact for a
+        # linear model), so a solve without blur is needed only when BIC prefers it.
+        i_blur = FitParams.layout(n_photos)["raw_blur"]
         inv_jtj = cov[i_blur, i_blur] / max(s2, 1e-300)
-        raw_blur = float(best.solution.params.raw_blur)
-        rss_no_blur = best.rss + raw_blur ** 2 / max(inv_jtj, 1e-300)
+        raw_blur = np.asarray(best.solution.params.raw_blur, dtype=np.float64).reshape(-1)
+        rss_no_blur = best.rss + float(raw_blur @ np.linalg.pinv(inv_jtj, rcond=COV_RCOND) @ raw_blur)
         no_blur_cfg = FitConfig.make(best.config.profile, False, fit_sun, delta, options.rule)
         bic_no_blur = _bic(rss_no_blur, n_eff, _n_free(no_blur_cfg, n_photos))
         if log:
@@ -445,8 +445,9 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
     robust = k_rho_with_errors(sol.params, cluster_covariance(sol.residuals, sol.jacobian, clusters))
     result.rho = est.rho
     result.profile = cfg.profile
-    raw_blur = float(sol.params.raw_blur)
-    result.blur_px = float(np.sqrt(max(raw_blur, 0.0))) if float(cfg.fit_blur) else None
+    # One number for the group: the root mean square of the photos' blurs (px).
+    raw_blur = np.asarray(sol.params.raw_blur, dtype=np.float64)
+    result.blur_px = float(np.sqrt(np.mean(np.maximum(raw_blur, 0.0)))) if float(cfg.fit_blur) else None
     result.rmse = float(np.sqrt(best.rss / n_eff))
     result.converged = sol.converged
     result.n_samples = n_eff
@@ -467,6 +468,8 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
     result.identifiable, result.range_k = ident.identifiable, ident.range_k
     if ident.warning:
         result.warnings.append(ident.warning)
+    elif resolution_warning(result.penumbra_px, result.blur_px):
+        result.warnings.append(resolution_warning(result.penumbra_px, result.blur_px))
     if options.plots:
         result.plot_profiles = profile_plot_data(samples, sol.prediction, est.rho, np.asarray(arrays.sky_hidden),
                                                   np.asarray(arrays.sun_cos))

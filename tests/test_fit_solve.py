@@ -17,7 +17,7 @@ from fitting.solve import (MAX_K_REL_STDERR, MIN_PENUMBRA_PX, covariance, identi
 def _params(n_photos=3, seed=0):
     rng = np.random.default_rng(seed)
     f = lambda *shape: jnp.asarray(rng.normal(size=shape))
-    return FitParams(raw_k=f(), raw_rho=f(), raw_blur=f(), sun_delta_deg=f(2), log_level=f(n_photos, 2),
+    return FitParams(raw_k=f(), raw_rho=f(), raw_blur=f(n_photos), sun_delta_deg=f(2), log_level=f(n_photos, 2),
                      gradient=f(n_photos, 2))
 
 
@@ -25,7 +25,7 @@ def test_parameter_vector_layout_names_every_entry_and_round_trips():
     params = _params(3)
     x = np.asarray(params.vector())
     lay = FitParams.layout(3)
-    assert x.shape == (5 + 4 * 3,)
+    assert x.shape == (4 + 5 * 3,)
     for name, where in lay.items():
         np.testing.assert_array_equal(x[where], np.ravel(getattr(params, name)), err_msg=name)
     back = FitParams.from_vector(jnp.asarray(x), 3)
