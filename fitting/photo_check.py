@@ -138,13 +138,12 @@ def fit_quality(agreement: list[PhotoAgreement]) -> tuple[list[str], str | None]
                             "rho is a compromise")
     ratios = [a.rms_lit / a.predicted_depth for a in agreement
               if a.n_lit >= _MIN_SIDE_SAMPLES and np.isfinite(a.rms_lit) and a.predicted_depth > 0]
-    texture = None
     if ratios and np.median(ratios) > TEXTURE_DEPTH_RATIO:
-        texture = (f"the ground's texture rivals the shadow (lit residual {100 * np.median(ratios):.0f} % of the "
-                   f"shadow's depth, above {100 * TEXTURE_DEPTH_RATIO:.0f} %): texture edges pass for the penumbra "
-                   "and shift the levels")
-        warnings.append(texture + "; rho is not measured reliably")
-    return warnings, texture
+        warnings.append(f"the ground's texture rivals the shadow (lit residual {100 * np.median(ratios):.0f} % of the "
+                        f"shadow's depth, above {100 * TEXTURE_DEPTH_RATIO:.0f} %): texture edges pass for the "
+                        "penumbra and shift the levels; rho is not measured reliably")
+        return warnings, "the ground's texture hides the penumbra's width"
+    return warnings, None
 
 
 def judge(agreement: list[PhotoAgreement]) -> Verdict:
