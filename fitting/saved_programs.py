@@ -20,6 +20,7 @@ import hashlib
 import os
 import re
 import tempfile
+from importlib import metadata
 from pathlib import Path
 
 import equinox as eqx
@@ -46,8 +47,14 @@ def saved_programs_dir() -> Path | None:
 @functools.lru_cache(maxsize=1)
 def _source_digest() -> str:
     """A digest of the source of every module a saved program can be traced from (softshadow
-    and fitting): a program saved by other code is never loaded."""
+    and fitting) and of the versions of the libraries it is traced through: a program saved by
+    other code is never loaded."""
     h = hashlib.sha256()
+    for name in ("jax", "jaxlib", "equinox", "optimistix", "lineax", "numpy"):
+        try:
+            h.update(f"{name}={metadata.version(name)};".encode())
+        except metadata.PackageNotFoundError:
+            h.update(f"{name}=none;".encode())
     for package in ("softshadow", "fitting"):
         root = Path(__import__(package).__file__).parent
         for path in sorted(root.rglob("*.py")):
