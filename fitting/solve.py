@@ -39,7 +39,7 @@ from .views import PhotoView
 
 __all__ = ["FitOptions", "fit_group", "Solution", "Trial", "KRho", "Identifiability", "sample_views",
            "initial_params", "plain_config", "start_grid", "plain_start", "choose_model", "covariance", "k_rho_with_errors",
-           "penumbra_width_px", "identifiability", "profile_plot_data"]
+           "penumbra_width_px", "no_ramp_bound", "identifiability", "profile_plot_data"]
 
 #: Levenberg-Marquardt tolerances (relative, absolute) on the parameters and on each residual
 #: (residuals are relative to the lit level, whose noise is ~1e-2: 1e-4 is 1 % of it).
@@ -366,6 +366,17 @@ def penumbra_width_px(samples: list[PhotoSamples], prediction: Prediction) -> tu
     return float(np.median(w)), float(q75 - q25)
 
 
+def no_ramp_bound(samples: list[PhotoSamples], prediction: Prediction, k: float) -> float | None:
+    """Step 5a': when no sample lies inside the fitted penumbra (|u| >= 1 everywhere), the largest k
+    the samples allow: the penumbra's half-width grows in proportion to k, so the penumbra of
+    k * min |u| would just reach the nearest sample, which shows no ramp. None when every sample
+    lies beyond the planned bands (u = +-1e6: no bound from them)."""
+    n = sum(len(s.observed) for s in samples)
+    u = np.abs(np.asarray(prediction.u, dtype=np.float64)[:n])
+    u = u[u < 1e5]
+    return float(k * u.min()) if len(u) else None
+
+
 class Identifiability(NamedTuple):
     """Whether k was measured; when not, range_k is an upper bound and ``warning`` says so."""
 
@@ -476,6 +487,11 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
     result.range_stderr_sys, result.rho_stderr_sys = errors.range_stderr_sys, errors.rho_stderr_sys
     ident = identifiability(est.range_k, errors.range_stderr_stat, result.penumbra_px, errors.range_stderr)
     result.identifiable, result.range_k = ident.identifiable, ident.range_k
+    if not ident.identifiable and result.penumbra_px is None:
+        # No sample inside the penumbra (the object hides it from the camera, or it is far below a
+        # pixel): k + 2 sigma bounds nothing there, since k did not move from its start.
+        bound = no_ramp_bound(samples, sol.prediction, est.range_k)
+        result.range_k = max(result.range_k, bound) if bound is not None else result.range_k
     if ident.warning:
         result.warnings.append(ident.warning)
     elif resolution_warning(result.penumbra_px, result.blur_px):

@@ -183,7 +183,8 @@ HARD_PRESET_FAILURES = {
                "the identifiability test is the median of only 16 of 2048 samples inside the penumbra "
                "(1.64 px; before, 7 samples read 0.70 px and k was an upper bound)",
     "zenith": "known bug: sun at 87 deg, the shadow is under the pillar: rho 0.001 for a truth of 0.20, "
-              "with reliable = true (only k is flagged as not identifiable)",
+              "with reliable = true (0 samples in the umbra); k's upper bound is right since 2026-11-25 "
+              "(0.0086 from the samples that show no ramp, 0.00064 before)",
     "subpixel": "known bug: penumbra under a pixel (80 m top-down map): k 0.065 (14x the truth) and rho "
                 "0.55 for 0.25, identifiable and reliable",
     "out-of-frame": "known bug: shadow partly out of frame: k 0.0095 for 0.00465 (+105 %), identifiable; its rho "

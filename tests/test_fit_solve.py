@@ -11,7 +11,7 @@ import pytest
 
 from fitting.model import FitParams, Prediction, k_from_raw, rho_from_raw
 from fitting.solve import (MAX_K_REL_STDERR, MIN_PENUMBRA_PX, covariance, identifiability, k_rho_with_errors,
-                           penumbra_width_px, robust_delta)
+                           no_ramp_bound, penumbra_width_px, robust_delta)
 
 
 def _params(n_photos=3, seed=0):
@@ -105,6 +105,16 @@ def test_penumbra_width_is_two_over_the_pixel_slope_inside_the_penumbra():
     assert iqr == pytest.approx(np.subtract(*np.percentile([4.0, 8.0, 2.0, 4.0], [75, 25])))
     none = Prediction(np.zeros(2), np.zeros(2), np.array([2.0, -3.0]), np.ones(2))
     assert penumbra_width_px([_Samples(2)], none) == (None, None)
+
+
+def test_no_ramp_bound_is_the_k_whose_penumbra_reaches_the_nearest_sample():
+    """No sample inside the penumbra: u scales as 1/k, so k * min |u| is the largest k the samples
+    allow; samples beyond the planned bands (u = +-1e6) and padding rows bound nothing."""
+    u = np.array([30.0, -17.0, 1e6, -1e6, 25.0, 0.0])  # the last row is padding
+    pred = Prediction(np.zeros(6), np.zeros(6), u, np.ones(6))
+    assert no_ramp_bound([_Samples(3), _Samples(2)], pred, 5e-4) == pytest.approx(17.0 * 5e-4)
+    far = Prediction(np.zeros(2), np.zeros(2), np.array([1e6, -1e6]), np.ones(2))
+    assert no_ramp_bound([_Samples(2)], far, 5e-4) is None
 
 
 def test_identifiable_when_the_penumbra_is_resolved_and_k_is_measured():
