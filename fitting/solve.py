@@ -51,12 +51,14 @@ MIN_PENUMBRA_PX, MAX_K_REL_STDERR = 0.8, 0.5
 #: Not identifiable when fewer samples than this lie inside the fitted penumbra (|u| < 1): the
 #: penumbra's width, and k, then rest on a handful of pixels, where a sharper shadow under the
 #: camera's blur or JPEG fits as well (hard-cases preset, 320x240: the sun at 5 deg read k 2.4x
-#: the truth from 16 samples; 400x300 physical folders that measure k have 179 or more).
-MIN_PENUMBRA_SAMPLES = 50
+#: the truth from 16 samples, a shadow partly out of frame 2.0x from 12; every group measured
+#: within its stated error had 74 or more: docs/uncertainty.md, "Counting the samples").
+MIN_PENUMBRA_SAMPLES = 40
 #: rho is not measured when fewer samples than this lie in the fitted umbra (alpha, blur included,
 #: at least UMBRA_ALPHA): rho is the umbra's level, and without umbra pixels it comes from the
-#: penumbra's model and trades off with k (a shadow a pixel or two wide read rho 0.55 for 0.25).
-MIN_UMBRA_SAMPLES, UMBRA_ALPHA = 20, 0.99
+#: penumbra's model and trades off with k (a shadow a pixel or two wide, no umbra sample, read rho
+#: 0.55 for 0.25; a long thin shadow at a low sun measured rho within 0.005 from 15).
+MIN_UMBRA_SAMPLES, UMBRA_ALPHA = 5, 0.99
 
 
 def _group_arrays(samples: list[PhotoSamples], views: list[PhotoView]) -> GroupArrays:
