@@ -48,12 +48,15 @@ LM_RTOL, LM_ATOL = 1e-4, 1e-4
 COV_RCOND = 1e-6
 #: Not identifiable below this penumbra width (pixels) or above this relative error of k.
 MIN_PENUMBRA_PX, MAX_K_REL_STDERR = 0.8, 0.5
-#: Not identifiable when fewer samples than this lie inside the fitted penumbra (|u| < 1): the
-#: penumbra's width, and k, then rest on a handful of pixels, where a sharper shadow under the
-#: camera's blur or JPEG fits as well (hard-cases preset, 320x240: the sun at 5 deg read k 2.4x
-#: the truth from 16 samples, a shadow partly out of frame 2.0x from 12; every group measured
-#: within its stated error had 74 or more: docs/uncertainty.md, "Counting the samples").
-MIN_PENUMBRA_SAMPLES = 40
+#: Not identifiable when fewer samples than MIN_PENUMBRA_SAMPLES lie inside a fitted penumbra
+#: (|u| < 1) narrower than NARROW_PENUMBRA_PX: its width, as wide as a camera's blur spot
+#: (2 sqrt(1/12 + blur^2) = 1.6 px at 0.7 px of blur), and k then rest on a handful of pixels,
+#: where a sharper shadow under the blur or JPEG fits as well (hard-cases preset, 320x240: the sun
+#: at 5 deg read k 2.4x the truth from 16 samples of a 1.6 px penumbra, a shadow partly out of
+#: frame 2.0x from 12; groups with penumbrae of 1.3-1.95 px that measured k had 185 or more,
+#: and 26 samples of a 5.6 px penumbra measured k within 0.5 %: docs/uncertainty.md, "Counting
+#: the samples").
+MIN_PENUMBRA_SAMPLES, NARROW_PENUMBRA_PX = 40, 2.0
 #: rho is not measured when fewer samples than this lie in the fitted umbra (alpha, blur included,
 #: at least UMBRA_ALPHA): rho is the umbra's level, and without umbra pixels it comes from the
 #: penumbra's model and trades off with k (a shadow a pixel or two wide, no umbra sample, read rho
@@ -403,14 +406,15 @@ class Identifiability(NamedTuple):
 def identifiability(k: float, k_stderr: float, penumbra_px: float | None,
                     bound_stderr: float | None = None, n_penumbra: int | None = None) -> Identifiability:
     """Step 5b: k is not identifiable when the penumbra is narrower than MIN_PENUMBRA_PX
-    (or not seen), when fewer than MIN_PENUMBRA_SAMPLES samples lie inside it (``n_penumbra``;
-    None: not checked), or when k is lost in its own noise (statistical error ``k_stderr``
+    (or not seen), when it is narrower than NARROW_PENUMBRA_PX and fewer than
+    MIN_PENUMBRA_SAMPLES samples lie inside it (``n_penumbra``; None: not checked), or when
+    k is lost in its own noise (statistical error ``k_stderr``
     above MAX_K_REL_STDERR of k). Then the reported range_k is an upper bound: k + 2 sigma
     (sigma = ``bound_stderr``, the stated error with its systematic part, when given; else
     ``k_stderr``), and at least the k whose penumbra would be one pixel wide
     (k / penumbra_px, the width scaling with k)."""
     resolved = penumbra_px is not None and penumbra_px >= MIN_PENUMBRA_PX
-    seen = n_penumbra is None or n_penumbra >= MIN_PENUMBRA_SAMPLES
+    seen = n_penumbra is None or n_penumbra >= MIN_PENUMBRA_SAMPLES or penumbra_px >= NARROW_PENUMBRA_PX
     if resolved and seen and k_stderr <= MAX_K_REL_STDERR * max(k, 1e-12):
         return Identifiability(True, float(k), None)
     upper = k + 2.0 * (k_stderr if bound_stderr is None else max(k_stderr, bound_stderr))

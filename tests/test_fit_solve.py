@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from fitting.model import FitParams, Prediction, k_from_raw, rho_from_raw
-from fitting.solve import (MAX_K_REL_STDERR, MIN_PENUMBRA_PX, MIN_PENUMBRA_SAMPLES, MIN_UMBRA_SAMPLES, UMBRA_ALPHA,
+from fitting.solve import (MAX_K_REL_STDERR, MIN_PENUMBRA_PX, MIN_PENUMBRA_SAMPLES, NARROW_PENUMBRA_PX, MIN_UMBRA_SAMPLES, UMBRA_ALPHA,
                            SampleCounts, covariance, identifiability, k_rho_with_errors, penumbra_width_px,
                            robust_delta, sample_counts, umbra_warning)
 
@@ -144,13 +144,15 @@ def test_sample_counts_inside_the_penumbra_and_in_the_umbra_leave_out_the_paddin
     assert sample_counts([_Samples(8)], pred) == SampleCounts(penumbra=4, umbra=3)
 
 
-def test_too_few_samples_inside_the_penumbra_make_k_an_upper_bound():
-    k, se, bound = 0.01, 0.001, 0.002
-    assert identifiability(k, se, 3.0, bound, MIN_PENUMBRA_SAMPLES).identifiable
-    ident = identifiability(k, se, 3.0, bound, MIN_PENUMBRA_SAMPLES - 1)
+def test_too_few_samples_inside_a_narrow_penumbra_make_k_an_upper_bound():
+    k, se, bound, narrow = 0.01, 0.001, 0.002, 0.99 * NARROW_PENUMBRA_PX
+    assert identifiability(k, se, narrow, bound, MIN_PENUMBRA_SAMPLES).identifiable
+    ident = identifiability(k, se, narrow, bound, MIN_PENUMBRA_SAMPLES - 1)
     assert not ident.identifiable
     assert ident.range_k == pytest.approx(k + 2 * bound)
     assert f"only {MIN_PENUMBRA_SAMPLES - 1} samples" in ident.warning and "upper bound" in ident.warning
+    # A penumbra wider than a blur spot is measured by few samples too.
+    assert identifiability(k, se, NARROW_PENUMBRA_PX, bound, 3).identifiable
     # A penumbra under the resolution keeps its own reason, whatever the count.
     assert "narrower than the resolution" in identifiability(k, se, 0.5, bound, 3).warning
 
