@@ -180,8 +180,6 @@ def test_hard_cases_preset_reports_its_bad_photos(hard_cases_preset):
 HARD_PRESET_FAILURES = {
     "zenith": "known bug: sun at 87 deg, the shadow is under the pillar: rho 0.001 for a truth of 0.20, "
               "with reliable = true (only k is flagged as not identifiable)",
-    "out-of-frame": "known bug: shadow partly out of frame: rho 0.39 for 0.30 (k -36 %), reliable",
-    "clutter": "known bug: cluttered ground: k +50 % (0.0070) and rho 0.31 for 0.28, reliable",
 }
 
 
