@@ -33,7 +33,7 @@ from .photo_check import judge, photo_agreement
 from .photos import Photo, PhotoError, list_photos, read_photo
 from .resume import GroupStore, group_key, photo_digest
 from .results import FitResults, GroupResult
-from .uncertainty import edge_rho_errors, profile_spread
+from .uncertainty import edge_rho_errors, profile_spread, range_upper_bound
 from .views import PhotoView
 
 __all__ = ["fit_folder", "fit_photos", "fit_and_report", "FolderError", "unreadable_summary"]
@@ -200,6 +200,12 @@ def _fit_checked(model, pose, views: list[PhotoView], group: PhotoGroup,
         if verdict.warnings:
             result.warnings += verdict.warnings
             result.reliable = False
+        if verdict.range_unmeasured and result.identifiable and result.range_k is not None:
+            # What hides the rho measurement hides the penumbra's width too: k is then a bound.
+            result.identifiable = False
+            result.range_k = range_upper_bound(result.range_k, result.range_stderr_stat or 0.0, result.penumbra_px,
+                                               result.range_stderr)
+            result.warnings.append(f"range not identifiable: {verdict.range_unmeasured}; range_k is an upper bound")
         break
     if result.fitted and result.identifiable and result.range_k is not None and result.range_k > options.range_k_max:
         # The samples' band and the start were sized for k up to range_k_max: beyond it the band

@@ -35,7 +35,7 @@ import numpy as np
 
 __all__ = ["SystematicFloor", "CALIBRATED_FLOOR", "Uncertainty", "edge_clusters", "cluster_covariance",
            "systematic_errors", "combine_errors", "CLUSTERS_PER_PHOTO", "EdgeFloor", "CALIBRATED_EDGE_FLOOR",
-           "profile_spread", "edge_rho_errors", "resolution_warning", "RESOLVED_BLUR_WIDTHS"]
+           "profile_spread", "edge_rho_errors", "resolution_warning", "RESOLVED_BLUR_WIDTHS", "range_upper_bound"]
 
 #: Stretches of edge per photo for the cluster-robust covariance: few enough that one
 #: stretch spans the residuals' correlation along the edge, enough for a stable sum.
@@ -65,6 +65,18 @@ CALIBRATED_FLOOR = SystematicFloor(k_rel=0.08, k_rel_px=0.06, rho_abs=0.002, rho
 #: blur (the blur spot, sqrt(1/12 + blur^2) px) is not resolved by the photo: its width then comes
 #: from the difference between the edge's spread and the fitted blur, so k rests on the blur model.
 RESOLVED_BLUR_WIDTHS = 2.0
+
+
+def range_upper_bound(k: float, k_stderr: float, penumbra_px: float | None,
+                      bound_stderr: float | None = None) -> float:
+    """The range_k reported when k is not identifiable: k + 2 sigma (sigma = ``bound_stderr``, the
+    stated error with its systematic part, when given and larger; else the statistical
+    ``k_stderr``), and at least the k whose penumbra would be one pixel wide (k / penumbra_px,
+    the width scaling with k)."""
+    upper = k + 2.0 * (k_stderr if bound_stderr is None else max(k_stderr, bound_stderr))
+    if penumbra_px:
+        upper = max(upper, k / max(penumbra_px, 1e-9))
+    return float(upper)
 
 
 def resolution_warning(penumbra_px: float | None, blur_px: float | None) -> str | None:

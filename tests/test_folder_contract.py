@@ -182,6 +182,32 @@ def test_judge_rules():
     assert judge([PhotoAgreement(f"{i}.jpg", 0.01, 0.01, 0.0) for i in range(3)]).no_shadow
 
 
+def test_fit_quality_rules():
+    """The umbra must be one level (its residual at most a few times the lit ground's), and the
+    ground's texture small beside the shadow's step; either failing makes the group unreliable,
+    the texture also makes k a bound. A clean photo (the demo's residuals) passes."""
+    from fitting.photo_check import TEXTURE_DEPTH_RATIO, PhotoAgreement, fit_quality, judge
+    clean = PhotoAgreement("a.jpg", 0.02, 0.84, 0.84, 536, 312, 0.017, 0.004)
+    assert fit_quality([clean]) == ([], None) and judge([clean]).warnings == []
+    # An umbra that holds two levels (part of a sheet normalised as ground): 8 times the lit residual.
+    two_levels = PhotoAgreement("b.jpg", 0.08, 0.40, 0.60, 322, 173, 0.022, 0.177)
+    verdict = judge([two_levels])
+    assert verdict.range_unmeasured is None and len(verdict.warnings) == 1
+    assert verdict.warnings[0].startswith("b.jpg: the umbra is not one level")
+    # Small residuals are not flagged whatever their ratio (a clean render's sky-term misfit).
+    assert fit_quality([PhotoAgreement("c.jpg", 0.01, 0.8, 0.8, 500, 300, 0.003, 0.02)]) == ([], None)
+    # Too few umbra samples to judge.
+    assert fit_quality([PhotoAgreement("d.jpg", 0.08, 0.4, 0.6, 322, 5, 0.022, 0.177)]) == ([], None)
+    # Texture: the lit residual a large part of the shadow's depth (the photos' median decides).
+    rough = PhotoAgreement("e.jpg", 0.22, 0.70, 0.68, 450, 273, 0.254, 0.078)
+    warnings, texture = fit_quality([rough])
+    assert "texture rivals the shadow" in warnings[0] and "texture" in texture
+    assert judge([rough]).range_unmeasured == texture
+    just_below = PhotoAgreement("f.jpg", 0.1, 0.5, 0.5, 450, 273, 0.99 * TEXTURE_DEPTH_RATIO * 0.5, 0.05)
+    assert fit_quality([just_below]) == ([], None)
+    assert fit_quality([rough, clean, clean])[1] is None
+
+
 def test_group_without_a_shadow_in_view_fits_nothing(one_group, tmp_path):
     from fitting import FitOptions, fit_folder
     folder = _copy(one_group, tmp_path / "gray")
