@@ -31,6 +31,7 @@ from .options import FitOptions
 from .overlay import fitted_alpha_image
 from .receiver_light import shadow_factor
 from .results import GroupResult, OverlayPlotData, ProfilePlotData
+from .saved_programs import call_saved
 from .samples import NoShadowInView, PhotoSamples, select_samples
 from .shadow_cues import few_profiles_warning
 from .uncertainty import cluster_covariance, combine_errors, edge_clusters, resolution_warning
@@ -180,14 +181,23 @@ def _prepare(params: FitParams, raw_ks, group: GroupArrays, pose: Pose, config: 
     return grad_t_pixel, raw_ks[jnp.argmin(losses)]
 
 
-@eqx.filter_jit
 def _solve(params: FitParams, args, max_steps: int, start_raw_ks, prepare) -> Solution:
     """Levenberg-Marquardt from ``params``; the ``Solution`` with the residuals' Jacobian
     computed at the solution (forward mode: n rows, few columns).
 
     With ``prepare`` true (a traced switch, so one compiled program serves every call), the
     group's first solve: |dT/dpixel| is computed and raw_k starts at the best value of the
-    grid ``start_raw_ks`` (m,) (``_prepare``)."""
+    grid ``start_raw_ks`` (m,) (``_prepare``). The program is saved between processes when
+    the command line asks for it (``fitting.saved_programs``)."""
+    vector, converged, steps, r, jac, *rest = call_saved(
+        "fitting.solve", _solve_arrays, params, args, max_steps, start_raw_ks, prepare)
+    pred, grad_t_pixel = Prediction(*rest[:-1]), rest[-1]
+    return Solution(FitParams.from_vector(np.asarray(vector), params.n_photos), converged, steps, r, jac, pred, grad_t_pixel)
+
+
+def _solve_arrays(params: FitParams, args, max_steps: int, start_raw_ks, prepare) -> tuple:
+    """``_solve``'s program: the solution as a tuple of arrays (parameter vector, converged,
+    steps, residuals, Jacobian, the prediction's fields, |dT/dpixel|)."""
     group, pose, config = args
     grad_t_pixel, raw_k = jax.lax.cond(
         prepare, lambda: _prepare(params, start_raw_ks, group, pose, config),
@@ -206,8 +216,8 @@ def _solve(params: FitParams, args, max_steps: int, start_raw_ks, prepare) -> So
         return r, (r, pred)
 
     jac, (r, pred) = jax.jacfwd(at, has_aux=True)(sol.value.vector())
-    return Solution(sol.value, sol.result == optx.RESULTS.successful, sol.stats["num_steps"], r, jac, pred,
-                    group.grad_t_pixel)
+    return (sol.value.vector(), sol.result == optx.RESULTS.successful, sol.stats["num_steps"], r, jac, *pred,
+            group.grad_t_pixel)
 
 
 def _to_numpy(sol: Solution) -> Solution:

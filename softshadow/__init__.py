@@ -15,7 +15,7 @@ from ._version import __version__
 # steps (a photo without geometry, ``--help``) never loads JAX or trimesh, which take seconds.
 __getattr__, __dir__, __all__ = _lazy.attach(__name__, submod_attrs={
     "colour": ["linear_to_srgb", "srgb_to_linear"],
-    "compilation_cache": ["default_cache_dir", "use_compilation_cache"],
+    "compilation_cache": ["default_cache_dir", "use_compilation_cache", "SAVED_PROGRAMS_ENV"],
     "camera": ["GroundGrid", "PinholeCamera", "look_at_camera"],
     "evaluate": ["plan_alpha", "plan_alpha_jit", "plan_coordinate", "plan_coordinate_light"],
     "lod": ["PAPER_FACE_COUNTS", "LodLevel", "decimate", "lod_series"],

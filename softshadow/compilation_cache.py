@@ -10,7 +10,10 @@ import os
 import sys
 from pathlib import Path
 
-__all__ = ["default_cache_dir", "use_compilation_cache"]
+__all__ = ["default_cache_dir", "use_compilation_cache", "SAVED_PROGRAMS_ENV"]
+
+#: The folder where ``fitting.saved_programs`` keeps traced programs (``jax.export``); unset: off.
+SAVED_PROGRAMS_ENV = "SOFTSHADOW_SAVED_PROGRAMS"
 
 
 def default_cache_dir() -> Path:
@@ -21,7 +24,10 @@ def default_cache_dir() -> Path:
 def use_compilation_cache(cache_dir=None) -> None:
     """Turn on JAX's persistent compilation cache in this process, in ``cache_dir``
     (``default_cache_dir()`` when None). Programs that compile in under 0.5 s are not
-    kept. A folder that cannot be created leaves the cache off (never an error).
+    kept. A folder that cannot be created leaves the cache off (never an error). Also turns on
+    saved traced programs (``SAVED_PROGRAMS_ENV``, in the folder ``programs`` inside it) unless
+    that variable is already set: the compilation cache's key is the traced program, so without
+    them every process still traces the solver.
 
     JAX is not imported here: importing it takes seconds, and a process that never needs it (a
     photo without geometry) should not pay for it. If JAX is not loaded yet, the settings go
@@ -32,6 +38,7 @@ def use_compilation_cache(cache_dir=None) -> None:
         cache.mkdir(parents=True, exist_ok=True)
     except OSError:
         return
+    os.environ.setdefault(SAVED_PROGRAMS_ENV, str(cache / "programs"))
     settings = {"jax_compilation_cache_dir": str(cache), "jax_persistent_cache_min_compile_time_secs": 0.5}
     jax = sys.modules.get("jax")
     for name, value in settings.items():
