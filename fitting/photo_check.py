@@ -13,7 +13,8 @@ and fitted values across the shadow edge, both divided by the photo's fitted lit
 - ``rms``: the root mean square of (observed - fitted), relative to the lit level.
 
 ``judge`` turns these into decisions: a photo that shows no shadow where the others do,
-or whose residual is several times the others', is left out (the caller refits without
+whose umbra is not one level while theirs is (below), or whose residual is several times
+the others', is left out (the caller refits without
 it); a group where no photo shows a shadow has "no shadow in view"; when two photos
 disagree and neither can be blamed, the group is marked unreliable.
 
@@ -125,17 +126,20 @@ def _others(values: list[float], i: int) -> float:
     return float(np.median(rest)) if rest else float("nan")
 
 
+def _umbra_levels(a: PhotoAgreement) -> str | None:
+    """Why a photo's umbra is not one level (module docstring), or None."""
+    if (a.n_umbra >= _MIN_SIDE_SAMPLES and a.rms_umbra > UMBRA_RESIDUAL_MIN
+            and a.rms_umbra > UMBRA_RESIDUAL_RATIO * a.rms_lit):
+        return (f"the umbra is not one level (its residual {a.rms_umbra:.3f} is "
+                f"{a.rms_umbra / max(a.rms_lit, 1e-12):.1f} times the lit ground's, {a.rms_lit:.3f}): another "
+                "surface, or part of a white sheet taken for ground, lies in the shadow")
+    return None
+
+
 def fit_quality(agreement: list[PhotoAgreement]) -> tuple[list[str], str | None]:
     """Whether the model describes what the photos show (module docstring): one-line warnings that
     make the group unreliable, and the reason k is not measured (the texture rule) or None."""
-    warnings = []
-    for a in agreement:
-        if (a.n_umbra >= _MIN_SIDE_SAMPLES and a.rms_umbra > UMBRA_RESIDUAL_MIN
-                and a.rms_umbra > UMBRA_RESIDUAL_RATIO * a.rms_lit):
-            warnings.append(f"{a.photo}: the umbra is not one level (its residual {a.rms_umbra:.3f} is "
-                            f"{a.rms_umbra / max(a.rms_lit, 1e-12):.1f} times the lit ground's, {a.rms_lit:.3f}): "
-                            "another surface, or part of a white sheet taken for ground, lies in the shadow; "
-                            "rho is a compromise")
+    warnings = [f"{a.photo}: {_umbra_levels(a)}; rho is a compromise" for a in agreement if _umbra_levels(a)]
     ratios = [a.rms_lit / a.predicted_depth for a in agreement
               if a.n_lit >= _MIN_SIDE_SAMPLES and np.isfinite(a.rms_lit) and a.predicted_depth > 0]
     if ratios and np.median(ratios) > TEXTURE_DEPTH_RATIO:
@@ -172,6 +176,13 @@ def judge(agreement: list[PhotoAgreement]) -> Verdict:
                                "lens cap on, wrong time or wrong camera?"))
     if candidates:
         _, name, reason = min(candidates)
+        verdict.leave_out.append((name, reason))
+        return verdict
+    # A photo whose umbra holds two levels while the others' hold one: the fit without it measures rho.
+    two_levels = [(a.rms_umbra / max(a.rms_lit, 1e-12), a.photo, _umbra_levels(a)) for a in agreement
+                  if _umbra_levels(a)]
+    if two_levels and len(two_levels) < len(agreement):
+        _, name, reason = max(two_levels)
         verdict.leave_out.append((name, reason))
         return verdict
     rms = [a.rms for a in agreement]

@@ -186,6 +186,8 @@ def test_fit_quality_rules():
     """The umbra must be one level (its residual at most a few times the lit ground's), and the
     ground's texture small beside the shadow's step; either failing makes the group unreliable,
     the texture also makes k a bound. A clean photo (the demo's residuals) passes."""
+    import dataclasses
+
     from fitting.photo_check import TEXTURE_DEPTH_RATIO, PhotoAgreement, fit_quality, judge
     clean = PhotoAgreement("a.jpg", 0.02, 0.84, 0.84, 536, 312, 0.017, 0.004)
     assert fit_quality([clean]) == ([], None) and judge([clean]).warnings == []
@@ -194,6 +196,10 @@ def test_fit_quality_rules():
     verdict = judge([two_levels])
     assert verdict.range_unmeasured is None and len(verdict.warnings) == 1
     assert verdict.warnings[0].startswith("b.jpg: the umbra is not one level")
+    # Among photos whose umbrae are one level, the photo whose umbra is not is left out (then refitted).
+    verdict = judge([clean, two_levels, dataclasses.replace(clean, photo="g.jpg")])
+    assert verdict.leave_out == [("b.jpg", verdict.leave_out[0][1])]
+    assert verdict.leave_out[0][1].startswith("the umbra is not one level")
     # Small residuals are not flagged whatever their ratio (a clean render's sky-term misfit).
     assert fit_quality([PhotoAgreement("c.jpg", 0.01, 0.8, 0.8, 500, 300, 0.003, 0.02)]) == ([], None)
     # Too few umbra samples to judge.
