@@ -4,7 +4,7 @@ Per sample pixel of photo p with albedo class c:
 
     observed ~ level[p, c] * (1 + g_p . uv) * ((1 - rho) c (1 - alpha) + rho (1 - h)),
     alpha = profile(u) blurred by a Gaussian of tau = sqrt(blur^2 + 1/12) |du/dpixel|
-            (``pixel_profile_alpha``, accurate for any tau),
+            (``softshadow.blurred_profile_alpha``, accurate for any tau),
 
 where u is softshadow's penumbra coordinate at the pixel's ground point (a
 function of k, the sun and the pose), the 1/12 is the pixel's own area (a
@@ -25,81 +25,21 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-import functools
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.scipy.special import ndtr
 from jaxtyping import Array, Float, Int
 
-from softshadow import (PROFILES, PointPlan, Pose, blurred_profile_alpha, light_direction, plan_coordinate_light,
-                        profile_alpha)
+from softshadow import PROFILES, PointPlan, Pose, blurred_profile_alpha, light_direction, plan_coordinate_light
 
 from .receiver_light import shadow_factor
 
 __all__ = ["GroupArrays", "FitConfig", "FitParams", "Prediction", "K_SCALE", "k_from_raw", "raw_from_k", "rho_from_raw",
            "raw_from_rho", "predict", "angular_pixel_gradient", "residuals", "pseudo_huber",
-           "sample_light", "edge_terms", "shadow_terms", "shadow_alpha", "residuals_of", "pixel_profile_alpha",
-           "WIDE_BLUR_TAU"]
+           "sample_light", "edge_terms", "shadow_terms", "shadow_alpha", "residuals_of"]
 
 K_SCALE = 0.01
-
-#: Blur (standard deviation, u units) from which ``pixel_profile_alpha`` integrates over the
-#: penumbra instead of over the Gaussian. Below it Gauss-Hermite over the blur is within 2e-4 of
-#: the exact convolution; above it Gauss-Hermite is a staircase (errors 0.006 at tau = 1, 0.1 at
-#: tau = 5: a penumbra of 1-2 px under a camera blur of 0.5-0.9 px), while the integral over the
-#: penumbra with _WIDE_NODES nodes is within 1e-6 for the disk.
-WIDE_BLUR_TAU = 0.1
-_WIDE_NODES = 24
-_INV_SQRT_2PI = float(1.0 / np.sqrt(2.0 * np.pi))
-
-
-@functools.lru_cache(maxsize=None)
-def _penumbra_nodes(profile: str, nodes: int) -> tuple[np.ndarray, np.ndarray]:
-    """Nodes s (M,) in (-1, 1) and weights (M,) of the integral over the penumbra of the profile's
-    density -d alpha/ds: the midpoint rule in theta, s = cos theta (the disk's density times
-    sin theta is smooth and periodic, so the rule converges geometrically)."""
-    theta = (np.arange(nodes) + 0.5) * np.pi / nodes
-    s = np.cos(theta)
-    with jax.ensure_compile_time_eval():
-        density = -np.asarray(jax.vmap(jax.grad(lambda x: profile_alpha(x, profile)))(jnp.asarray(s)))
-    return s, density * np.sin(theta) * np.pi / nodes
-
-
-def _expected_positive_part(y):
-    """E[max(y + Z, 0)] for a unit Gaussian Z: y Phi(y) + phi(y)."""
-    return y * ndtr(y) + jnp.exp(-0.5 * y * y) * _INV_SQRT_2PI
-
-
-def pixel_profile_alpha(u, tau, profile: str):
-    """Alpha of ``profile`` seen through a Gaussian of standard deviation ``tau`` (u units): the
-    pixel's own area and the camera's blur. u and tau broadcast; float32 or float64.
-
-    Accurate for any tau (within 2e-4 of the exact convolution; the linear ramp exactly), where
-    ``softshadow.blurred_profile_alpha`` (Gauss-Hermite over the blur, 12 nodes) turns into a
-    staircase once tau exceeds the penumbra's half-width. That is the case of a penumbra of one or
-    two pixels under the camera's blur: the staircase read the blur low and k 20-33 % high on
-    400x300 photos (docs/uncertainty.md).
-
-    linear: (tau / 2) (G((1 - u) / tau) - G((-1 - u) / tau)), G(y) = E[max(y + Z, 0)].
-    disk: for tau < WIDE_BLUR_TAU, Gauss-Hermite over the blur; above, the integral over the
-    penumbra of the profile's density times Phi((s - u) / tau).
-    """
-    u, tau = jnp.broadcast_arrays(jnp.asarray(u), jnp.asarray(tau))
-    if profile == "linear":
-        sharp = tau < 1e-6
-        t = jnp.where(sharp, 1.0, tau)  # double where: no 0/0 in the unused branch's gradient
-        smooth = 0.5 * t * (_expected_positive_part((1.0 - u) / t) - _expected_positive_part((-1.0 - u) / t))
-        return jnp.where(sharp, profile_alpha(u, profile), smooth)
-    if profile not in PROFILES:
-        raise ValueError(f"unknown penumbra profile {profile!r}; choose one of {PROFILES}")
-    s, w = (jnp.asarray(a, dtype=u.dtype) for a in _penumbra_nodes(profile, _WIDE_NODES))
-    narrow = tau < WIDE_BLUR_TAU
-    t = jnp.where(narrow, 1.0, tau)
-    wide = ndtr((s - u[..., None]) / t[..., None]) @ w
-    return jnp.where(narrow, blurred_profile_alpha(u, tau, profile), wide)
 
 
 def k_from_raw(raw):
@@ -272,7 +212,7 @@ def _edge_terms_per_sample(geometry: Float[Array, "3"], raw_blur: Float[Array, "
     variance = 1.0 / 12.0 + config.fit_blur * raw_blur
     slope = dudt * group.grad_t_pixel
     tau = jnp.sqrt(jnp.maximum(variance, 1e-3)) * slope
-    return pixel_profile_alpha(u, tau, config.profile), u, slope
+    return blurred_profile_alpha(u, tau, config.profile), u, slope
 
 
 def edge_terms(shape: Float[Array, "3+P"], group: GroupArrays, pose: Pose, config: FitConfig):

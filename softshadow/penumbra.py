@@ -37,7 +37,7 @@ import numpy as np
 from jaxtyping import Array, Float, Int
 
 __all__ = ["PROFILES", "RULES", "penumbra_coordinate", "profile_alpha", "edge_alpha", "edge_coordinate",
-           "blurred_profile_alpha", "profile_slope", "profile_integral", "footprint_profile_alpha",
+           "profile_slope", "profile_integral", "footprint_profile_alpha",
            "occluded_disk_fraction", "corner_mass", "corner_alpha", "shade"]
 
 PROFILES = ("linear", "disk")
@@ -323,36 +323,6 @@ def profile_slope(u, profile: str = "linear"):
     raise ValueError(f"unknown penumbra profile {profile!r}; choose one of {PROFILES}")
 
 
-def _gauss_hermite(nodes: int, dtype):
-    """Nodes and weights (summing to 1) of Gauss-Hermite quadrature for a unit Gaussian."""
-    z, w = np.polynomial.hermite_e.hermegauss(nodes)
-    return jnp.asarray(z, dtype=dtype), jnp.asarray(w / w.sum(), dtype=dtype)
-
-
-@functools.partial(jax.custom_jvp, nondiff_argnums=(2, 3))
-def blurred_profile_alpha(u, tau, profile: str = "linear", nodes: int = 12):
-    """Alpha of a profile seen through Gaussian blur of standard deviation ``tau`` in u units.
-
-    Gauss-Hermite quadrature over the blur; u and tau broadcast. With tau = 0 it
-    equals ``profile_alpha``. Used for camera blur and pixel-area integration. Its JVP
-    is two arrays (d/du, d/dtau) formed in the primal pass, so each tangent direction
-    costs one product, not a pass over the nodes (a fitter's Jacobian has many).
-    """
-    u, tau = jnp.asarray(u), jnp.asarray(tau)
-    z, w = _gauss_hermite(nodes, jnp.result_type(u))
-    return profile_alpha(u[..., None] + tau[..., None] * z, profile) @ w
-
-
-@blurred_profile_alpha.defjvp
-def _blurred_profile_alpha_jvp(profile, nodes, primals, tangents):
-    (u, tau), (du, dtau) = primals, tangents
-    u, tau = jnp.asarray(u), jnp.asarray(tau)
-    z, w = _gauss_hermite(nodes, jnp.result_type(u))
-    x = u[..., None] + tau[..., None] * z
-    slope = profile_slope(x, profile)
-    return profile_alpha(x, profile) @ w, (slope @ w) * du + (slope @ (w * z)) * dtau
-
-
 @functools.partial(jax.custom_jvp, nondiff_argnums=(1,))
 def profile_integral(u, profile: str = "linear"):
     """The antiderivative of ``profile_alpha`` in u: 0 for u >= 1, u for u <= -1 (where alpha is 1).
@@ -401,8 +371,9 @@ def footprint_profile_alpha(u, du_a, du_b, profile: str = "linear"):
     |du_a| / 2 and |du_b| / 2: a trapezoid). Exact along the wider side (the difference of
     ``profile_integral``), Gauss-Legendre with 3 nodes along the narrower one (within 6e-4 of a brute-force mean), where the
     integrand is already smoothed by the wider box. With du_a = du_b = 0 it is
-    ``profile_alpha``. The box of one pixel has variance 1/12 px^2: the Gaussian that the
-    fitter's ``blurred_profile_alpha`` uses for the same footprint has the same variance.
+    ``profile_alpha``. The box of one pixel has variance 1/12 px^2: the Gaussian that
+    ``pixel_profile.blurred_profile_alpha`` (the fitter's model of a photographed pixel, which
+    adds the camera's blur) takes for the same footprint has the same variance.
     """
     u, du_a, du_b = jnp.asarray(u), jnp.abs(jnp.asarray(du_a)), jnp.abs(jnp.asarray(du_b))
     wide = 0.5 * jnp.maximum(du_a, du_b)

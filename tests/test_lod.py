@@ -180,3 +180,13 @@ def test_masking_report_marks_the_levels_a_slide_hides():
     assert "| 1, 15 | **0.970** | 0.700 |" in text and "| 1, 0 | 0.800 | 0.400 |" in text
     assert "- 5,000 faces: hidden by (1, 15)" in text
     assert "- 300 faces: hidden by no slide; the slide that hides it best is (1, 15), SSIM 0.700" in text
+
+
+def test_bench_ceiling_is_the_fastest_levels_saving():
+    """The LOD benchmark's ceiling: the fastest decimated level against the full mesh (off and
+    auto never count), and the mesh's share of the full mesh's warm fit."""
+    from softshadow_cli.bench.lod import _ceiling
+    rows = [{"lod": "off", "faces": 41384, "seconds": 2.0}, {"lod": "auto", "faces": 41384, "seconds": 0.5},
+            {"lod": 20692, "faces": 20692, "seconds": 1.6}, {"lod": 1000, "faces": 1000, "seconds": 1.25},
+            {"lod": 300, "faces": 300, "seconds": 1.3}]
+    assert _ceiling(rows) == {"faces": 1000, "speedup_warm": 1.6, "mesh_share_warm": 0.375}

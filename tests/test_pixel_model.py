@@ -1,6 +1,6 @@
 """The fit's pixel model when the penumbra is one or two pixels wide: the blurred profile
-(``fitting.model.pixel_profile_alpha``) against an exact convolution, its gradients, and one blur
-per photo."""
+(``softshadow.blurred_profile_alpha``, the renderer's, which the fitter uses) against an exact
+convolution, its gradients, and one blur per photo."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import norm
 
-from softshadow import Pose, profile_alpha
+from softshadow import WIDE_BLUR_TAU, Pose, blurred_profile_alpha, profile_alpha
 
 from test_fit_model import K, _oblique_view
 
@@ -36,14 +36,13 @@ def _reference(u, tau, profile):
 def test_blurred_profile_matches_the_exact_convolution_for_any_blur(profile):
     """From no blur to a blur five times the penumbra's half-width (a 1 px penumbra under a
     camera blur of 2 px), within 2e-4 everywhere; in float32 too."""
-    from fitting.model import pixel_profile_alpha
     u = np.linspace(-12.0, 12.0, 241)
     for tau in (0.0, 0.05, 0.0999, 0.1, 0.3, 1.0, 2.0, 5.0):
         ref = _reference(u, tau, profile)
         with jax.enable_x64(True):
-            got = np.asarray(pixel_profile_alpha(jnp.asarray(u), jnp.full(u.shape, tau), profile))
+            got = np.asarray(blurred_profile_alpha(jnp.asarray(u), jnp.full(u.shape, tau), profile))
         np.testing.assert_allclose(got, ref, atol=2e-4, err_msg=f"tau {tau}")
-        got32 = pixel_profile_alpha(jnp.asarray(u, jnp.float32), jnp.full(u.shape, tau, jnp.float32), profile)
+        got32 = blurred_profile_alpha(jnp.asarray(u, jnp.float32), jnp.full(u.shape, tau, jnp.float32), profile)
         assert got32.dtype == jnp.float32
         np.testing.assert_allclose(np.asarray(got32), ref, atol=3e-4, err_msg=f"float32, tau {tau}")
 
@@ -53,12 +52,11 @@ def test_blurred_profile_matches_the_exact_convolution_for_any_blur(profile):
 def test_blurred_profile_gradients_match_finite_differences(u, tau, profile):
     """d alpha / d(u, tau) by autodiff against central differences in float64, at generic points
     (away from the branch switch at WIDE_BLUR_TAU and the unblurred ramp's kinks)."""
-    from fitting.model import WIDE_BLUR_TAU, pixel_profile_alpha
     h = 1e-6
     if abs(tau - WIDE_BLUR_TAU) < 10 * h or tau < 0.02:
         tau = tau + 0.05
     with jax.enable_x64(True):
-        f = lambda a, b: pixel_profile_alpha(a, b, profile)
+        f = lambda a, b: blurred_profile_alpha(a, b, profile)
         du, dt = jax.grad(f, argnums=(0, 1))(jnp.float64(u), jnp.float64(tau))
         fd_u = (float(f(u + h, tau)) - float(f(u - h, tau))) / (2 * h)
         fd_t = (float(f(u, tau + h)) - float(f(u, tau - h))) / (2 * h)
@@ -70,16 +68,38 @@ def test_blurred_profile_gradients_match_finite_differences(u, tau, profile):
 def test_blurred_profile_is_finite_with_its_gradients_at_hard_points(profile):
     """No blur, the branch switch, the ramp's ends and far outside: values in [0, 1] and finite
     gradients (float64 and float32)."""
-    from fitting.model import WIDE_BLUR_TAU, pixel_profile_alpha
     for dtype in (jnp.float64, jnp.float32):
         with jax.enable_x64(dtype == jnp.float64):
             for u in (-1.0, 1.0, 0.0, -40.0, 40.0):
                 for tau in (0.0, 1e-7, WIDE_BLUR_TAU, 1e3):
-                    f = lambda a, b: pixel_profile_alpha(a, b, profile)
+                    f = lambda a, b: blurred_profile_alpha(a, b, profile)
                     a = float(f(jnp.asarray(u, dtype), jnp.asarray(tau, dtype)))
                     g = jax.grad(f, argnums=(0, 1))(jnp.asarray(u, dtype), jnp.asarray(tau, dtype))
                     assert -1e-6 <= a <= 1 + 1e-6, (u, tau, a)
                     assert np.isfinite([float(x) for x in g]).all(), (u, tau, g)
+
+
+@pytest.mark.parametrize("profile", ["disk", "linear"])
+def test_blurred_profile_vectorised_jvp_and_float32_gradients(profile):
+    """The forward-mode derivative over arrays (as the fitter's Jacobian takes it) matches central
+    differences in float64 on both sides of WIDE_BLUR_TAU; float32 gradients follow float64's;
+    with no blur it is ``profile_alpha`` itself."""
+    u = np.linspace(-2.7, 2.9, 23)
+    tau = np.geomspace(0.03, 3.1, 23)
+    du, dtau = np.cos(np.arange(23.0)), np.sin(np.arange(23.0) + 0.5)
+    f = jax.jit(lambda a, b: blurred_profile_alpha(a, b, profile))  # one compilation per dtype, not an op each
+    grads = jax.jit(jax.vmap(jax.grad(f, argnums=(0, 1))))
+    with jax.enable_x64(True):
+        _, tangent = jax.jit(lambda a, b, da, db: jax.jvp(f, (a, b), (da, db)))(u, tau, du, dtau)
+        h = 1e-6
+        fd = (np.asarray(f(u + h * du, tau + h * dtau)) - np.asarray(f(u - h * du, tau - h * dtau))) / (2 * h)
+        np.testing.assert_allclose(np.asarray(tangent), fd, atol=1e-6)
+        g64 = np.stack(grads(u, tau))
+        sharp = np.asarray(profile_alpha(jnp.asarray(u), profile))
+        np.testing.assert_allclose(np.asarray(f(u, np.zeros_like(u))), sharp, atol=1e-12)
+    g32 = grads(jnp.asarray(u, jnp.float32), jnp.asarray(tau, jnp.float32))
+    assert all(g.dtype == jnp.float32 for g in g32)
+    np.testing.assert_allclose(np.stack(g32), g64, atol=2e-4)
 
 
 @functools.lru_cache(maxsize=None)

@@ -85,23 +85,14 @@ def _fresh(folder: Path, tmp: Path, coarsest: int) -> dict:
 
 
 def _ceiling(rows: list[dict]) -> dict:
-    """What the coarsest level saves: its warm speed-up over the full mesh (the most any level can
-    give, since the rest of the fit does not depend on the mesh) and the share of the full mesh's
-    warm fit that the mesh accounts for (1 - coarsest / full)."""
-    full, coarsest = rows[0], rows[-1]
-    return {"faces": coarsest["faces"], "speedup_warm": round(full["seconds"] / coarsest["seconds"], 3),
-            "mesh_share_warm": round(1.0 - coarsest["seconds"] / full["seconds"], 3)}
-
-
-def _shifts(row: dict, full: dict) -> None:
-    """The row's shifts of k and rho from the full mesh's fit in its stated (and statistical)
-    standard errors, and the warm speed-up."""
-    if row["error"] is None and full["error"] is None:
-        dk, dr = row["range_k"] - full["range_k"], row["rho"] - full["rho"]
-        row["k_shift_se"], row["rho_shift_se"] = dk / full["range_stderr"], dr / full["rho_stderr"]
-        row["k_shift_se_stat"] = dk / full["range_stderr_stat"]
-        row["rho_shift_se_stat"] = dr / full["rho_stderr_stat"]
-        row["speedup_warm"] = full["seconds"] / row["seconds"]
+    """The most any level of detail can save: the fastest decimated level's warm speed-up over
+    the full mesh (the coarsest levels leave only the work that does not depend on the mesh, so
+    on a quiet machine it is the coarsest; on a shared one, whichever ran fastest), and the share
+    of the full mesh's warm fit that the mesh accounts for (1 - fastest / full)."""
+    full = rows[0]
+    fastest = min((r for r in rows if r["lod"] not in ("off", "auto")), key=lambda r: r["seconds"])
+    return {"faces": fastest["faces"], "speedup_warm": round(full["seconds"] / fastest["seconds"], 3),
+            "mesh_share_warm": round(1.0 - fastest["seconds"] / full["seconds"], 3)}
 
 
 def bench_lod(quick: bool = False, seed: int = 0, progress=None, fresh: bool = True,
