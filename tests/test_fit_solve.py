@@ -108,6 +108,12 @@ def test_penumbra_width_is_two_over_the_pixel_slope_inside_the_penumbra():
     assert penumbra_width_px([_Samples(2)], none) == (None, None)
 
 
+def test_no_sample_inside_the_penumbra_is_an_upper_bound_not_an_error():
+    """penumbra_px None (no sample inside the penumbra) with the sample count given: a bound."""
+    ident = identifiability(5e-4, 1e-5, None, 1e-4, 0)
+    assert not ident.identifiable and ident.range_k >= 5e-4 and "upper bound" in ident.warning
+
+
 def test_no_ramp_bound_is_the_k_whose_penumbra_reaches_the_nearest_sample():
     """No sample inside the penumbra: u scales as 1/k, so k * min |u| is the largest k the samples
     allow; samples beyond the planned bands (u = +-1e6) and padding rows bound nothing."""
