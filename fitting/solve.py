@@ -424,7 +424,7 @@ def identifiability(k: float, k_stderr: float, penumbra_px: float | None,
     ``k_stderr``), and at least the k whose penumbra would be one pixel wide
     (k / penumbra_px, the width scaling with k)."""
     resolved = penumbra_px is not None and penumbra_px >= MIN_PENUMBRA_PX
-    seen = n_penumbra is None or n_penumbra >= MIN_PENUMBRA_SAMPLES or penumbra_px >= NARROW_PENUMBRA_PX
+    seen = n_penumbra is None or n_penumbra >= MIN_PENUMBRA_SAMPLES or (resolved and penumbra_px >= NARROW_PENUMBRA_PX)
     if resolved and seen and k_stderr <= MAX_K_REL_STDERR * max(k, 1e-12):
         return Identifiability(True, float(k), None)
     upper = k + 2.0 * (k_stderr if bound_stderr is None else max(k_stderr, bound_stderr))
