@@ -39,7 +39,8 @@ from .views import PhotoView
 
 __all__ = ["FitOptions", "fit_group", "Solution", "Trial", "KRho", "Identifiability", "sample_views",
            "initial_params", "plain_config", "start_grid", "plain_start", "choose_model", "covariance", "k_rho_with_errors",
-           "penumbra_width_px", "identifiability", "profile_plot_data"]
+           "penumbra_width_px", "SampleCounts", "sample_counts", "identifiability", "umbra_warning",
+           "profile_plot_data"]
 
 #: Levenberg-Marquardt tolerances (relative, absolute) on the parameters and on each residual
 #: (residuals are relative to the lit level, whose noise is ~1e-2: 1e-4 is 1 % of it).
@@ -48,6 +49,20 @@ LM_RTOL, LM_ATOL = 1e-4, 1e-4
 COV_RCOND = 1e-6
 #: Not identifiable below this penumbra width (pixels) or above this relative error of k.
 MIN_PENUMBRA_PX, MAX_K_REL_STDERR = 0.8, 0.5
+#: Not identifiable when fewer samples than MIN_PENUMBRA_SAMPLES lie inside a fitted penumbra
+#: (|u| < 1) narrower than NARROW_PENUMBRA_PX: its width, as wide as a camera's blur spot
+#: (2 sqrt(1/12 + blur^2) = 1.6 px at 0.7 px of blur), and k then rest on a handful of pixels,
+#: where a sharper shadow under the blur or JPEG fits as well (hard-cases preset, 320x240: the sun
+#: at 5 deg read k 2.4x the truth from 16 samples of a 1.6 px penumbra, a shadow partly out of
+#: frame 2.0x from 12; groups with penumbrae of 1.3-1.95 px that measured k had 185 or more,
+#: and 26 samples of a 5.6 px penumbra measured k within 0.5 %: docs/uncertainty.md, "Counting
+#: the samples").
+MIN_PENUMBRA_SAMPLES, NARROW_PENUMBRA_PX = 40, 2.0
+#: rho is not measured when fewer samples than this lie in the fitted umbra (alpha, blur included,
+#: at least UMBRA_ALPHA): rho is the umbra's level, and without umbra pixels it comes from the
+#: penumbra's model and trades off with k (a shadow a pixel or two wide, no umbra sample, read rho
+#: 0.55 for 0.25; a long thin shadow at a low sun measured rho within 0.005 from 15).
+MIN_UMBRA_SAMPLES, UMBRA_ALPHA = 5, 0.99
 
 
 def _group_arrays(samples: list[PhotoSamples], views: list[PhotoView]) -> GroupArrays:
@@ -366,6 +381,30 @@ def penumbra_width_px(samples: list[PhotoSamples], prediction: Prediction) -> tu
     return float(np.median(w)), float(q75 - q25)
 
 
+class SampleCounts(NamedTuple):
+    """How many of the fit's samples (padding left out) the fitted shadow puts inside the
+    penumbra (|u| < 1) and in the umbra (alpha >= UMBRA_ALPHA, the pixel's blur included)."""
+
+    penumbra: int
+    umbra: int
+
+
+def sample_counts(samples: list[PhotoSamples], prediction: Prediction) -> SampleCounts:
+    """Step 5a: ``SampleCounts`` of the photos' samples under ``prediction``."""
+    n = sum(len(s.observed) for s in samples)
+    u, alpha = np.asarray(prediction.u)[:n], np.asarray(prediction.alpha)[:n]
+    return SampleCounts(int(np.count_nonzero(np.abs(u) < 1)), int(np.count_nonzero(alpha >= UMBRA_ALPHA)))
+
+
+def umbra_warning(n_umbra: int) -> str | None:
+    """The warning (the group is then not reliable) for a fit with fewer than MIN_UMBRA_SAMPLES
+    samples in the fitted umbra, or None."""
+    if n_umbra >= MIN_UMBRA_SAMPLES:
+        return None
+    return (f"rho not measured: only {n_umbra} samples lie in the fitted umbra (fewer than "
+            f"{MIN_UMBRA_SAMPLES}), so rho rests on the penumbra's model")
+
+
 class Identifiability(NamedTuple):
     """Whether k was measured; when not, range_k is an upper bound and ``warning`` says so."""
 
@@ -375,18 +414,27 @@ class Identifiability(NamedTuple):
 
 
 def identifiability(k: float, k_stderr: float, penumbra_px: float | None,
-                    bound_stderr: float | None = None) -> Identifiability:
+                    bound_stderr: float | None = None, n_penumbra: int | None = None) -> Identifiability:
     """Step 5b: k is not identifiable when the penumbra is narrower than MIN_PENUMBRA_PX
-    (or not seen) or k is lost in its own noise (statistical error ``k_stderr`` above
-    MAX_K_REL_STDERR of k). Then the reported range_k is an upper bound: k + 2 sigma (sigma
-    = ``bound_stderr``, the stated error with its systematic part, when given; else
+    (or not seen), when it is narrower than NARROW_PENUMBRA_PX and fewer than
+    MIN_PENUMBRA_SAMPLES samples lie inside it (``n_penumbra``; None: not checked), or when
+    k is lost in its own noise (statistical error ``k_stderr``
+    above MAX_K_REL_STDERR of k). Then the reported range_k is an upper bound: k + 2 sigma
+    (sigma = ``bound_stderr``, the stated error with its systematic part, when given; else
     ``k_stderr``), and at least the k whose penumbra would be one pixel wide
     (k / penumbra_px, the width scaling with k)."""
-    if penumbra_px is not None and penumbra_px >= MIN_PENUMBRA_PX and k_stderr <= MAX_K_REL_STDERR * max(k, 1e-12):
+    resolved = penumbra_px is not None and penumbra_px >= MIN_PENUMBRA_PX
+    seen = n_penumbra is None or n_penumbra >= MIN_PENUMBRA_SAMPLES or penumbra_px >= NARROW_PENUMBRA_PX
+    if resolved and seen and k_stderr <= MAX_K_REL_STDERR * max(k, 1e-12):
         return Identifiability(True, float(k), None)
     upper = k + 2.0 * (k_stderr if bound_stderr is None else max(k_stderr, bound_stderr))
     if penumbra_px:
         upper = max(upper, k / max(penumbra_px, 1e-9))
+    if resolved and not seen:
+        # Blur and JPEG widen a penumbra that few pixels sample: k reads high, so it bounds k.
+        return Identifiability(False, float(upper), f"range not identifiable: only {n_penumbra} samples lie "
+                               f"inside the fitted penumbra (fewer than {MIN_PENUMBRA_SAMPLES}); range_k is "
+                               "an upper bound")
     return Identifiability(False, float(upper), "range not identifiable: the penumbra is narrower than "
                            "the resolution; range_k is an upper bound")
 
@@ -474,12 +522,17 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
     result.range_stderr, result.rho_stderr = errors.range_stderr, errors.rho_stderr
     result.range_stderr_stat, result.rho_stderr_stat = errors.range_stderr_stat, errors.rho_stderr_stat
     result.range_stderr_sys, result.rho_stderr_sys = errors.range_stderr_sys, errors.rho_stderr_sys
-    ident = identifiability(est.range_k, errors.range_stderr_stat, result.penumbra_px, errors.range_stderr)
+    counts = sample_counts(samples, sol.prediction)
+    ident = identifiability(est.range_k, errors.range_stderr_stat, result.penumbra_px, errors.range_stderr,
+                            counts.penumbra)
     result.identifiable, result.range_k = ident.identifiable, ident.range_k
     if ident.warning:
         result.warnings.append(ident.warning)
     elif resolution_warning(result.penumbra_px, result.blur_px):
         result.warnings.append(resolution_warning(result.penumbra_px, result.blur_px))
+    if umbra_warning(counts.umbra):
+        result.warnings.append(umbra_warning(counts.umbra))
+        result.reliable = False
     if options.plots:
         result.plot_profiles = profile_plot_data(samples, sol.prediction, est.rho, np.asarray(arrays.sky_hidden),
                                                   np.asarray(arrays.sun_cos))

@@ -178,17 +178,8 @@ def test_hard_cases_preset_reports_its_bad_photos(hard_cases_preset):
 # Measured at 320 x 240 (fitted value against the truth, k = 0.00465 everywhere): each of these
 # groups comes back with a wrong value that is neither flagged as an upper bound nor unreliable.
 HARD_PRESET_FAILURES = {
-    "low-sun": "known bug since the per-photo pixel model (2026-11-24 evening): sun at 5 deg, k 0.0114 for "
-               "0.00465 (2.0 stated sigma) is reported identifiable, reliable: the penumbra width behind "
-               "the identifiability test is the median of only 16 of 2048 samples inside the penumbra "
-               "(1.64 px; before, 7 samples read 0.70 px and k was an upper bound)",
     "zenith": "known bug: sun at 87 deg, the shadow is under the pillar: rho 0.001 for a truth of 0.20, "
               "with reliable = true (only k is flagged as not identifiable)",
-    "subpixel": "known bug: penumbra under a pixel (80 m top-down map): k 0.065 (14x the truth) and rho "
-                "0.55 for 0.25, identifiable and reliable",
-    "out-of-frame": "known bug: shadow partly out of frame: k 0.0095 for 0.00465 (+105 %), identifiable; its rho "
-                    "(0.389 for 0.30) is now flagged unreliable (the umbra is not one level: part of the shadowed "
-                    "sheet is taken for ground), but k needs the penumbra-sample rule (12 samples inside it)",
 }
 
 

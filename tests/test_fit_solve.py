@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from fitting.model import FitParams, Prediction, k_from_raw, rho_from_raw
-from fitting.solve import (MAX_K_REL_STDERR, MIN_PENUMBRA_PX, covariance, identifiability, k_rho_with_errors,
-                           penumbra_width_px, robust_delta)
+from fitting.solve import (MAX_K_REL_STDERR, MIN_PENUMBRA_PX, MIN_PENUMBRA_SAMPLES, NARROW_PENUMBRA_PX, MIN_UMBRA_SAMPLES, UMBRA_ALPHA,
+                           SampleCounts, covariance, identifiability, k_rho_with_errors, penumbra_width_px,
+                           robust_delta, sample_counts, umbra_warning)
 
 
 def _params(n_photos=3, seed=0):
@@ -132,6 +133,35 @@ def test_identifiability_thresholds():
     assert not identifiability(k, 0.001, MIN_PENUMBRA_PX * 0.99).identifiable
     assert identifiability(k, MAX_K_REL_STDERR * k, 2.0).identifiable
     assert not identifiability(k, MAX_K_REL_STDERR * k * 1.01, 2.0).identifiable
+
+
+def test_sample_counts_inside_the_penumbra_and_in_the_umbra_leave_out_the_padding():
+    u = np.array([-2.0, -0.5, 0.99, 1.0, 3.0, 0.2, 0.0, -5.0])
+    alpha = np.array([1.0, 0.7, 0.0, 0.0, 0.0, 0.4, UMBRA_ALPHA, 1.0])
+    pred = Prediction(np.zeros(8), alpha, u, np.ones(8))
+    # 6 real samples (4 + 2); the last two rows are padding.
+    assert sample_counts([_Samples(4), _Samples(2)], pred) == SampleCounts(penumbra=3, umbra=1)
+    assert sample_counts([_Samples(8)], pred) == SampleCounts(penumbra=4, umbra=3)
+
+
+def test_too_few_samples_inside_a_narrow_penumbra_make_k_an_upper_bound():
+    k, se, bound, narrow = 0.01, 0.001, 0.002, 0.99 * NARROW_PENUMBRA_PX
+    assert identifiability(k, se, narrow, bound, MIN_PENUMBRA_SAMPLES).identifiable
+    ident = identifiability(k, se, narrow, bound, MIN_PENUMBRA_SAMPLES - 1)
+    assert not ident.identifiable
+    assert ident.range_k == pytest.approx(k + 2 * bound)
+    assert f"only {MIN_PENUMBRA_SAMPLES - 1} samples" in ident.warning and "upper bound" in ident.warning
+    # A penumbra wider than a blur spot is measured by few samples too.
+    assert identifiability(k, se, NARROW_PENUMBRA_PX, bound, 3).identifiable
+    # A penumbra under the resolution keeps its own reason, whatever the count.
+    assert "narrower than the resolution" in identifiability(k, se, 0.5, bound, 3).warning
+
+
+def test_umbra_warning_below_the_minimum_count_only():
+    assert umbra_warning(MIN_UMBRA_SAMPLES) is None
+    warning = umbra_warning(MIN_UMBRA_SAMPLES - 1)
+    assert warning.startswith("rho not measured") and f"only {MIN_UMBRA_SAMPLES - 1} samples" in warning
+    assert "\n" not in warning
 
 
 def test_robust_scale_is_three_normal_sigmas_and_ignores_padding():
