@@ -435,8 +435,7 @@ def identifiability(k: float, k_stderr: float, penumbra_px: float | None,
     ``k_stderr``), and at least the k whose penumbra would be one pixel wide
     (k / penumbra_px, the width scaling with k)."""
     resolved = penumbra_px is not None and penumbra_px >= MIN_PENUMBRA_PX
-    seen = (n_penumbra is None or n_penumbra >= MIN_PENUMBRA_SAMPLES
-            or (penumbra_px is not None and penumbra_px >= NARROW_PENUMBRA_PX))
+    seen = n_penumbra is None or n_penumbra >= MIN_PENUMBRA_SAMPLES or (resolved and penumbra_px >= NARROW_PENUMBRA_PX)
     if resolved and seen and k_stderr <= MAX_K_REL_STDERR * max(k, 1e-12):
         return Identifiability(True, float(k), None)
     upper = range_upper_bound(k, k_stderr, penumbra_px, bound_stderr)

@@ -169,8 +169,9 @@ def test_too_few_samples_inside_a_narrow_penumbra_make_k_an_upper_bound():
     assert f"only {MIN_PENUMBRA_SAMPLES - 1} samples" in ident.warning and "upper bound" in ident.warning
     # A penumbra wider than a blur spot is measured by few samples too.
     assert identifiability(k, se, NARROW_PENUMBRA_PX, bound, 3).identifiable
-    # A penumbra under the resolution keeps its own reason, whatever the count.
+    # A penumbra under the resolution, or not seen at all (no sample inside), keeps its own reason.
     assert "narrower than the resolution" in identifiability(k, se, 0.5, bound, 3).warning
+    assert "narrower than the resolution" in identifiability(k, se, None, bound, 0).warning
 
 
 def test_umbra_warning_below_the_minimum_count_only():

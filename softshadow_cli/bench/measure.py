@@ -33,10 +33,18 @@ def _status_kb(field: str) -> int | None:
     return None
 
 
+_M_MMAP_THRESHOLD = -3  # glibc's mallopt parameter
+
+
 def _trim_heap() -> None:
-    """Hand glibc's free heap pages back to the system (no-op where libc has no malloc_trim)."""
+    """Hand glibc's free heap pages back to the system, and fix its mmap threshold at 1 MB, so
+    that large buffers are mapped afresh and unmapped when freed (glibc otherwise raises the
+    threshold after the first large free, up to 32 MB, and later buffers reuse resident heap
+    pages: a 32 MB output then read 0 MB extra in 5 of 30 runs). No-op without glibc."""
     try:
-        ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").malloc_trim(0)
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        libc.mallopt(_M_MMAP_THRESHOLD, 1 << 20)
+        libc.malloc_trim(0)
     except (OSError, AttributeError):
         pass
 
