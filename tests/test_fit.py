@@ -178,8 +178,9 @@ def test_hard_cases_preset_reports_its_bad_photos(hard_cases_preset):
 # Measured at 320 x 240 (fitted value against the truth, k = 0.00465 everywhere): each of these
 # groups comes back with a wrong value that is neither flagged as an upper bound nor unreliable.
 HARD_PRESET_FAILURES = {
-    "zenith": "known bug: sun at 87 deg, the shadow is under the pillar: rho 0.001 for a truth of 0.20, "
-              "with reliable = true (only k is flagged as not identifiable)",
+    "zenith": "known bug: sun at 87 deg, the shadow is under the pillar: rho 0.001 for a truth of 0.20 is "
+              "flagged unreliable (no sample in the fitted umbra), but k's upper bound, 0.00064, is below the "
+              "truth, 0.00465 (no sample inside the penumbra; the bound is k + 2 sigma)",
 }
 
 
