@@ -190,3 +190,16 @@ def test_bench_ceiling_is_the_fastest_levels_saving():
             {"lod": 20692, "faces": 20692, "seconds": 1.6}, {"lod": 1000, "faces": 1000, "seconds": 1.25},
             {"lod": 300, "faces": 300, "seconds": 1.3}]
     assert _ceiling(rows) == {"faces": 1000, "speedup_warm": 1.6, "mesh_share_warm": 0.375}
+
+
+def test_bench_shifts_are_in_the_full_meshs_errors():
+    """The LOD benchmark's shifts: a level's k and rho minus the full mesh's, over the full mesh's
+    stated and statistical errors, and its warm speed-up."""
+    from softshadow_cli.bench.lod import _shifts
+    full = {"error": None, "range_k": 0.010, "rho": 0.25, "range_stderr": 0.001, "rho_stderr": 0.002,
+            "range_stderr_stat": 0.0005, "rho_stderr_stat": 0.001, "seconds": 2.0}
+    row = dict(full, range_k=0.0095, rho=0.254, seconds=0.5)
+    _shifts(row, full)
+    assert row["k_shift_se"] == pytest.approx(-0.5) and row["rho_shift_se"] == pytest.approx(2.0)
+    assert row["k_shift_se_stat"] == pytest.approx(-1.0) and row["rho_shift_se_stat"] == pytest.approx(4.0)
+    assert row["speedup_warm"] == pytest.approx(4.0)

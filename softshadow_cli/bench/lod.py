@@ -95,6 +95,17 @@ def _ceiling(rows: list[dict]) -> dict:
             "mesh_share_warm": round(1.0 - fastest["seconds"] / full["seconds"], 3)}
 
 
+def _shifts(row: dict, full: dict) -> None:
+    """The row's shifts of k and rho from the full mesh's fit in its stated (and statistical)
+    standard errors, and the warm speed-up."""
+    if row["error"] is None and full["error"] is None:
+        dk, dr = row["range_k"] - full["range_k"], row["rho"] - full["rho"]
+        row["k_shift_se"], row["rho_shift_se"] = dk / full["range_stderr"], dr / full["rho_stderr"]
+        row["k_shift_se_stat"] = dk / full["range_stderr_stat"]
+        row["rho_shift_se_stat"] = dr / full["rho_stderr_stat"]
+        row["speedup_warm"] = full["seconds"] / row["seconds"]
+
+
 def bench_lod(quick: bool = False, seed: int = 0, progress=None, fresh: bool = True,
               scenes: tuple[str, ...] | None = None) -> dict:
     """Per scene: the truth, and per setting (off, auto, fixed levels) the faces fitted, the fit
