@@ -136,10 +136,15 @@ def _umbra_levels(a: PhotoAgreement) -> str | None:
     return None
 
 
+def _two_level_umbrae(agreement: list[PhotoAgreement]) -> list[tuple[PhotoAgreement, str]]:
+    """The photos whose umbra is not one level, each with its reason (``_umbra_levels``)."""
+    return [(a, reason) for a in agreement if (reason := _umbra_levels(a))]
+
+
 def fit_quality(agreement: list[PhotoAgreement]) -> tuple[list[str], str | None]:
     """Whether the model describes what the photos show (module docstring): one-line warnings that
     make the group unreliable, and the reason k is not measured (the texture rule) or None."""
-    warnings = [f"{a.photo}: {_umbra_levels(a)}; rho is a compromise" for a in agreement if _umbra_levels(a)]
+    warnings = [f"{a.photo}: {reason}; rho is a compromise" for a, reason in _two_level_umbrae(agreement)]
     ratios = [a.rms_lit / a.predicted_depth for a in agreement
               if a.n_lit >= _MIN_SIDE_SAMPLES and np.isfinite(a.rms_lit) and a.predicted_depth > 0]
     if ratios and np.median(ratios) > TEXTURE_DEPTH_RATIO:
@@ -179,11 +184,10 @@ def judge(agreement: list[PhotoAgreement]) -> Verdict:
         verdict.leave_out.append((name, reason))
         return verdict
     # A photo whose umbra holds two levels while the others' hold one: the fit without it measures rho.
-    two_levels = [(a.rms_umbra / max(a.rms_lit, 1e-12), a.photo, _umbra_levels(a)) for a in agreement
-                  if _umbra_levels(a)]
+    two_levels = _two_level_umbrae(agreement)
     if two_levels and len(two_levels) < len(agreement):
-        _, name, reason = max(two_levels)
-        verdict.leave_out.append((name, reason))
+        a, reason = max(two_levels, key=lambda pair: pair[0].rms_umbra / max(pair[0].rms_lit, 1e-12))
+        verdict.leave_out.append((a.photo, reason))
         return verdict
     rms = [a.rms for a in agreement]
     worst = int(np.argmax(rms))
