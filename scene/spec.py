@@ -15,7 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from softshadow import FALLOFFS, GroundGrid, PinholeCamera, Projector, slide_from_text
+from softshadow import GroundGrid, PinholeCamera, Projector, slide_from_text
+from softshadow.internal import FALLOFFS
 
 __all__ = ["NO_GEOMETRY", "TABLES", "SceneError", "SiteSpec", "ObjectSpec", "ReceiverSpec", "CameraSpec", "PhotoSpec",
            "ProjectorSpec", "SceneSpec",

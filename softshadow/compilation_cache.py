@@ -12,7 +12,7 @@ from pathlib import Path
 
 __all__ = ["default_cache_dir", "use_compilation_cache", "SAVED_PROGRAMS_ENV"]
 
-#: The folder where ``fitting.saved_programs`` keeps traced programs (``jax.export``); unset: off.
+#: The folder where ``fitting.solve.saved_programs`` keeps traced programs (``jax.export``); unset: off.
 SAVED_PROGRAMS_ENV = "SOFTSHADOW_SAVED_PROGRAMS"
 
 

@@ -200,8 +200,12 @@ def _add_bench(sub):
 
 
 def _run_bench(args) -> int:
-    from .bench import run_bench
-    return run_bench(args)
+    from .checkout import import_benchmarks
+    benchmarks = import_benchmarks()
+    if benchmarks is None:
+        return _fail("bench", "the benchmarks live in a source checkout, not in the installed package: "
+                              "git clone the repository, pip install -e . there, and run softshadow bench from it", 2)
+    return benchmarks.run_bench(args)
 
 
 def main(argv=None) -> int:

@@ -15,10 +15,11 @@ import matplotlib.image as mpimg
 import numpy as np
 import pytest
 
-from fitting import plots, report
-from fitting.report import (PAPER_TABLE2, brightness_stderr, format_table, nearest_paper_time,
+from fitting.report import plots
+from fitting.report import write as report
+from fitting.report.write import (PAPER_TABLE2, brightness_stderr, format_table, nearest_paper_time,
                             software_versions, write_report, write_results_json, write_table2)
-from fitting.results import FitResults, GroupResult, OverlayPlotData, ProfilePlotData
+from fitting.report.results import FitResults, GroupResult, OverlayPlotData, ProfilePlotData
 
 CONVENTIONS_GROUP_KEYS = {
     "label", "time", "photos", "range", "range_k", "range_stderr", "brightness", "rho",
