@@ -15,7 +15,7 @@ def _use_compilation_cache() -> None:
 
 
 def _fail(command: str, message: str, code: int = 1) -> int:
-    print(f"softshadow {command}: {message}", file=sys.stderr)
+    print(f"softshadow {command}: {message}" if command else f"softshadow: {message}", file=sys.stderr)
     return code
 
 
@@ -74,14 +74,21 @@ def _run_render(args) -> int:
     import numpy as np
 
     from .render_command import render_scene_file
+    from .validate import OptionError, check_render_options
     try:
+        check_render_options(args)
         image, shading = render_scene_file(args)
+    except OptionError as exc:
+        return _fail("render", str(exc).splitlines()[0], 2)
     except (ValueError, OSError) as exc:
         return _fail("render", str(exc).splitlines()[0])
     from PIL import Image
-    Image.fromarray(image).save(args.out)
-    if args.npy:
-        np.save(args.npy, shading)
+    try:
+        Image.fromarray(image).save(args.out)
+        if args.npy:
+            np.save(args.npy, shading)
+    except (ValueError, OSError) as exc:
+        return _fail("render", f"cannot write the image: {exc}".splitlines()[0])
     print(f"wrote {args.out}" + (f" and {args.npy}" if args.npy else ""))
     return 0
 
@@ -110,14 +117,14 @@ def _add_fit(sub):
     p.add_argument("--range-k-max", type=float, default=0.03, help="largest k searched (default 0.03)")
     p.add_argument("--half-size", action="store_true", help="decode RAW at half size (faster)")
     p.add_argument("--no-plots", dest="plots", action="store_false")
-    p.add_argument("--overlays", default="first", choices=("first", "all"),
+    p.add_argument("--overlays", default=None, choices=("first", "all"),
                    help="overlay plots of the fitted shadow for the first photo of each group "
                         "(default) or for every photo")
     p.add_argument("--lod", default="auto", type=_lod_value, metavar="auto|off|FACES",
                    help="level of detail of the object's mesh: auto (default: the coarsest level that "
                         "moves k and rho by at most --lod-tolerance of their standard errors), off "
                         "(the mesh as given), or a face count to decimate to")
-    p.add_argument("--lod-tolerance", type=float, default=0.1, metavar="SE",
+    p.add_argument("--lod-tolerance", type=float, default=None, metavar="SE",
                    help="with --lod auto: the largest shift of k or rho allowed, in their stated "
                         "standard errors, systematic part included (default 0.1)")
     p.set_defaults(func=_run_fit)
@@ -138,6 +145,11 @@ def _lod_value(text: str):
 
 def _run_fit(args) -> int:
     from .fit_command import run_fit
+    from .validate import OptionError, check_fit_options
+    try:
+        check_fit_options(args)
+    except OptionError as exc:
+        return _fail("fit", str(exc).splitlines()[0], 2)
     return run_fit(args)
 
 
@@ -208,8 +220,7 @@ def _run_bench(args) -> int:
     return benchmarks.run_bench(args)
 
 
-def main(argv=None) -> int:
-    argv = sys.argv[1:] if argv is None else list(argv)
+def _parse(argv: list[str]) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="softshadow", description=__doc__)
     from softshadow import __version__
     parser.add_argument("--version", action="version", version=f"softshadow {__version__}")
@@ -219,21 +230,38 @@ def main(argv=None) -> int:
     _add_synth(sub, with_arguments="synth" in argv)
     _add_demo(sub)
     _add_bench(sub)
-    args = parser.parse_args(argv)
+    return parser.parse_args(argv)
+
+
+def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    from .interrupts import ctrl_c_never_swallowed, ctrl_c_pressed
+    # The command's name for a message before the arguments are parsed (a Ctrl-C during imports).
+    command = next((a for a in argv if a in ("render", "fit", "synth", "demo", "bench")), "")
+    args = None
     try:
-        _use_compilation_cache()
-        from softshadow import one_blas_thread
-        from .interrupts import ctrl_c_never_swallowed
-        with ctrl_c_never_swallowed(), one_blas_thread():
-            return int(args.func(args) or 0)
+        # From the first import on: a Ctrl-C that lands inside an extension module's
+        # initialisation (jaxlib) must not abort the process.
+        with ctrl_c_never_swallowed():
+            args = _parse(argv)
+            _use_compilation_cache()
+            from softshadow import one_blas_thread
+            with one_blas_thread():
+                code = int(args.func(args) or 0)
+        if ctrl_c_pressed() and code != 130:
+            # A Ctrl-C a library swallowed, pressed too late to stop the work it was meant to stop.
+            return _fail(command, "interrupted (the command had finished its work)", 130)
+        return code
     except KeyboardInterrupt:
-        return _fail(args.command, "interrupted", 130)
+        return _fail(command, "interrupted", 130)
     except Exception as exc:
+        if ctrl_c_pressed():  # a library turned the KeyboardInterrupt into another exception
+            return _fail(command, "interrupted", 130)
         # A bug or an unforeseen input: one line for the user, the traceback with --verbose.
         if getattr(args, "verbose", False):
             raise
         first = (str(exc).splitlines() or [""])[0]
-        return _fail(args.command, f"unexpected error: {type(exc).__name__}: {first}"
+        return _fail(command, f"unexpected error: {type(exc).__name__}: {first}"
                      + (" (--verbose shows the traceback)" if hasattr(args, "verbose") else ""))
 
 

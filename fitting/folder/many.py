@@ -22,10 +22,12 @@ the rest; failed folders are tried again.
 
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
 import importlib.util
 import json
 import os
+import signal
 import sys
 import time as _time
 from pathlib import Path
@@ -73,11 +75,14 @@ def _relative(folder: Path, root: Path) -> str:
 
 
 def folder_rows(folder: str, groups: list[dict]) -> list[dict]:
-    """summary.csv rows of one folder from its results.json groups."""
+    """summary.csv rows of one folder from its results.json groups (a group with an error is
+    never reliable, whatever its record says)."""
     rows = []
     for g in groups:
         row = {c: g.get(c) for c in SUMMARY_COLUMNS if c not in ("folder", "photos", "error")}
         row.update(folder=folder, photos=";".join(g.get("photos") or []), error=g.get("error"))
+        if row["error"] is not None:
+            row["reliable"] = False
         rows.append(row)
     return rows
 
@@ -88,9 +93,19 @@ def _failure_row(folder: str, reason: str) -> dict:
     return row
 
 
-def _read_done(out_dir: Path) -> list[dict] | None:
-    """The groups of a folder already done (its marker and results.json), else None."""
-    if not (out_dir / DONE_MARKER).exists():
+def _done_marker(out_dir: Path) -> dict | None:
+    try:
+        marker = json.loads((out_dir / DONE_MARKER).read_text())
+    except (OSError, ValueError):
+        return None
+    return marker if isinstance(marker, dict) else None
+
+
+def _read_done(out_dir: Path, key: str | None) -> list[dict] | None:
+    """The groups of a folder already done (its marker and results.json) whose marker carries
+    ``key`` (``resume.folder_key``: nothing that decides its results has changed), else None."""
+    marker = _done_marker(out_dir)
+    if marker is None or key is None or marker.get("key") != key:
         return None
     try:
         return json.loads((out_dir / "results.json").read_text())["groups"]
@@ -99,27 +114,35 @@ def _read_done(out_dir: Path) -> list[dict] | None:
 
 
 def fit_one_folder(folder, out_dir, options: FitOptions | None = None, force: bool = False,
-                   cache_dir=None) -> tuple[list[dict], float]:
-    """Fit one folder into ``out_dir`` (``fit_and_report``) and mark it done; the task a
-    Dask worker runs. Returns (its results.json groups, seconds spent). Raises what the fit
-    raises (the caller records it)."""
+                   cache_dir=None, half_size: bool = False, jobs: int = 1) -> tuple[list[dict], float]:
+    """Fit one folder into ``out_dir`` (``fit_and_report``) and mark it done with its key
+    (``resume.folder_key``, taken before the fit reads the folder); the task a Dask worker runs.
+    Returns (its results.json groups, seconds spent). Raises what the fit raises (the caller
+    records it)."""
+    from ..report.files import software_versions
     from .api import fit_and_report
+    from .resume import folder_key
     use_compilation_cache(cache_dir)
     start = _time.perf_counter()
+    options = options or FitOptions()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    results: FitResults = fit_and_report(folder, out_dir, options, force=force)
+    (out_dir / DONE_MARKER).unlink(missing_ok=True)  # not done while it is being refitted
+    key = folder_key(folder, options, software_versions(), half_size)
+    results: FitResults = fit_and_report(folder, out_dir, options, force=force, half_size=half_size, jobs=jobs)
     seconds = _time.perf_counter() - start
     marker = {"finished": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-              "groups": len(results.groups), "fitted": results.n_fitted, "seconds": round(seconds, 3)}
+              "groups": len(results.groups), "fitted": results.n_fitted, "seconds": round(seconds, 3),
+              "key": key}
     (out_dir / DONE_MARKER).write_text(json.dumps(marker) + "\n")
     return [g.to_json() for g in results.groups], seconds
 
 
-def _task(folder: str, out_dir: str, options, force: bool, cache_dir) -> dict:
+def _task(folder: str, out_dir: str, options, force: bool, cache_dir, half_size: bool = False,
+          jobs: int = 1) -> dict:
     """Worker side: never raises, so one folder's failure is a row, not a lost run."""
     try:
-        groups, seconds = fit_one_folder(folder, out_dir, options, force, cache_dir)
+        groups, seconds = fit_one_folder(folder, out_dir, options, force, cache_dir, half_size, jobs)
         return {"groups": groups, "seconds": seconds, "error": None}
     except Exception as exc:  # noqa: BLE001 - any failure of one folder must not stop the others
         from .read import FolderError
@@ -138,12 +161,47 @@ def _client(scheduler: str, workers: int | None, log: Callable[[str], None]):
     if scheduler == "local":
         n = workers or max(1, os.cpu_count() or 1)
         # Processes, one thread each: XLA threads inside each fit, and the GIL is not shared.
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                               dashboard_address=":0", silence_logs=40)
+        with _ctrl_c_for_this_process_only():
+            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                   dashboard_address=":0", silence_logs=40)
         return Client(cluster), cluster
     if workers is not None:
         log("--workers is ignored with an existing cluster: it has the workers it has")
     return Client(scheduler, timeout="30s"), None
+
+
+@contextlib.contextmanager
+def _ctrl_c_for_this_process_only():
+    """Local worker processes started within the block never see Ctrl-C: a terminal sends it
+    to the whole process group, and a worker that took it would print tracebacks (JAX's exit
+    handler) and keep the cluster from closing. This process stops them (``_stop_local``).
+
+    SIGINT is blocked in this thread while the cluster starts: the cluster's event-loop thread,
+    created now, inherits the blocked signal, and so do the worker processes it starts (across
+    their exec). This thread unblocks it afterwards, so a Ctrl-C pressed meanwhile is pending,
+    not lost, and other threads receive it as before."""
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+def _stop_local(cluster) -> None:
+    """Stop a local cluster's worker processes at once (after a Ctrl-C): their fits cannot be
+    cut short politely, and waiting for them takes as long as a fit. Kept groups are whole
+    files (``resume.GroupStore``), so the next run resumes there."""
+    for nanny in list(getattr(cluster, "workers", {}).values()):
+        process = getattr(getattr(nanny, "process", None), "process", None)
+        pid = getattr(process, "pid", None)
+        if pid:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except OSError:
+                pass
 
 
 def _dashboard(client, local: bool) -> str | None:
@@ -173,7 +231,8 @@ def write_summary(rows: list[dict], out) -> Path:
 
 def fit_many(root, out, scheduler: str = "local", workers: int | None = None,
              options: FitOptions | None = None, force: bool = False, progress: bool = True,
-             cache_dir=None, plot: bool = True, log: Callable[[str], None] | None = None):
+             cache_dir=None, plot: bool = True, log: Callable[[str], None] | None = None,
+             half_size: bool = False, jobs: int = 1):
     """Fit every photo folder under ``root`` on Dask; returns the summary (pandas DataFrame,
     columns ``SUMMARY_COLUMNS``, one row per group, or one per failed folder).
 
@@ -181,16 +240,23 @@ def fit_many(root, out, scheduler: str = "local", workers: int | None = None,
     ``out/summary.png`` are written there too.
     scheduler: "local" (a LocalCluster of ``workers`` processes, default one per core) or
     the address of an existing scheduler ("tcp://HOST:8786").
-    force: refit folders already done (and their groups).
+    force: refit folders already done (and their groups). Without it a folder already done
+    is reused only while its key matches (``resume.folder_key``: its photos, scene.toml and
+    the files it names, the options, ``half_size`` and the software); a changed folder is
+    refitted, reusing the groups that did not change.
+    half_size, jobs: as ``fit_and_report``'s, for every folder.
     cache_dir: JAX's compilation cache for the workers (default:
     ``softshadow.internal.default_cache_dir()`` as each worker sees it).
     progress: a tqdm bar over folders on stderr; log: where one-line notes go (the
-    dashboard address; default stderr).
+    dashboard address, the folders that changed; default stderr).
     Raises ValueError when ``root`` holds no photo folder or the scheduler is not valid.
     """
     import pandas as pd
     from dask.distributed import as_completed
     from tqdm import tqdm
+
+    from ..report.files import software_versions
+    from .resume import folder_key
 
     log = log or (lambda text: print(text, file=sys.stderr))
     _check_scheduler(scheduler)
@@ -202,15 +268,24 @@ def fit_many(root, out, scheduler: str = "local", workers: int | None = None,
         raise ValueError(f"no folder under {root} holds photos")
     out.mkdir(parents=True, exist_ok=True)
     options = options or FitOptions()
+    software = software_versions()
     names = [_relative(f, root) for f in folders]
     rows_by: dict[str, list[dict]] = {}
-    todo = []
+    todo, changed = [], []
     for name, folder in zip(names, folders):
-        done = None if force else _read_done(out / name)
+        done = None
+        if not force and _done_marker(out / name) is not None:
+            done = _read_done(out / name, folder_key(folder, options, software, half_size))
+            if done is None:
+                changed.append(name)
         if done is not None:
             rows_by[name] = folder_rows(name, done)
         else:
             todo.append((name, folder))
+    if changed:
+        log(f"{len(changed)} finished folder{'s' if len(changed) != 1 else ''} changed since "
+            f"{'its' if len(changed) == 1 else 'their'} results (photos, scene.toml or the files it names, "
+            f"options or software), refitted: {', '.join(changed[:5])}{', ...' if len(changed) > 5 else ''}")
 
     def summary():
         return [r for n in names if n in rows_by for r in rows_by[n]]
@@ -226,7 +301,7 @@ def fit_many(root, out, scheduler: str = "local", workers: int | None = None,
             futures = {}
             for name, folder in todo:
                 fut = client.submit(_task, str(folder), str(out / name), options, force,
-                                    None if cache_dir is None else str(cache_dir),
+                                    None if cache_dir is None else str(cache_dir), half_size, jobs,
                                     key=f"fit-{name}-{_time.time_ns()}", pure=False)
                 futures[fut] = name
             bar = tqdm(total=len(folders), initial=done_count, desc="folders", unit="folder",
@@ -243,6 +318,10 @@ def fit_many(root, out, scheduler: str = "local", workers: int | None = None,
                     rows_by[name] = folder_rows(name, result["groups"])
                 write_summary(summary(), out)  # an interrupted run keeps what finished
                 bar.update(1)
+        except KeyboardInterrupt:
+            if cluster is not None:
+                _stop_local(cluster)
+            raise
         finally:
             if bar is not None:
                 bar.close()
