@@ -45,6 +45,7 @@ class _State:
     def __init__(self) -> None:
         self.active = False
         self.pressed = False
+        self.deferred = False  # waiting for the main thread to leave a place it cannot raise in
         self.lock = threading.Lock()
         self.timers: list[threading.Timer] = []
 
@@ -72,10 +73,16 @@ def ctrl_c_pressed() -> bool:
     return _state.pressed
 
 
-def _deliver() -> None:
-    """Deliver the Ctrl-C again: the handler runs at the main thread's next bytecode."""
+def _deliver(wake: bool = False) -> None:
+    """Deliver the Ctrl-C again: the handler runs at the main thread's next bytecode. With
+    ``wake``, as a real signal to the main thread, which also ends a blocking wait there (a
+    sleep, a lock); else only as Python's flag, which never interrupts native code."""
     with _state.lock:
-        if _state.active:
+        if not _state.active:
+            return
+        if wake and hasattr(signal, "pthread_kill"):
+            signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
+        else:
             _thread.interrupt_main()
 
 
@@ -111,7 +118,8 @@ def _watch(main_ident: int) -> None:
     deliver it again, and look again a moment later. Once it is handled, stop watching."""
     if not _state.active or _handling_interrupt(main_ident):
         return
-    _deliver()
+    if not _state.deferred:
+        _deliver(wake=True)
     _state.later(WATCH_S, lambda: _watch(main_ident))
 
 
@@ -123,8 +131,10 @@ def _interrupt(signum, frame) -> None:
     if first:
         _state.later(WATCH_S, lambda: _watch(threading.main_thread().ident))
     if _cannot_raise_here(frame):
+        _state.deferred = True
         _state.later(RETRY_S, _deliver)
         return
+    _state.deferred = False
     raise KeyboardInterrupt
 
 
@@ -149,18 +159,20 @@ def ctrl_c_never_swallowed():
         yield
         return
     previous_hook = sys.unraisablehook
-    _state.pressed = False
+    _state.pressed = _state.deferred = False
     _state.active = True
     sys.unraisablehook = _unraisable(previous_hook)
     previous = signal.signal(signal.SIGINT, _interrupt)
     try:
         yield
     finally:
-        _state.stop()
-        signal.signal(signal.SIGINT, previous)
-        sys.unraisablehook = previous_hook
-        if _state.pressed:
-            _forget_unhandled_interrupt()
+        try:
+            _state.stop()
+        finally:
+            signal.signal(signal.SIGINT, previous)
+            sys.unraisablehook = previous_hook
+            if _state.pressed:
+                _forget_unhandled_interrupt()
 
 
 def _forget_unhandled_interrupt() -> None:

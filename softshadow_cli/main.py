@@ -238,7 +238,7 @@ def main(argv=None) -> int:
     from .interrupts import ctrl_c_never_swallowed, ctrl_c_pressed
     # The command's name for a message before the arguments are parsed (a Ctrl-C during imports).
     command = next((a for a in argv if a in ("render", "fit", "synth", "demo", "bench")), "")
-    args = None
+    args = code = None
     try:
         # From the first import on: a Ctrl-C that lands inside an extension module's
         # initialisation (jaxlib) must not abort the process.
@@ -253,6 +253,10 @@ def main(argv=None) -> int:
             return _fail(command, "interrupted (the command had finished its work)", 130)
         return code
     except KeyboardInterrupt:
+        if code == 130:  # delivered again while the command, interrupted, was ending: said already
+            return 130
+        if code is not None:
+            return _fail(command, "interrupted (the command had finished its work)", 130)
         return _fail(command, "interrupted", 130)
     except Exception as exc:
         if ctrl_c_pressed():  # a library turned the KeyboardInterrupt into another exception

@@ -29,6 +29,7 @@ import json
 import os
 import signal
 import sys
+import threading
 import time as _time
 from pathlib import Path
 from typing import Callable
@@ -161,47 +162,88 @@ def _client(scheduler: str, workers: int | None, log: Callable[[str], None]):
     if scheduler == "local":
         n = workers or max(1, os.cpu_count() or 1)
         # Processes, one thread each: XLA threads inside each fit, and the GIL is not shared.
-        with _ctrl_c_for_this_process_only():
+        with _workers_ignore_ctrl_c(), _ctrl_c_held() as held:
+            # A cluster interrupted while it starts cannot be closed (its exit handler then
+            # fails with tracebacks): a Ctrl-C waits until it has started, then stops it.
             cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                    dashboard_address=":0", silence_logs=40)
-        return Client(cluster), cluster
+        try:
+            if held:
+                raise KeyboardInterrupt
+            return Client(cluster), cluster
+        except KeyboardInterrupt:
+            _stop_local(None, cluster)
+            raise
     if workers is not None:
         log("--workers is ignored with an existing cluster: it has the workers it has")
     return Client(scheduler, timeout="30s"), None
 
 
 @contextlib.contextmanager
-def _ctrl_c_for_this_process_only():
-    """Local worker processes started within the block never see Ctrl-C: a terminal sends it
-    to the whole process group, and a worker that took it would print tracebacks (JAX's exit
-    handler) and keep the cluster from closing. This process stops them (``_stop_local``).
-
-    SIGINT is blocked in this thread while the cluster starts: the cluster's event-loop thread,
-    created now, inherits the blocked signal, and so do the worker processes it starts (across
-    their exec). This thread unblocks it afterwards, so a Ctrl-C pressed meanwhile is pending,
-    not lost, and other threads receive it as before."""
-    if not hasattr(signal, "pthread_sigmask"):
+def _workers_ignore_ctrl_c():
+    """Local worker processes started within the block ignore Ctrl-C (SIGINT): a terminal sends
+    it to the whole process group, and a worker that took it would print tracebacks (asyncio,
+    JAX's exit handler) and keep the cluster from closing; this process stops them instead
+    (``_stop_local``). Workers are started through a shell that ignores SIGINT and then runs
+    Python, which keeps the signal ignored from its first instruction on; this process's own
+    handling of Ctrl-C is not touched, so a Ctrl-C pressed while the cluster starts is not lost."""
+    import multiprocessing.spawn as spawn
+    import shlex
+    import shutil
+    import tempfile
+    shell = shutil.which("sh") if os.name == "posix" else None
+    if shell is None:
         yield
         return
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    python = os.fsdecode(spawn.get_executable())
+    with tempfile.TemporaryDirectory(prefix="softshadow-worker-") as tmp:
+        wrapper = Path(tmp) / "python"
+        wrapper.write_text(f"#!{shell}\ntrap '' INT\nexec {shlex.quote(python)} \"$@\"\n")
+        wrapper.chmod(0o755)
+        spawn.set_executable(str(wrapper))
+        try:
+            yield
+        finally:
+            spawn.set_executable(python)
+
+
+@contextlib.contextmanager
+def _ctrl_c_held():
+    """Within the block, Ctrl-C is recorded instead of raised (in the main thread, when Python
+    handles SIGINT); the list it yields is non-empty when Ctrl-C was pressed."""
+    held: list[bool] = []
+    previous = signal.getsignal(signal.SIGINT)
+    if threading.current_thread() is not threading.main_thread() or not callable(previous):
+        yield held
+        return
+    signal.signal(signal.SIGINT, lambda signum, frame: held.append(True))
     try:
-        yield
+        yield held
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+        signal.signal(signal.SIGINT, previous)
 
 
-def _stop_local(cluster) -> None:
-    """Stop a local cluster's worker processes at once (after a Ctrl-C): their fits cannot be
-    cut short politely, and waiting for them takes as long as a fit. Kept groups are whole
-    files (``resume.GroupStore``), so the next run resumes there."""
-    for nanny in list(getattr(cluster, "workers", {}).values()):
-        process = getattr(getattr(nanny, "process", None), "process", None)
-        pid = getattr(process, "pid", None)
-        if pid:
-            try:
-                os.kill(pid, signal.SIGKILL)
-            except OSError:
-                pass
+def _stop_local(client, cluster) -> None:
+    """Stop a local cluster at once (after a Ctrl-C), without its logs: its workers' fits
+    cannot be cut short politely, and waiting for them takes as long as a fit. Kept groups are
+    whole files (``resume.GroupStore``), so the next run resumes there."""
+    import logging
+    quiet = logging.getLogger("distributed")
+    level = quiet.level
+    quiet.setLevel(logging.CRITICAL)  # "comm closed" and the like: the workers are stopped on purpose
+    try:
+        for nanny in list(getattr(cluster, "workers", {}).values()):
+            pid = getattr(getattr(getattr(nanny, "process", None), "process", None), "pid", None)
+            if pid:
+                try:
+                    os.kill(pid, signal.SIGTERM)
+                except OSError:
+                    pass
+        if client is not None:
+            client.close()
+        cluster.close()
+    finally:
+        quiet.setLevel(level)
 
 
 def _dashboard(client, local: bool) -> str | None:
@@ -319,13 +361,18 @@ def fit_many(root, out, scheduler: str = "local", workers: int | None = None,
                 write_summary(summary(), out)  # an interrupted run keeps what finished
                 bar.update(1)
         except KeyboardInterrupt:
+            if bar is not None:
+                bar.close()
+                bar = None
             if cluster is not None:
-                _stop_local(cluster)
+                _stop_local(client, cluster)
+                client = cluster = None
             raise
         finally:
             if bar is not None:
                 bar.close()
-            client.close()
+            if client is not None:
+                client.close()
             if cluster is not None:
                 cluster.close()
     rows = summary()

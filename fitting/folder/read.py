@@ -59,32 +59,35 @@ def _reason_kind(reason: str) -> tuple[str, str]:
     return "unreadable file", "unreadable files"
 
 
-def unmatched_entries(scene: SceneSpec | None, files: list[Path]) -> tuple[list[dict], set[str]]:
+def unmatched_entries(scene: SceneSpec | None, files: list[Path]) -> tuple[list[dict], dict[str, str]]:
     """scene.toml's ``[photos."NAME"]`` entries that match no photo file, as ``skipped`` entries
-    naming the closest file name (names are case-sensitive), and the photos such an entry was
-    surely meant for: a photo without an entry of its own whose name differs only in case, or
-    is the closest match. Those photos are left out rather than fitted without their entry
-    (their camera, time or sun)."""
+    naming the close file name (names are case-sensitive), and {photo: entry} for the photos
+    such an entry was surely meant for: a photo without an entry of its own whose name differs
+    only in case. Those photos are left out rather than fitted without their entry (their
+    camera, time or sun). A merely similar name (difflib) is suggested, not assumed: in a
+    numbered series every name is similar to its neighbours."""
     import difflib
     if scene is None or not scene.photos:
-        return [], set()
+        return [], {}
     names = [f.name for f in files]
-    without_entry = [n for n in names if n not in scene.photos]
-    notes, meant = [], set()
-    for entry in scene.photos:
-        if entry in names:
-            continue
-        near = [n for n in without_entry if n.lower() == entry.lower()] or difflib.get_close_matches(
-            entry, without_entry, n=1, cutoff=0.8)
-        if near:
-            meant.add(near[0])
-            notes.append({"photo": entry, "reason": f'[photos."{entry}"] in scene.toml matches no file; did you '
-                                                    f'mean "{near[0]}"? (names are case-sensitive)'})
+    free = [n for n in names if n not in scene.photos]  # photos without an entry of their own
+    unmatched = [e for e in scene.photos if e not in names]
+    meant: dict[str, str] = {}
+    for entry in unmatched:
+        same = [n for n in free if n.lower() == entry.lower() and n not in meant]
+        if same:
+            meant[same[0]] = entry
+    notes = []
+    for entry in unmatched:
+        photo = next((p for p, e in meant.items() if e == entry), None)
+        if photo is not None:
+            reason = (f'[photos."{entry}"] in scene.toml matches no file; did you mean "{photo}"? '
+                      "(names are case-sensitive)")
         else:
-            close = difflib.get_close_matches(entry, names, n=1, cutoff=0.8)
-            notes.append({"photo": entry, "reason": f'[photos."{entry}"] in scene.toml matches no file in the folder'
-                                                    + (f' (the closest is "{close[0]}", which has its own entry)'
-                                                       if close else "")})
+            near = difflib.get_close_matches(entry, [n for n in free if n not in meant], n=1, cutoff=0.8)
+            reason = f'[photos."{entry}"] in scene.toml matches no file in the folder' + (
+                f' (a photo without an entry: "{near[0]}")' if near else "")
+        notes.append({"photo": entry, "reason": reason})
     return notes, meant
 
 
@@ -98,7 +101,7 @@ def read_folder(folder: Path, scene: SceneSpec | None, half_size: bool = False) 
     photos = []
     for f in files:
         if f.name in meant:
-            entry = next(n["photo"] for n in notes if f'"{f.name}"' in n["reason"])
+            entry = meant[f.name]
             skipped.append({"photo": f.name, "reason": f'its scene.toml entry seems misspelt as [photos."{entry}"] '
                                                        f'(names are case-sensitive): rename it [photos."{f.name}"]'})
             continue
