@@ -74,9 +74,8 @@ def _run_render(args) -> int:
     import numpy as np
 
     from .render_command import render_scene_file
-    from .validate import OptionError, check_render_options
+    from .validate import OptionError
     try:
-        check_render_options(args)
         image, shading = render_scene_file(args)
     except OptionError as exc:
         return _fail("render", str(exc).splitlines()[0], 2)
@@ -145,11 +144,6 @@ def _lod_value(text: str):
 
 def _run_fit(args) -> int:
     from .fit_command import run_fit
-    from .validate import OptionError, check_fit_options
-    try:
-        check_fit_options(args)
-    except OptionError as exc:
-        return _fail("fit", str(exc).splitlines()[0], 2)
     return run_fit(args)
 
 
@@ -233,6 +227,12 @@ def _parse(argv: list[str]) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
+def _option_problem(args) -> str | None:
+    """One line on the first option of ``args`` that cannot be used (softshadow_cli.validate)."""
+    from .validate import option_problem
+    return option_problem(args)
+
+
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     from .interrupts import ctrl_c_never_swallowed, ctrl_c_pressed
@@ -244,6 +244,9 @@ def main(argv=None) -> int:
         # initialisation (jaxlib) must not abort the process.
         with ctrl_c_never_swallowed():
             args = _parse(argv)
+            problem = _option_problem(args)
+            if problem:  # before any work
+                return _fail(command, problem, 2)
             _use_compilation_cache()
             from softshadow import one_blas_thread
             with one_blas_thread():

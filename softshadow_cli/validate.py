@@ -10,8 +10,9 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-__all__ = ["OptionError", "parse_size", "check_render_options", "check_fit_options",
-           "check_output_file", "RENDER_MAX_SIDE", "RANGE_K_LIMIT"]
+__all__ = ["OptionError", "option_problem", "parse_size", "check_render_options", "check_fit_options",
+           "check_synth_options", "check_demo_options", "check_bench_options", "check_output_file",
+           "check_output_folder", "RENDER_MAX_SIDE", "RANGE_K_LIMIT"]
 
 #: The largest width or height ``softshadow render --size`` draws (a larger image is a typo).
 RENDER_MAX_SIDE = 16384
@@ -21,6 +22,18 @@ RANGE_K_LIMIT = 1.0
 
 class OptionError(ValueError):
     """An option that cannot be used: one line naming it (exit status 2)."""
+
+
+def option_problem(args) -> str | None:
+    """The first option of a parsed command line that cannot be used (one line), or None."""
+    check = {"render": check_render_options, "fit": check_fit_options, "synth": check_synth_options,
+             "demo": check_demo_options, "bench": check_bench_options}.get(getattr(args, "command", None))
+    try:
+        if check is not None:
+            check(args)
+    except OptionError as exc:
+        return str(exc).splitlines()[0]
+    return None
 
 
 def _number(option: str, value, *, low: float | None = None, high: float | None = None,
@@ -92,6 +105,23 @@ def check_output_file(option: str, path, suffixes: tuple[str, ...] | None = None
         raise OptionError(f"{option} {path}: the folder {parent} cannot be written")
 
 
+def check_output_folder(option: str, path) -> None:
+    """A folder that can be created or written: not a file, not under a file, and its nearest
+    existing parent writable. Creates nothing."""
+    import os
+    path = Path(path)
+    label = f"{option} {path}" if option else str(path)
+    if path.exists() and not path.is_dir():
+        raise OptionError(f"{label} is a file, not a folder")
+    probe = path
+    while not probe.exists() and probe.parent != probe:
+        probe = probe.parent
+    if not probe.is_dir():
+        raise OptionError(f"{label} cannot be created: {probe} is a file, not a folder")
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise OptionError(f"{label} cannot be written: {probe} is read-only")
+
+
 def _image_suffixes() -> tuple[str, ...]:
     """File extensions Pillow can write."""
     from PIL import Image
@@ -127,14 +157,37 @@ def check_render_options(args) -> None:
     for option, attr in (("--camera-position", "camera_position"), ("--camera-target", "camera_target")):
         if getattr(args, attr, None) is not None:
             _xyz(option, getattr(args, attr))
+    if (getattr(args, "camera_position", None) is None) != (getattr(args, "camera_target", None) is None):
+        raise OptionError("give both --camera-position and --camera-target")
     for option, attr in (("--projector", "projector"), ("--projector-target", "projector_target")):
         for text in getattr(args, attr, None) or []:
             _xyz(option, text)
+    _check_projector_counts(args)
     check_output_file("--out", args.out, _image_suffixes())
     if args.npy:
         check_output_file("--npy", args.npy, (".npy",))
         if Path(args.npy).resolve() == Path(args.out).resolve():
             raise OptionError("--npy and --out name the same file")
+
+
+def _check_projector_counts(args) -> None:
+    """The projector options pair up in order: one target per --projector, and every other
+    projector option given once (for all) or once per --projector."""
+    n = len(getattr(args, "projector", None) or [])
+    others = (("--projector-fov", "projector_fov"), ("--slide", "slide"),
+              ("--projector-intensity", "projector_intensity"))
+    if not n:
+        for option, attr in (("--projector-target", "projector_target"),) + others:
+            if getattr(args, attr, None):
+                raise OptionError(f"{option} needs --projector X,Y,Z")
+        return
+    targets = len(getattr(args, "projector_target", None) or [])
+    if targets != n:
+        raise OptionError(f"give one --projector-target X,Y,Z per --projector ({n}), got {targets}")
+    for option, attr in others:
+        given = len(getattr(args, attr, None) or [])
+        if given not in (0, 1, n):
+            raise OptionError(f"give {option} once, or once per --projector ({n}), not {given} times")
 
 
 def check_fit_options(args) -> None:
@@ -153,3 +206,37 @@ def check_fit_options(args) -> None:
     if not getattr(args, "recursive", False) and (
             getattr(args, "scheduler", "local") != "local" or getattr(args, "workers", None) is not None):
         raise OptionError("--scheduler and --workers go with --recursive")
+
+
+def _seed(value) -> None:
+    if value is not None and value < 0:
+        raise OptionError(f"--seed must be a whole number >= 0, got {value}")
+
+
+def check_synth_options(args) -> None:
+    """``softshadow synth``'s options, before anything is rendered (raises OptionError)."""
+    _seed(getattr(args, "seed", None))
+    _whole("--quality", getattr(args, "quality", None), 1, 100, "JPEG quality")
+    if getattr(args, "out_dir", None) is not None:
+        check_output_folder("OUT_DIR", args.out_dir)
+
+
+def check_demo_options(args) -> None:
+    """``softshadow demo``'s options (raises OptionError)."""
+    import argparse
+
+    from .synth_command import parse_size as synth_size
+    _seed(args.seed)
+    try:
+        synth_size(args.size)
+    except argparse.ArgumentTypeError as exc:
+        raise OptionError(f"--size: {exc}") from None
+    check_output_folder("--out", args.out)
+
+
+def check_bench_options(args) -> None:
+    """``softshadow bench``'s output files, before minutes of benchmarks (raises OptionError)."""
+    if getattr(args, "json_path", None):
+        check_output_file("--json", args.json_path)
+    if getattr(args, "report", None):
+        check_output_file("--report", args.report)

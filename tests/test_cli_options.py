@@ -163,3 +163,21 @@ def test_fit_passes_half_size_and_jobs_to_every_folder(monkeypatch, tmp_path, ca
     monkeypatch.setattr(fitting, "fit_many", fake_fit_many)
     main(["fit", str(tmp_path), "--out", str(tmp_path / "out"), "--recursive", "--half-size", "--jobs", "2"])
     assert seen["half_size"] is True and seen["jobs"] == 2
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["synth", "{tmp}/s", "--seed", "-1"], "softshadow synth: --seed must be a whole number >= 0, got -1"),
+    (["synth", "{tmp}/s", "--quality", "0"], "softshadow synth: --quality must be from 1 to 100, got 0"),
+    (["synth", "{tmp}/file/s"], "softshadow synth: OUT_DIR {tmp}/file/s cannot be created: {tmp}/file is a file"),
+    (["demo", "--out", "{tmp}/d", "--seed", "-2"], "softshadow demo: --seed must be a whole number >= 0, got -2"),
+    (["demo", "--out", "{tmp}/d", "--size", "0x0"], "softshadow demo: --size: size must be at least 16x16"),
+    (["demo", "--out", "{tmp}/file"], "softshadow demo: --out {tmp}/file is a file, not a folder"),
+    (["bench", "--json", "{tmp}/missing/x.json"], "softshadow bench: --json {tmp}/missing/x.json: the folder"),
+    (["bench", "--report", "{tmp}/missing/x.md"], "softshadow bench: --report {tmp}/missing/x.md: the folder"),
+])
+def test_synth_demo_and_bench_check_their_options_first(cli, tmp_path, argv, words):
+    (tmp_path / "file").write_text("a file")
+    code, err = cli([a.format(tmp=tmp_path) for a in argv])
+    line = _one_line(err)
+    assert code == 2 and line.startswith(words.format(tmp=tmp_path)), line
+    assert not (tmp_path / "s").exists() and not (tmp_path / "d").exists()
