@@ -15,9 +15,14 @@ compiling it again.
 Failures and resuming: a folder that fails (unreadable, no photos, a crash, a lost
 worker) gets a row with its reason in ``error`` and never stops the others. A folder that
 finished gets a done marker (``out/<folder>/.softshadow-done``) written after its
-results.json; the next run reuses its results.json instead of fitting it again. A folder
-interrupted half-way keeps its finished groups (``out/<folder>/groups/``) and fits only
-the rest; failed folders are tried again.
+results.json, carrying the folder's key (``resume.folder_key``: what a single-folder fit
+keys its groups with); the next run reuses its results.json while the key matches, and
+refits it (reusing its unchanged groups) when anything that decides its results changed.
+A folder interrupted half-way keeps its finished groups (``out/<folder>/groups/``) and
+fits only the rest; failed folders are tried again.
+
+Ctrl-C: local workers ignore it (a terminal sends it to the whole process group); the
+process that started them stops them at once and re-raises it.
 """
 
 from __future__ import annotations
