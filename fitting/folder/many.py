@@ -127,6 +127,13 @@ def _task(folder: str, out_dir: str, options, force: bool, cache_dir) -> dict:
         return {"groups": [], "seconds": 0.0, "error": reason.splitlines()[0] if reason else type(exc).__name__}
 
 
+def _require_dask() -> None:
+    """Dask is an extra (only many folders need it): a one-line ValueError naming it when missing."""
+    if importlib.util.find_spec("distributed") is None:
+        raise ValueError("many folders (--recursive) run on Dask, which is not installed: "
+                         "pip install 'softshadow[many]'")
+
+
 def _check_scheduler(scheduler: str) -> None:
     if scheduler != "local" and not scheduler.startswith(("tcp://", "tls://", "ws://", "wss://", "ucx://")):
         raise ValueError(f"scheduler must be 'local' or an address such as tcp://HOST:8786, got {scheduler!r}")
@@ -186,11 +193,14 @@ def fit_many(root, out, scheduler: str = "local", workers: int | None = None,
     ``softshadow.internal.default_cache_dir()`` as each worker sees it).
     progress: a tqdm bar over folders on stderr; log: where one-line notes go (the
     dashboard address; default stderr).
-    Raises ValueError when ``root`` holds no photo folder or the scheduler is not valid.
+    Raises ValueError when ``root`` holds no photo folder, the scheduler is not valid or Dask is not
+    installed (the ``many`` extra).
     """
     import pandas as pd
-    from dask.distributed import as_completed
     from tqdm import tqdm
+
+    _require_dask()
+    from dask.distributed import as_completed
 
     log = log or (lambda text: print(text, file=sys.stderr))
     _check_scheduler(scheduler)
