@@ -338,7 +338,7 @@ def test_safe_name():
 
 def test_write_report_writes_everything(tmp_path):
     written = write_report(_results(with_plots=True), tmp_path, reference=PAPER_TABLE2, truth=TRUTH)
-    assert set(written) == {"results.json", "table2.md", "table2.csv", "plots/09-20_profiles.png",
+    assert set(written) == {"results.json", "table2.md", "table2.csv", "index.html", "plots/09-20_profiles.png",
                             "plots/09-20_overlay_a.png", "plots/09-20_overlay_b.png",
                             "plots/range_vs_time.png"}
     for rel, path in written.items():
@@ -359,7 +359,7 @@ def test_write_report_survives_a_failing_plot(tmp_path, monkeypatch, caplog):
 
 def test_write_report_without_plots(tmp_path):
     written = write_report(_results(with_plots=True), tmp_path, plots=False)
-    assert set(written) == {"results.json", "table2.md", "table2.csv"}
+    assert set(written) == {"results.json", "table2.md", "table2.csv", "index.html"}
     assert not (tmp_path / "plots").exists()
 
 

@@ -36,13 +36,16 @@ class ProfilePlotData:
 
 @dataclasses.dataclass
 class OverlayPlotData:
-    """The fitted shadow over a photo: image (H, W) linear gray, alpha (H, W) fitted alpha
-    (NaN where not modelled), samples_uv (n, 2) pixels used by the fit."""
+    """The fitted shadow over a photo: image (h, w) linear gray, possibly a downsampled copy of the
+    photo; alpha (h, w) fitted alpha on the same pixels (NaN where not modelled); samples_uv (n, 2)
+    the pixels used by the fit, in the photo's own pixels; photo_shape (H, W) the photo's size
+    (None: the image is the photo at full size)."""
 
     photo: str
     image: np.ndarray
     alpha: np.ndarray
     samples_uv: np.ndarray
+    photo_shape: tuple[int, int] | None = None
 
 
 @dataclasses.dataclass

@@ -47,8 +47,8 @@ MISSING = "—"
 RANGE_NAME = "Range of the soft shadow"
 BRIGHTNESS_NAME = "Brightness of the shadow"
 
-#: The files of a finished report in OUT_DIR (besides plots/*.png).
-REPORT_FILES = ("results.json", "table2.md", "table2.csv")
+#: The files of a finished report in OUT_DIR (besides plots/*.png and *.svg).
+REPORT_FILES = ("results.json", "table2.md", "table2.csv", "index.html")
 
 
 def clear_report(out_dir) -> None:
@@ -59,7 +59,7 @@ def clear_report(out_dir) -> None:
         (out_dir / name).unlink(missing_ok=True)
     plots = out_dir / "plots"
     if plots.is_dir():
-        for f in plots.glob("*.png"):
+        for f in [*plots.glob("*.png"), *plots.glob("*.svg")]:
             f.unlink(missing_ok=True)
 
 
@@ -371,8 +371,8 @@ def write_table2(results: FitResults, out_dir, reference=None, truth=None) -> tu
 
 def write_report(results: FitResults, out_dir, reference=None, truth=None,
                  plots: bool = True, group_plots: list[Path] | None = None) -> dict[str, Path]:
-    """Write results.json, table2.md/.csv and (unless ``plots`` is False) the plots
-    into OUT_DIR.
+    """Write results.json, table2.md/.csv, (unless ``plots`` is False) the plots, and index.html (the
+    page that shows them all) into OUT_DIR.
 
     group_plots: the groups' plots when they were already written (``plot_group_safely``
     while the fit went on); then only the range-against-time plot is drawn here.
@@ -385,6 +385,11 @@ def write_report(results: FitResults, out_dir, reference=None, truth=None,
     written += write_table2(results, out_dir, reference, truth)
     if plots:
         written += _write_plots(results, out_dir, reference, truth, group_plots)
+    from .page import write_index_html
+    try:
+        written.append(write_index_html(results_document(results), out_dir))
+    except Exception as exc:  # the page must never cost the results
+        logger.warning("index.html skipped: %s: %s", type(exc).__name__, exc)
     return {p.relative_to(out_dir).as_posix(): p for p in written}
 
 
