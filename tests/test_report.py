@@ -192,8 +192,8 @@ def test_table2_reference_and_truth_rows(tmp_path):
     results.groups[3].time = "09:41"  # 21 minutes from the paper's 09:20: still matched
     md_path, _ = write_table2(results, tmp_path, reference=PAPER_TABLE2, truth=TRUTH)
     rows = {r[0]: r[1:] for r in _md_table(md_path.read_text())[2:]}
-    assert rows["Reference: range"] == ["6.0", "5.0", "8.0", "—"]
-    assert rows["Reference: brightness"] == ["110.0", "120.0", "180.0", "—"]
+    assert rows["Paper, set by hand: range (its own units)"] == ["6.0", "5.0", "8.0", "—"]
+    assert rows["Paper, set by hand: brightness"] == ["110.0", "120.0", "180.0", "—"]
     assert rows["Truth: range"][:2] == ["0.47", "0.47"]  # matched by photos, not label
     assert rows["Truth: brightness"][0] == f"{255 * 0.16 ** (1 / 2.2):.1f}"
     assert rows["Truth: ρ"][1] == "0.210"
@@ -243,7 +243,7 @@ def test_format_table_shows_fit_truth_and_paper():
     text = format_table(_results(), reference=PAPER_TABLE2, truth=TRUTH)
     lines = text.splitlines()
     assert lines[0].split() == ["Time", "of", "day", "09:20", "13:21", "16:21", "IMG_7.jpg"]
-    assert any(line.startswith("Reference: brightness") and "110.0" in line and "180.0" in line
+    assert any(line.startswith("Paper, set by hand: brightness") and "110.0" in line and "180.0" in line
                for line in lines)
     assert any(line.startswith("Truth: range") and "0.47" in line for line in lines)
     assert "≤ 0.10" in text and "no shadow in view" in text
@@ -343,7 +343,7 @@ def test_write_report_writes_everything(tmp_path):
                             "plots/range_vs_time.png"}
     for rel, path in written.items():
         assert path == tmp_path / rel and path.stat().st_size > 0
-    assert "Reference: range" in (tmp_path / "table2.md").read_text()
+    assert "Paper, set by hand: range" in (tmp_path / "table2.md").read_text()
 
 
 def test_write_report_survives_a_failing_plot(tmp_path, monkeypatch, caplog):

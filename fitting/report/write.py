@@ -176,9 +176,9 @@ def _table_rows(groups: Sequence[GroupResult], reference, truth
     if reference:
         refs = [reference_for_group(g, reference) for g in groups]
         if any(r is not None for r in refs):
-            rows.append(("Reference: range", "reference_range",
+            rows.append(("Paper, set by hand: range (its own units)", "reference_range",
                          [TableCell(None if r is None else float(r[0])) for r in refs]))
-            rows.append(("Reference: brightness", "reference_brightness",
+            rows.append(("Paper, set by hand: brightness", "reference_brightness",
                          [TableCell(None if r is None else float(r[1])) for r in refs]))
     if truth:
         truths = [truth_for_group(g, truth) for g in groups]
@@ -289,8 +289,9 @@ def table2_markdown(results: FitResults, reference=None, truth=None) -> str:
               "propagated to first order; " f"{UPPER_BOUND} marks an upper bound, "
               f"{MISSING} a value that could not be measured."]
     if reference:
-        lines.append("Reference values are matched to a column by its label or by the "
-                     f"nearest time of day within {PAPER_TIME_TOLERANCE_MIN:.0f} minutes.")
+        lines.append("The paper's values (its Table 2) were set by hand from photos with its own expansion "
+                     "rule, so its range is not on the scale of a measured 100 k; they are matched to a column "
+                     f"by its label or by the nearest time of day within {PAPER_TIME_TOLERANCE_MIN:.0f} minutes.")
     if notes:
         lines += ["", "Notes:", ""] + [f"{i}. {_md_escape(t)}" for i, t in enumerate(notes, 1)]
     if results.skipped:
