@@ -193,6 +193,15 @@ def _run_demo(args) -> int:
     return run_demo(args)
 
 
+def _add_board(sub):
+    p = _parser(sub, "board", help="write the printable ChArUco board that registers your photos",
+                description="Write a ChArUco board to print (PDF or PNG at its true size), and print the "
+                            "scene.toml [camera] entry that registers photos of it.")
+    from .board_command import add_arguments, run_board
+    add_arguments(p)
+    p.set_defaults(func=run_board)
+
+
 def _add_bench(sub):
     p = _parser(
         sub, "bench", help="time the renderers and the fitter against a known truth (tables; JSON with --json)",
@@ -248,6 +257,7 @@ def build_parser(with_synth_arguments: bool = True) -> argparse.ArgumentParser:
     _add_fit(sub)
     _add_synth(sub, with_arguments=with_synth_arguments)
     _add_demo(sub)
+    _add_board(sub)
     _add_bench(sub)
     return parser
 

@@ -18,7 +18,7 @@ def _subparsers():
     return dict(sub.choices)
 
 
-@pytest.mark.parametrize("command", ["render", "fit", "synth", "demo", "bench"])
+@pytest.mark.parametrize("command", ["render", "fit", "synth", "demo", "board", "bench"])
 def test_every_option_has_help_and_its_default(command):
     parser = _subparsers()[command]
     text = parser.format_help()
