@@ -1,7 +1,7 @@
 """The report writer: results.json, Table 2 (Markdown, CSV, terminal) and plots.
 
 FitResults are built by hand (no fitting here), so these tests are fast and check
-only the writing: exact CONVENTIONS keys and units, uncertainty propagation,
+only the writing: exact results.json keys and units, uncertainty propagation,
 column order, upper-bound marks, CSV round trip, PNG validity, atomic writes.
 """
 
@@ -21,7 +21,7 @@ from fitting.report.write import (PAPER_TABLE2, brightness_stderr, format_table,
                             software_versions, write_report, write_results_json, write_table2)
 from fitting.report.results import FitResults, GroupResult, OverlayPlotData, ProfilePlotData
 
-CONVENTIONS_GROUP_KEYS = {
+CONTRACT_GROUP_KEYS = {
     "label", "time", "photos", "range", "range_k", "range_stderr", "brightness", "rho",
     "rho_stderr", "sun_azimuth_deg", "sun_elevation_deg", "rmse", "n_profiles", "converged",
     "identifiable", "seconds"}
@@ -85,7 +85,7 @@ def test_results_json_has_conventions_keys_and_paper_units(tmp_path):
     assert doc["software"]["numpy"] == np.__version__
     by_label = {g["label"]: g for g in doc["groups"]}
     for g in doc["groups"]:
-        assert CONVENTIONS_GROUP_KEYS <= set(g), CONVENTIONS_GROUP_KEYS - set(g)
+        assert CONTRACT_GROUP_KEYS <= set(g), CONTRACT_GROUP_KEYS - set(g)
     m = by_label["09:20"]
     assert m["range"] == pytest.approx(100 * 0.0052, rel=1e-12)
     assert m["brightness"] == pytest.approx(255 * 0.157 ** (1 / 2.2), rel=1e-12)

@@ -65,7 +65,7 @@ def _fit_photos(photos, scene, options, half_size, progress, store, on_group, jo
             # One entry per photo: the unreadable time, not also "no time" from the grouping.
             skipped.append({"photo": p.name, "reason": str(exc)})
     if scene is None or scene.object is None:
-        # No geometry: each photo on its own (CONVENTIONS).
+        # No geometry: each photo on its own (docs/formats.md).
         groups_out: list[GroupResult] = []
         for p in photos:
             result = measure_without_scene(p, times.get(p.name), scene)

@@ -2,7 +2,7 @@
 
 Every folder under ``root`` that holds photos is fitted by ``fit_and_report`` into
 ``out/<its path relative to root>/``; ``out/summary.csv`` has one row per group of every
-folder (CONVENTIONS columns, then ``error``) and ``out/summary.png`` plots k and rho
+folder (the documented columns, then ``error``) and ``out/summary.png`` plots k and rho
 against time of day, one line per folder.
 
 The work runs on ``dask.distributed``: a ``LocalCluster`` of worker processes with one
@@ -40,7 +40,7 @@ from ..solve.options import FitOptions
 __all__ = ["SUMMARY_COLUMNS", "DONE_MARKER", "find_photo_folders", "fit_many", "folder_rows",
            "write_summary"]
 
-#: summary.csv columns: the CONVENTIONS contract, then the reason a folder or group failed.
+#: summary.csv columns: the documented contract (docs/formats.md), then the reason a folder or group failed.
 SUMMARY_COLUMNS = ("folder", "label", "time", "range_k", "range_stderr", "rho", "rho_stderr",
                    "sun_azimuth_deg", "sun_elevation_deg", "reliable", "photos", "error")
 #: Written into a folder's output after its results.json: the folder is done (JSON: finished,

@@ -1,4 +1,4 @@
-"""Photo times and their grouping into times of day (CONVENTIONS "Photo folders").
+"""Photo times and their grouping into times of day (docs/formats.md, "Photo folders").
 
 A photo's time is its EXIF DateTimeOriginal (with OffsetTimeOriginal), else
 the ``time`` of its scene.toml entry. Groups compare *local clock time of

@@ -1,6 +1,6 @@
 """Result records of a fit: what ``fit_folder`` returns and ``softshadow fit`` writes.
 
-Plain dataclasses whose ``to_json`` gives exactly the CONVENTIONS
+Plain dataclasses whose ``to_json`` gives exactly the documented
 ``results.json`` fields; plot data rides along in ``ProfilePlotData`` and
 ``OverlayPlotData`` (not written to JSON).
 """
@@ -50,7 +50,7 @@ class OverlayPlotData:
 
 @dataclasses.dataclass
 class GroupResult:
-    """One time of day (or one photo, without a scene). Fields as in CONVENTIONS results.json.
+    """One time of day (or one photo, without a scene). Fields as in results.json (docs/formats.md).
 
     range_k and rho are physical values; ``range`` and ``brightness`` are the paper's units
     (100 k and 255 rho^(1/2.2)); *_stderr are one-sigma in physical units. When

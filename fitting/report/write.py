@@ -1,7 +1,7 @@
 """Files written from a fit: results.json, the paper's Table 2 (Markdown and CSV), plots.
 
 ``write_report`` writes everything ``softshadow fit PHOTO_DIR --out OUT_DIR`` puts in
-OUT_DIR (CONVENTIONS "softshadow fit ... writes"); ``format_table`` gives the same
+OUT_DIR (docs/formats.md, "softshadow fit writes"); ``format_table`` gives the same
 table as plain text for the terminal. Every file is written atomically (a temporary
 file in the same folder, then ``os.replace``), so an interruption leaves either the
 old file or the new one, never half of one.
@@ -84,7 +84,7 @@ def results_document(results: FitResults) -> dict:
 
 
 def write_results_json(results: FitResults, out_dir) -> Path:
-    """Write OUT_DIR/results.json (CONVENTIONS format) atomically; returns its path.
+    """Write OUT_DIR/results.json (docs/formats.md) atomically; returns its path.
 
     Non-finite numbers are already None in ``GroupResult.to_json``; ``allow_nan=False``
     makes any that slip through (say in ``skipped``) an error instead of invalid JSON.
