@@ -30,7 +30,8 @@ def _positive(text: str) -> float:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("out", metavar="OUT", help="the board to write: a .pdf (print it at 100 %%) or a .png")
-    p.add_argument("--paper", default="A4", choices=("A4", "A3", "letter"), help="paper size (landscape)")
+    p.add_argument("--paper", default="A4", choices=("A4", "A3", "A2", "A1", "A0", "letter"),
+                   help="paper size, landscape (A2-A0: a poster; the larger the board, the farther the camera)")
     p.add_argument("--dpi", type=_positive, default=300.0, help="resolution of the page")
     p.add_argument("--squares", type=_squares, default=(7, 5), metavar="COLSxROWS", help="chessboard squares")
     p.add_argument("--square-mm", type=_positive, default=None, metavar="MM",

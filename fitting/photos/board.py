@@ -21,9 +21,10 @@ from .markers import board_from_spec
 
 __all__ = ["PAPER_SIZES_MM", "PaperName", "PrintedBoard", "board_spec_for_paper", "printed_board", "write_board"]
 
-PaperName = Literal["A4", "A3", "letter"]
-#: Paper sizes (width, height) in millimetres, portrait.
-PAPER_SIZES_MM: dict[str, tuple[float, float]] = {"A4": (210.0, 297.0), "A3": (297.0, 420.0),
+PaperName = Literal["A4", "A3", "A2", "A1", "A0", "letter"]
+#: Paper sizes (width, height) in millimetres, portrait. A2 to A0 are posters (a copy shop prints them).
+PAPER_SIZES_MM: dict[str, tuple[float, float]] = {"A4": (210.0, 297.0), "A3": (297.0, 420.0), "A2": (420.0, 594.0),
+                                                   "A1": (594.0, 841.0), "A0": (841.0, 1189.0),
                                                    "letter": (215.9, 279.4)}
 _MARGIN_MM = 12.0  # white paper around the board: the detector's quiet zone, and printers' margins
 _CAPTION_MM = 22.0  # below the board: the caption and the scale bar
