@@ -123,6 +123,9 @@ def _run_bench(args, progress) -> int:
     if args.what in ("fit", "all"):
         from .fit import bench_fit
         result["fit"] = bench_fit(quick=args.quick)
+    if args.what == "startup":
+        from .startup import bench_startup
+        result["startup"] = bench_startup(quick=args.quick, progress=progress)
     if args.what == "floor":
         from .floor import bench_floor
         result["floor"] = bench_floor(quick=args.quick, progress=progress)

@@ -218,7 +218,7 @@ def _add_bench(sub):
     p.add_argument("--quick", action="store_true", help="fewer repeats and sizes")
     p.add_argument("--what", default="overview",
                    choices=("overview", "render", "fit", "all", "sweep", "receiver", "precision", "lod",
-                            "lod-grid", "floor"),
+                            "lod-grid", "floor", "startup"),
                    help="overview (the default, above); the renderer's and fitter's micro benchmarks without "
                         "errors: render / fit, or both (all); the full speed-against-error sweep with its "
                         "image and parameter errors against a known truth (sweep); the light-space back "
@@ -227,7 +227,8 @@ def _add_bench(sub):
                         "real 41k-face dragon at each level of detail (lod); the Dowling paper's grid of "
                         "levels of detail under its slides with the SSIM masking table (lod-grid); the "
                         "renderer's error floor against a physical render, before and after its pixel "
-                        "footprint and hidden sky (floor)")
+                        "footprint and hidden sky (floor); a fit in a fresh process through the command line "
+                        "and through the Python API, alternated (startup)")
     p.add_argument("--report", help="with overview, sweep or lod-grid: also write the Markdown report here (and "
                                     "its images in img/ beside it), e.g. docs/benchmarks.md, "
                                     "docs/speed_vs_error.md, docs/lod_masking.md")
