@@ -58,7 +58,7 @@ def _run_and_report(run, write, result, json_path, report_path) -> dict:
     result.update(run())
     result["environment"]["load_average_at_end"] = load_average()
     result["environment"]["run_minutes"] = round((time.perf_counter() - t0) / 60.0, 1)
-    result["environment"]["finished_utc"] = datetime.datetime.now(datetime.timezone.utc).strftime(
+    result["environment"]["finished_utc"] = datetime.datetime.now(datetime.UTC).strftime(
         "%Y-%m-%d %H:%M UTC")
     if json_path and json_path != "-":
         Path(json_path).parent.mkdir(parents=True, exist_ok=True)

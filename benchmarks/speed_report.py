@@ -3,7 +3,6 @@ from the JSON a sweep wrote (no figure is typed in)."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 __all__ = ["image_cases", "pareto_front", "pareto_plot", "write_report", "write_overview_report"]

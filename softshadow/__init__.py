@@ -11,7 +11,7 @@ synthesiser use (plans, occluders, shadow maps): usable, but they may change bet
 
 import lazy_loader as _lazy
 
-from ._version import __version__
+from ._version import __version__ as __version__
 
 # The public names are listed in ``__init__.pyi`` (which type checkers and the API reference read too).
 # Each module is imported when one of its names is first used (PEP 562, ``lazy_loader``): a process

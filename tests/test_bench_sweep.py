@@ -20,7 +20,6 @@ from benchmarks.speed_report import pareto_front
 from benchmarks.scenes import image_error, linear_equivalent_k
 from benchmarks.scaling import loglog_slope
 from benchmarks.table1 import crossing_width
-from softshadow_cli.main import main
 
 
 def test_pareto_front_keeps_only_undominated_points():

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import csv
 import json
-import time
 
 import matplotlib.image as mpimg
 import numpy as np

@@ -6,7 +6,6 @@ import json
 import math
 
 import numpy as np
-import pytest
 import trimesh
 
 from data_synth.lighting import SunSky

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import concurrent.futures
 from pathlib import Path
-from typing import Callable
+from collections.abc import Callable
 
 from scene import SceneError, SceneSpec, load_scene
 from softshadow import one_blas_thread, use_compilation_cache

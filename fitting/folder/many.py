@@ -29,7 +29,7 @@ import os
 import sys
 import time as _time
 from pathlib import Path
-from typing import Callable
+from collections.abc import Callable
 
 from softshadow import use_compilation_cache
 
@@ -110,7 +110,7 @@ def fit_one_folder(folder, out_dir, options: FitOptions | None = None, force: bo
     out_dir.mkdir(parents=True, exist_ok=True)
     results: FitResults = fit_and_report(folder, out_dir, options, force=force)
     seconds = _time.perf_counter() - start
-    marker = {"finished": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+    marker = {"finished": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
               "groups": len(results.groups), "fitted": results.n_fitted, "seconds": round(seconds, 3)}
     (out_dir / DONE_MARKER).write_text(json.dumps(marker) + "\n")
     return [g.to_json() for g in results.groups], seconds

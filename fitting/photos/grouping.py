@@ -13,7 +13,7 @@ from __future__ import annotations
 import dataclasses
 import datetime as _dt
 import math
-from typing import Mapping
+from collections.abc import Mapping
 
 from scene import SceneSpec, parse_time
 

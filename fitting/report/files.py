@@ -14,7 +14,7 @@ import re
 import tempfile
 from importlib import metadata
 from pathlib import Path
-from typing import Iterator
+from collections.abc import Iterator
 
 __all__ = ["atomic_path", "atomic_writer", "safe_name", "software_versions"]
 

@@ -15,9 +15,8 @@ threads and never touches the user's pyplot backend.
 from __future__ import annotations
 
 import math
-import re
 from pathlib import Path
-from typing import Mapping
+from collections.abc import Mapping
 
 import numpy as np
 from matplotlib.collections import LineCollection
