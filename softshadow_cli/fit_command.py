@@ -146,17 +146,21 @@ def run_fit(args) -> int:
             print(f"group {g.label}: {g.error}", file=sys.stderr)
     if results.n_fitted == 0:
         return _fail("no group could be fitted (reasons above)", 1)
-    print(f"wrote {out / 'results.json'}, {out / 'table2.md'}" + _plots_written(out, args.plots, started))
+    print(_written(out, args.plots, started))
     return 0
 
 
-def _plots_written(out: Path, wanted: bool, since: float) -> str:
-    """The plots part of the closing line: how many were written into OUT/plots in this run, or
-    why there are none."""
+def _written(out: Path, wanted: bool, since: float) -> str:
+    """The closing line: the files this run wrote, plots counted (PNG) only when some were drawn,
+    or why there are none."""
+    def fresh(path: Path) -> bool:
+        return path.is_file() and path.stat().st_mtime >= since - 1
+
+    files = ", ".join(str(out / n) for n in ("results.json", "table2.md", "index.html") if fresh(out / n))
     if not wanted:
-        return ""
+        return f"wrote {files}"
     plots = out / "plots"
-    count = sum(1 for f in plots.glob("*.png") if f.stat().st_mtime >= since - 1) if plots.is_dir() else 0
+    count = sum(1 for f in plots.glob("*.png") if fresh(f)) if plots.is_dir() else 0
     if count:
-        return f" and {count} plot{'s' if count != 1 else ''} in {plots}"
-    return " (no plots: no group has a fitted shadow to draw)"
+        return f"wrote {files} and {count} plot{'s' if count != 1 else ''} in {plots}"
+    return f"wrote {files} (no plots: no group has a fitted shadow to draw)"

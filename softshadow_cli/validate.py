@@ -11,7 +11,8 @@ import math
 from pathlib import Path
 
 __all__ = ["OptionError", "option_problem", "parse_size", "check_render_options", "check_fit_options",
-           "check_synth_options", "check_demo_options", "check_bench_options", "check_output_file",
+           "check_synth_options", "check_demo_options", "check_board_options", "check_bench_options",
+           "check_output_file",
            "check_output_folder", "RENDER_MAX_SIDE", "RANGE_K_LIMIT"]
 
 #: The largest width or height ``softshadow render --size`` draws (a larger image is a typo).
@@ -27,7 +28,8 @@ class OptionError(ValueError):
 def option_problem(args) -> str | None:
     """The first option of a parsed command line that cannot be used (one line), or None."""
     check = {"render": check_render_options, "fit": check_fit_options, "synth": check_synth_options,
-             "demo": check_demo_options, "bench": check_bench_options}.get(getattr(args, "command", None))
+             "demo": check_demo_options, "board": check_board_options,
+             "bench": check_bench_options}.get(getattr(args, "command", None))
     try:
         if check is not None:
             check(args)
@@ -240,3 +242,9 @@ def check_bench_options(args) -> None:
         check_output_file("--json", args.json_path)
     if getattr(args, "report", None):
         check_output_file("--report", args.report)
+
+
+def check_board_options(args) -> None:
+    """``softshadow board``'s numbers (its own checks cover the file and the board's layout)."""
+    _number("--dpi", getattr(args, "dpi", None), low=10.0, high=2400.0, why="dots per inch of the page")
+    _number("--square-mm", getattr(args, "square_mm", None), low=0.0, low_open=True, why="millimetres")
