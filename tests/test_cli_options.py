@@ -172,12 +172,14 @@ def test_fit_passes_half_size_and_jobs_to_every_folder(monkeypatch, tmp_path, ca
     (["demo", "--out", "{tmp}/d", "--seed", "-2"], "softshadow demo: --seed must be a whole number >= 0, got -2"),
     (["demo", "--out", "{tmp}/d", "--size", "0x0"], "softshadow demo: --size: size must be at least 16x16"),
     (["demo", "--out", "{tmp}/file"], "softshadow demo: --out {tmp}/file is a file, not a folder"),
+    (["board", "{tmp}/b.pdf", "--dpi", "inf"], "softshadow board: --dpi must be a finite number"),
+    (["board", "{tmp}/b.pdf", "--dpi", "100000"], "softshadow board: --dpi must be in [10, 2400], got 100000"),
     (["bench", "--json", "{tmp}/missing/x.json"], "softshadow bench: --json {tmp}/missing/x.json: the folder"),
     (["bench", "--report", "{tmp}/missing/x.md"], "softshadow bench: --report {tmp}/missing/x.md: the folder"),
 ])
-def test_synth_demo_and_bench_check_their_options_first(cli, tmp_path, argv, words):
+def test_synth_demo_board_and_bench_check_their_options_first(cli, tmp_path, argv, words):
     (tmp_path / "file").write_text("a file")
     code, err = cli([a.format(tmp=tmp_path) for a in argv])
     line = _one_line(err)
     assert code == 2 and line.startswith(words.format(tmp=tmp_path)), line
-    assert not (tmp_path / "s").exists() and not (tmp_path / "d").exists()
+    assert not any((tmp_path / n).exists() for n in ("s", "d", "b.pdf"))
