@@ -45,7 +45,6 @@ class _State:
     def __init__(self) -> None:
         self.active = False
         self.pressed = False
-        self.deferred = False  # waiting for the main thread to leave a place it cannot raise in
         self.lock = threading.Lock()
         self.timers: list[threading.Timer] = []
 
@@ -118,7 +117,9 @@ def _watch(main_ident: int) -> None:
     deliver it again, and look again a moment later. Once it is handled, stop watching."""
     if not _state.active or _handling_interrupt(main_ident):
         return
-    if not _state.deferred:
+    # A real signal ends a blocking wait; but not while the main thread is still where it cannot
+    # raise (native code there may not expect an interrupted system call).
+    if not _cannot_raise_here(sys._current_frames().get(main_ident)):
         _deliver(wake=True)
     _state.later(WATCH_S, lambda: _watch(main_ident))
 
@@ -131,10 +132,8 @@ def _interrupt(signum, frame) -> None:
     if first:
         _state.later(WATCH_S, lambda: _watch(threading.main_thread().ident))
     if _cannot_raise_here(frame):
-        _state.deferred = True
         _state.later(RETRY_S, _deliver)
         return
-    _state.deferred = False
     raise KeyboardInterrupt
 
 
@@ -159,7 +158,7 @@ def ctrl_c_never_swallowed():
         yield
         return
     previous_hook = sys.unraisablehook
-    _state.pressed = _state.deferred = False
+    _state.pressed = False
     _state.active = True
     sys.unraisablehook = _unraisable(previous_hook)
     previous = signal.signal(signal.SIGINT, _interrupt)
