@@ -25,7 +25,7 @@ import sys
 import threading
 from contextlib import contextmanager
 
-__all__ = ["ctrl_c_never_swallowed", "ctrl_c_pressed"]
+__all__ = ["ctrl_c_never_swallowed", "ctrl_c_pressed", "quiet_after_interrupt"]
 
 #: Seconds between a deferred or swallowed Ctrl-C and its next delivery.
 RETRY_S = 0.05
@@ -144,6 +144,8 @@ def _unraisable(previous):
         if _state.active and unraisable.exc_type is not None and issubclass(unraisable.exc_type, KeyboardInterrupt):
             _state.later(RETRY_S, _deliver)
             return
+        if _state.pressed:
+            return  # a __del__ of an object the Ctrl-C left half-built: the command is ending anyway
         previous(unraisable)
     return hook
 
@@ -185,3 +187,10 @@ def _forget_unhandled_interrupt() -> None:
         ctypes.pythonapi.PyRun_SimpleString(b"pass")
     except (ImportError, AttributeError, OSError):
         pass
+
+
+def quiet_after_interrupt() -> None:
+    """For a command that ends because of Ctrl-C: errors Python would print as "Exception ignored"
+    from now on (a ``__del__`` of an object the interruption left half-built, say llvmlite's) are
+    dropped; the command has said, in one line, that it was interrupted."""
+    sys.unraisablehook = lambda unraisable: None

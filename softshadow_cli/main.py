@@ -276,7 +276,14 @@ def _option_problem(args) -> str | None:
 
 
 def main(argv=None) -> int:
-    argv = sys.argv[1:] if argv is None else list(argv)
+    code = _main(sys.argv[1:] if argv is None else list(argv))
+    if code == 130:
+        from .interrupts import quiet_after_interrupt
+        quiet_after_interrupt()
+    return code
+
+
+def _main(argv: list[str]) -> int:
     from .interrupts import ctrl_c_never_swallowed, ctrl_c_pressed
     # The command's name for a message before the arguments are parsed (a Ctrl-C during imports).
     command = next((a for a in argv if a in ("render", "fit", "synth", "demo", "board", "bench")), "")

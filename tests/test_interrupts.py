@@ -213,3 +213,33 @@ def test_ctrl_c_while_compiling_is_one_line_and_130(pillar_folder, tmp_path, com
              if ln.strip() and not ln.startswith(("test: ", "fitting:"))]
     assert len(lines) == 1 and lines[0].startswith("softshadow fit: interrupted"), text
     assert time.monotonic() - sent < 60
+
+
+def test_after_a_ctrl_c_the_half_built_objects_say_nothing(tmp_path):
+    """An object the Ctrl-C left half-built (llvmlite's, during numba's compilation) fails in its
+    __del__ as the command ends: "Exception ignored in ... __del__" with a traceback, after the one
+    line. The command, interrupted, drops those."""
+    import subprocess
+    from pathlib import Path
+    script = tmp_path / "run.py"
+    script.write_text(
+        "import signal, sys\n"
+        "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
+        "import importlib\n"
+        "cli = importlib.import_module('softshadow_cli.main')\n"
+        "class HalfBuilt:\n"
+        "    def __del__(self):\n"
+        "        self.never_set\n"
+        "def command(args):\n"
+        "    global kept\n"
+        "    kept = HalfBuilt()\n"
+        "    raise KeyboardInterrupt\n"
+        "cli._add_demo = lambda sub: sub.add_parser('demo').set_defaults(func=command)\n"
+        "cli._use_compilation_cache = lambda: None\n"
+        "cli._option_problem = lambda args: None\n"
+        "code = cli.main(['demo'])\n"
+        "del kept\n"
+        "sys.exit(code)\n")
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
+    proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, env=env, timeout=120)
+    assert proc.returncode == 130 and proc.stderr.strip() == "softshadow demo: interrupted", proc.stderr
