@@ -89,9 +89,11 @@ def _xyz(option: str, text) -> None:
         raise OptionError(f"{option} must be three numbers X,Y,Z (metres), got {text!r}")
 
 
-def check_output_file(option: str, path, suffixes: tuple[str, ...] | None = None) -> None:
-    """An output file that can be written: its folder exists and is writable, it is not a
-    folder, and (with ``suffixes``) its extension is one of them."""
+def check_output_file(option: str, path, suffixes: tuple[str, ...] | None = None,
+                      folder_made: bool = False) -> None:
+    """An output file that can be written: its folder exists and is writable (or, with
+    ``folder_made``, can be created: the command makes it), it is not a folder, and (with
+    ``suffixes``) its extension is one of them."""
     import os
     path = Path(path)
     if path.is_dir():
@@ -99,6 +101,9 @@ def check_output_file(option: str, path, suffixes: tuple[str, ...] | None = None
     if suffixes is not None and path.suffix.lower() not in suffixes:
         raise OptionError(f"{option} {path} must end in one of {', '.join(sorted(set(suffixes)))}")
     parent = path.parent if str(path.parent) else Path(".")
+    if folder_made:
+        check_output_folder(option, parent)
+        return
     if not parent.exists():
         raise OptionError(f"{option} {path}: the folder {parent} does not exist")
     if not parent.is_dir():
@@ -238,10 +243,11 @@ def check_demo_options(args) -> None:
 
 def check_bench_options(args) -> None:
     """``softshadow bench``'s output files, before minutes of benchmarks (raises OptionError)."""
-    if getattr(args, "json_path", None):
-        check_output_file("--json", args.json_path)
+    # The bench makes the folders of its JSON and its report (docs/ and docs/img/ of a fresh checkout).
+    if getattr(args, "json_path", None) and args.json_path != "-":
+        check_output_file("--json", args.json_path, folder_made=True)
     if getattr(args, "report", None):
-        check_output_file("--report", args.report)
+        check_output_file("--report", args.report, folder_made=True)
 
 
 def check_board_options(args) -> None:
