@@ -175,8 +175,8 @@ def test_fit_passes_half_size_and_jobs_to_every_folder(monkeypatch, tmp_path, ca
     (["board", "{tmp}/b.pdf", "--dpi", "inf"], "softshadow board: --dpi must be a finite number"),
     (["board", "{tmp}/b.pdf", "--dpi", "100000"], "softshadow board: --dpi must be in [10, 2400], got 100000"),
     # The bench makes a missing folder for its outputs (docs/ of a fresh checkout), not one under a file.
-    (["bench", "--json", "{tmp}/file/x.json"], "softshadow bench: --json {tmp}/file cannot be created: {tmp}/file is"),
-    (["bench", "--report", "{tmp}/file/x.md"], "softshadow bench: --report {tmp}/file cannot be created: {tmp}/file is"),
+    (["bench", "--json", "{tmp}/file/x.json"], "softshadow bench: --json {tmp}/file is a file, not a folder"),
+    (["bench", "--report", "{tmp}/file/x.md"], "softshadow bench: --report {tmp}/file is a file, not a folder"),
 ])
 def test_synth_demo_board_and_bench_check_their_options_first(cli, tmp_path, argv, words):
     (tmp_path / "file").write_text("a file")
