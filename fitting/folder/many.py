@@ -34,7 +34,7 @@ from typing import Callable
 from softshadow import use_compilation_cache
 
 from ..photos.read import list_photos
-from ..report.results import FitResults
+from ..report.results import FitResults, GroupResult
 from ..solve.options import FitOptions
 
 __all__ = ["SUMMARY_COLUMNS", "DONE_MARKER", "find_photo_folders", "fit_many", "folder_rows",
@@ -73,11 +73,14 @@ def _relative(folder: Path, root: Path) -> str:
 
 
 def folder_rows(folder: str, groups: list[dict]) -> list[dict]:
-    """summary.csv rows of one folder from its results.json groups."""
+    """summary.csv rows of one folder from its results.json groups. ``reliable`` is the result's
+    (``GroupResult.from_json``): a group with an error is never reliable, even in a results.json
+    written before that was so."""
     rows = []
     for g in groups:
         row = {c: g.get(c) for c in SUMMARY_COLUMNS if c not in ("folder", "photos", "error")}
-        row.update(folder=folder, photos=";".join(g.get("photos") or []), error=g.get("error"))
+        row.update(folder=folder, photos=";".join(g.get("photos") or []), error=g.get("error"),
+                   reliable=GroupResult.from_json(g).reliable)
         rows.append(row)
     return rows
 
