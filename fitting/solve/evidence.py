@@ -133,8 +133,8 @@ def photo_estimates(params: FitParams, residuals: np.ndarray, jacobian: np.ndarr
         cov = (vt.T * inv ** 2) @ vt * s2
         rk, rr = raw_k + step[0], raw_rho + step[1]
         k = K_SCALE * float(np.logaddexp(0.0, rk))
-        rho = float(1.0 / (1.0 + np.exp(-rr)))
-        dk = K_SCALE / (1.0 + np.exp(-rk))
+        rho = float(np.exp(-np.logaddexp(0.0, -rr)))  # sigmoid, without overflow
+        dk = K_SCALE * float(np.exp(-np.logaddexp(0.0, -rk)))
         se_k = float(np.sqrt(max(cov[0, 0], 0.0)) * dk * stat_scale[0])
         se_rho = float(np.sqrt(max(cov[1, 1], 0.0)) * rho * (1 - rho) * stat_scale[1])
         out.append((k, se_k, rho, se_rho))

@@ -38,7 +38,7 @@ from .outcome import Estimate, Verdict
 
 __all__ = [
     "NO_SHADOW_DEPTH", "DEPTH_RATIO", "MIN_PHOTO_SHADOW_SAMPLES", "MISFIT_MAX", "PHOTO_MISFIT_MAX",
-    "UMBRA_RESIDUAL_RATIO", "UMBRA_RESIDUAL_MIN", "TEXTURE_DEPTH_RATIO", "MIN_PHOTO_UMBRA_SAMPLES",
+    "UMBRA_RESIDUAL_RATIO", "UMBRA_RESIDUAL_MIN", "TEXTURE_DEPTH_RATIO", "TEXTURE_PENUMBRA_PX", "MIN_PHOTO_UMBRA_SAMPLES",
     "MIN_PHOTO_PENUMBRA_SAMPLES", "PHOTO_SYS_SHARE", "DISAGREE_MAX_RATIO", "MIN_PENUMBRA_PX", "MAX_K_REL_STDERR",
     "MIN_PENUMBRA_SAMPLES", "NARROW_PENUMBRA_PX", "MIN_UMBRA_SAMPLES", "RESOLVED_BLUR_WIDTHS",
     "MIN_PROFILES", "SUN_SETTLED_DEG", "SUN_CHECK_GAIN", "CLOCK_ALONG_PATH", "ELEVATION_ONLY", "LOD_SHIFT_MAX",
@@ -91,6 +91,11 @@ _MIN_SIDE_SAMPLES = 10  # samples in a region needed to judge it
 #: on the hard-cases preset's low sun (rho 0.62); 0.37 on its cluttered ground (k +32 %, rho 0.323
 #: for 0.28).
 TEXTURE_DEPTH_RATIO = 0.3
+#: Across a penumbra wider than this (pixels), texture edges of a pixel or two average out: the
+#: ratio above is taken times sqrt(TEXTURE_PENUMBRA_PX / penumbra_px). A faint shadow (rho 0.67) over
+#: asphalt read 0.34 with a 25 px penumbra, k and rho within 1.4 sigma; the cluttered ground above
+#: had a 2.6 px penumbra.
+TEXTURE_PENUMBRA_PX = 4.0
 #: A photo's own rho is compared with the others' only when it holds at least this many umbra
 #: samples, its own k when it holds this many inside the penumbra: with fewer, one Gauss-Newton step
 #: from the group's solution is not an estimate (a photo with 4 umbra samples read rho 0.84 +- 0.04
@@ -302,9 +307,15 @@ def wants_sun_check(fit: FitEvidence) -> bool:
     return misfit_of(fit) > MISFIT_MAX or fit.k > fit.range_k_max
 
 
-def _sun_explains(check: SunCheck | None) -> bool:
-    return check is not None and (check.misfit_after <= MISFIT_MAX
-                                  or check.misfit_after <= SUN_CHECK_GAIN * check.misfit_before)
+def _sun_explains(check: SunCheck | None, fit: FitEvidence) -> bool:
+    """Whether the refit with the sun free removes what made it run: a misfit (brought under
+    ``MISFIT_MAX`` or below ``SUN_CHECK_GAIN`` of itself), or a penumbra beyond the band (k back within
+    it, the fit no worse)."""
+    if check is None:
+        return False
+    if check.misfit_before > MISFIT_MAX:
+        return check.misfit_after <= MISFIT_MAX or check.misfit_after <= SUN_CHECK_GAIN * check.misfit_before
+    return check.k_after <= fit.range_k_max and check.misfit_after <= max(check.misfit_before, MISFIT_MAX)
 
 
 def _clock_minutes(check: SunCheck) -> float | None:
@@ -331,7 +342,7 @@ def _likely_cause(fit: FitEvidence, context: GroupContext) -> str:
     if fit.sun_fitted:
         return _SUN_SEARCHED
     check = context.sun_check
-    if _sun_explains(check):
+    if _sun_explains(check, fit):
         minutes = _clock_minutes(check)
         if minutes is not None:
             later = "later" if minutes > 0 else "earlier"
@@ -373,157 +384,161 @@ def _agreement(values: list[tuple[float, float]], value: float) -> tuple[float, 
     return float(sum(((v - value) / e) ** 2 for v, e in used)), len(used) - 1
 
 
-def _birge(chi2: float, dof: int) -> float:
-    return math.sqrt(chi2 / dof) if dof and chi2 > dof else 1.0
-
-
-def _disagreement(fit: FitEvidence, name: str, pairs: list[tuple[PhotoEvidence, float, float]], value: float,
-                  ratio: float, fmt: str) -> str:
+def _birge_ratio(fit: FitEvidence, name: str) -> tuple[float, str | None]:
+    """How many times the photos' own estimates of k or rho (``name``) disagree beyond their errors
+    (the Birge ratio, sqrt(chi2 / dof), at least 1), and the warning when that is more than
+    ``DISAGREE_MAX_RATIO``. A photo's error is its statistical error and ``PHOTO_SYS_SHARE`` of the
+    group's systematic one, in quadrature; photos with too few samples of the shadow are not compared."""
+    if name == "k":
+        value, sys, fmt = fit.k, fit.k_stderr_sys, ".4g"
+        pairs = [(p, p.k, p.k_stderr) for p in fit.photos if p.n_penumbra >= MIN_PHOTO_PENUMBRA_SAMPLES]
+    else:
+        value, sys, fmt = fit.rho, fit.rho_stderr_sys, ".3f"
+        pairs = [(p, p.rho, p.rho_stderr) for p in fit.photos if p.n_umbra >= MIN_PHOTO_UMBRA_SAMPLES]
+    share = PHOTO_SYS_SHARE * sys if _finite(sys) else 0.0
+    pairs = [(p, v, math.hypot(e, share)) for p, v, e in pairs if _finite(v) and _finite(e)]
+    chi2, dof = _agreement([(v, e) for _, v, e in pairs], value)
+    ratio = math.sqrt(chi2 / dof) if dof and chi2 > dof else 1.0
+    if ratio <= DISAGREE_MAX_RATIO:
+        return ratio, None
     parts = ", ".join(f"{p.photo} {v:{fmt}} +- {e:{fmt}}" for p, v, e in pairs)
-    return (f"the photos disagree on {name} by {ratio:.1f} times their errors ({parts}; the group {value:{fmt}}): "
-            f"{name} is a compromise between them")
+    return ratio, (f"the photos disagree on {name} by {ratio:.1f} times their errors ({parts}; the group "
+                   f"{value:{fmt}}): {name} is a compromise between them")
+
+
+# ------------------------------------------------------------------------------- 5. the rest
+
+def _identifiability(fit: FitEvidence) -> str | None:
+    """Why k is not measured from the penumbra's width and samples and its own noise, or None."""
+    px = fit.penumbra_px
+    resolved = _finite(px) and px >= MIN_PENUMBRA_PX
+    if not resolved or fit.k_stderr_stat > MAX_K_REL_STDERR * max(fit.k, 1e-12):
+        return "the penumbra is narrower than the resolution"
+    if fit.n_in_penumbra < MIN_PENUMBRA_SAMPLES and px < NARROW_PENUMBRA_PX:
+        # Blur and JPEG widen a penumbra that few pixels sample: k reads high, so it bounds k.
+        return f"only {fit.n_in_penumbra} samples lie inside the fitted penumbra (fewer than {MIN_PENUMBRA_SAMPLES})"
+    return None
+
+
+def _misfit_warning(fit: FitEvidence, context: GroupContext) -> str | None:
+    """The goodness-of-fit warning (the model does not describe the photos) naming the likely cause."""
+    misfit = misfit_of(fit)
+    if not (_finite(misfit) and misfit > MISFIT_MAX):
+        return None
+    every = all(_finite(p.misfit) and p.misfit > MISFIT_MAX for p in fit.photos)
+    return (f"the fitted shadow does not match the photos: residuals {misfit:.1f} times the noise on the lit "
+            f"ground and in the umbra ({'every photo' if every else 'the photos median'}; about 1 when the scene is "
+            f"described right): {_likely_cause(fit, context)}")
+
+
+def _lod_warning(context: GroupContext) -> str | None:
+    """The warning for a forced level of detail that moves k or rho (``LOD_SHIFT_MAX``), or None."""
+    lod = context.level_of_detail
+    shift = max(lod.shift_k_se, lod.shift_rho_se)
+    if not (lod.forced and _finite(shift) and shift > LOD_SHIFT_MAX):
+        return None
+    return (f"the level of detail of {lod.faces:,} of the mesh's {lod.mesh_faces:,} faces moves k by "
+            f"{lod.shift_k_se:.1f} and rho by {lod.shift_rho_se:.1f} of their standard errors against the full mesh: "
+            "fit with --lod auto")
+
+
+def _texture_warning(fit: FitEvidence) -> str | None:
+    """The warning when the ground's texture rivals the shadow's step (``TEXTURE_DEPTH_RATIO``), or None."""
+    ratios = [p.rms_lit / p.predicted_depth for p in fit.photos
+              if p.n_lit >= _MIN_SIDE_SAMPLES and _finite(p.rms_lit) and _finite(p.predicted_depth)
+              and p.predicted_depth > 0]
+    px = fit.penumbra_px
+    # Across a penumbra wider than TEXTURE_PENUMBRA_PX, the pixel-scale texture averages out.
+    averaging = math.sqrt(min(1.0, TEXTURE_PENUMBRA_PX / px)) if _finite(px) and px > 0 else 1.0
+    if not ratios or averaging * median(ratios) <= TEXTURE_DEPTH_RATIO:
+        return None
+    return (f"the ground's texture rivals the shadow (lit residual {_pct(median(ratios))} of the shadow's depth, "
+            f"above {_pct(TEXTURE_DEPTH_RATIO)}): texture edges pass for the penumbra and shift the levels; rho is "
+            "not measured reliably" + (f"; or {_SUN_SEARCHED}" if fit.sun_fitted else ""))
+
+
+def _band_warning(fit: FitEvidence, context: GroupContext) -> str:
+    """The warning for a k beyond the band the samples were planned for (``range_k_max``)."""
+    head = f"k = {fit.k:.4g} is beyond range_k_max = {fit.range_k_max:g}: "
+    if _sun_explains(context.sun_check, fit):
+        return head + _likely_cause(fit, context)
+    # The samples' band and the start were sized for k up to range_k_max: beyond it the band may cut
+    # the penumbra short.
+    return head + "the samples may not cover the whole penumbra (raise --range-k-max)"
+
+
+def _photos_warning(fit: FitEvidence, context: GroupContext) -> str | None:
+    """The warning for a group whose photos that measured the shadow are fewer than half of those given."""
+    given = max(context.photos_given, len(fit.photos) + len(context.left_out) + len(fit.photos_without_shadow))
+    kept = [p.photo for p in fit.photos if _shows_shadow(p)]
+    if 2 * len(kept) >= given:
+        return None
+    return (f"only {len(kept)} of the group's {given} photos measured the shadow (the others were left out or show "
+            "none of it)" + (f": the values rest on {_names(kept)} alone" if kept else ""))
 
 
 # ------------------------------------------------------------------------------------- verdict
 
 def judge_fit(fit: FitEvidence, context: GroupContext = GroupContext()) -> tuple[Estimate, Verdict]:
     """The values and errors as reported and the verdict of a fitted group (module docstring)."""
-    warnings = [f"{photo}: {reason}" for photo, reason in fit.photos_without_shadow]
-    reliable, bound_reason = True, None
-    k_sys, rho_sys = fit.k_stderr_sys, fit.rho_stderr_sys
-    k_stat, rho_stat = fit.k_stderr_stat, fit.rho_stderr_stat
+    unsampled = [f"{photo}: {reason}" for photo, reason in fit.photos_without_shadow]
+    flags: list[str] = []  # warnings that make the group unreliable
+    notes: list[str | None] = []  # the others
+    # 4. Agreement: photos that disagree widen the statistical errors.
+    (k_ratio, k_disagree), (rho_ratio, rho_disagree) = _birge_ratio(fit, "k"), _birge_ratio(fit, "rho")
+    flags += [w for w in (k_disagree, rho_disagree) if w]
+    k_stat, rho_stat = fit.k_stderr_stat * k_ratio, fit.rho_stderr_stat * rho_ratio
+    k_err = math.hypot(k_stat, fit.k_stderr_sys) if _finite(fit.k_stderr_sys) else k_stat
+    rho_err = math.hypot(rho_stat, fit.rho_stderr_sys) if _finite(fit.rho_stderr_sys) else rho_stat
 
-    # 4. Agreement: each photo's own estimate against the group's value.
-    per_share = lambda e, sys: math.hypot(e, PHOTO_SYS_SHARE * sys) if _finite(sys) else e
-    k_pairs = [(p, p.k, per_share(p.k_stderr, k_sys)) for p in fit.photos
-               if p.n_penumbra >= MIN_PHOTO_PENUMBRA_SAMPLES and _finite(p.k)]
-    rho_pairs = [(p, p.rho, per_share(p.rho_stderr, rho_sys)) for p in fit.photos
-                 if p.n_umbra >= MIN_PHOTO_UMBRA_SAMPLES and _finite(p.rho)]
-    for name, pairs, value, fmt in (("k", k_pairs, fit.k, ".4g"), ("rho", rho_pairs, fit.rho, ".3f")):
-        ratio = _birge(*_agreement([(v, e) for _, v, e in pairs], value))
-        if ratio > 1.0:
-            if name == "k":
-                k_stat *= ratio
-            else:
-                rho_stat *= ratio
-        if ratio > DISAGREE_MAX_RATIO:
-            reliable = False
-            warnings.append(_disagreement(fit, name, pairs, value, ratio, fmt))
-    k_err = math.hypot(k_stat, k_sys) if _finite(k_sys) else k_stat
-    rho_err = math.hypot(rho_stat, rho_sys) if _finite(rho_sys) else rho_stat
+    # 3. Goodness of fit; a misdescribed scene (a misfit, or a penumbra beyond the band that a moved
+    # sun explains) also raises the residuals that the umbra's levels and the texture are judged by.
+    misfit = _misfit_warning(fit, context)
+    scene_off = misfit is not None or (fit.k > fit.range_k_max and _sun_explains(context.sun_check, fit))
+    flags += [w for w in (misfit, None if misfit else _lod_warning(context)) if w]
 
-    # 5. Identifiability of k.
-    px = fit.penumbra_px
-    resolved = _finite(px) and px >= MIN_PENUMBRA_PX
-    seen = fit.n_in_penumbra >= MIN_PENUMBRA_SAMPLES or (resolved and px >= NARROW_PENUMBRA_PX)
-    if not resolved:
-        bound_reason = "the penumbra is narrower than the resolution"
-    elif not seen:
-        # Blur and JPEG widen a penumbra that few pixels sample: k reads high, so it bounds k.
-        bound_reason = (f"only {fit.n_in_penumbra} samples lie inside the fitted penumbra (fewer than "
-                        f"{MIN_PENUMBRA_SAMPLES})")
-    elif fit.k_stderr_stat > MAX_K_REL_STDERR * max(fit.k, 1e-12):
-        bound_reason = "the penumbra is narrower than the resolution"
-
-    # 3. Goodness of fit.
-    misfit = misfit_of(fit)
-    misfits = _finite(misfit) and misfit > MISFIT_MAX
-    if misfits:
-        reliable = False
-        bound_reason = bound_reason or "the fitted shadow does not match the photos"
-        every = all(_finite(p.misfit) and p.misfit > MISFIT_MAX for p in fit.photos)
-        warnings.append(f"the fitted shadow does not match the photos: residuals {misfit:.1f} times the noise on "
-                        f"the lit ground and in the umbra ({'every photo' if every else 'the photos median'}; "
-                        f"about 1 when the scene is described right): {_likely_cause(fit, context)}")
-    lod = context.level_of_detail
-    if (lod.forced and _finite(max(lod.shift_k_se, lod.shift_rho_se))
-            and max(lod.shift_k_se, lod.shift_rho_se) > LOD_SHIFT_MAX and not misfits):
-        reliable = False
-        warnings.append(f"the level of detail of {lod.faces:,} of the mesh's {lod.mesh_faces:,} faces moves k by "
-                        f"{lod.shift_k_se:.1f} and rho by {lod.shift_rho_se:.1f} of their standard errors against "
-                        "the full mesh: fit with --lod auto")
+    # 5. Identifiability of k, with its bound.
+    bound = _identifiability(fit)
+    if bound is None and scene_off:
+        # A misplaced edge is fitted with a wider penumbra: k reads high, and bounds the truth.
+        bound = "the fitted shadow does not match the photos"
     moved = context.sun_last_move_deg
-    if fit.sun_fitted and bound_reason is None and _finite(moved) and moved > SUN_SETTLED_DEG:
-        # The sun's error moves the model's edges off the photo's; the fit widens the penumbra to
-        # cover them, so k reads high.
-        bound_reason = (f"the fitted sun had not settled (it still moved {moved:.2f} deg in the last refit), "
-                        "and its error widens the fitted penumbra")
+    if bound is None and fit.sun_fitted and _finite(moved) and moved > SUN_SETTLED_DEG:
+        # The fitted sun's error moves the model's edges off the photos'; the fit widens the penumbra
+        # to cover them, so k reads high.
+        bound = (f"the fitted sun had not settled (it still moved {moved:.2f} deg in the last refit), and its "
+                 "error widens the fitted penumbra")
+    texture = None if scene_off else _texture_warning(fit)
+    if bound is None and texture:
+        # What hides the rho measurement hides the penumbra's width too: k is then a bound.
+        bound = "the ground's texture hides the penumbra's width"
+    notes.append(f"range not identifiable: {bound}; range_k is an upper bound" if bound else
+                 resolution_warning(fit.penumbra_px, fit.blur_px))
+
+    if fit.n_in_umbra < MIN_UMBRA_SAMPLES:
+        flags.append(f"rho not measured: only {fit.n_in_umbra} samples lie in the fitted umbra (fewer than "
+                     f"{MIN_UMBRA_SAMPLES}), so rho rests on the penumbra's model")
+    if not scene_off:
+        flags += [f"{p.photo}: {why}; rho is a compromise" for p in fit.photos if (why := _umbra_levels(p))]
+    flags += [w for w in (texture, _band_warning(fit, context) if fit.k > fit.range_k_max and not misfit else None,
+                          None if fit.converged else "the solver stopped before converging",
+                          # Too little of the outline in view: one stretch of edge decides k and rho.
+                          few_profiles_warning(fit.n_profiles), _photos_warning(fit, context)) if w]
+    if context.left_out:
+        notes.append("refitted without " + ", ".join(name for name, _ in context.left_out)
+                     + ", which did not fit the other photos (see skipped)")
+    notes.append(context.level_of_detail.note)
 
     range_k = fit.k
-    identifiable = bound_reason is None
-    if not identifiable:
-        range_k = range_upper_bound(fit.k, k_stat, px, k_err)
-        if px is None and fit.no_ramp_k is not None:
+    if bound is not None:
+        range_k = range_upper_bound(fit.k, k_stat, fit.penumbra_px, k_err)
+        if fit.penumbra_px is None and fit.no_ramp_k is not None:
             # No sample inside the penumbra: k did not move from its start; the bound is the k whose
             # penumbra would reach the nearest sample, which shows no ramp.
             range_k = max(range_k, fit.no_ramp_k)
-        warnings.append(f"range not identifiable: {bound_reason}; range_k is an upper bound")
-    elif resolution_warning(px, fit.blur_px):
-        warnings.append(resolution_warning(px, fit.blur_px))
-
-    # A misdescribed scene (a misfit, or a penumbra beyond the band that a moved sun explains) also
-    # raises the residuals that the umbra's levels and the texture are judged by: its cause is named.
-    scene_off = misfits or (fit.k > fit.range_k_max and _sun_explains(context.sun_check))
-    if scene_off and identifiable:
-        # A misplaced edge is fitted with a wider penumbra: k reads high, and bounds the truth.
-        identifiable, range_k = False, range_upper_bound(fit.k, k_stat, px, k_err)
-        warnings.append("range not identifiable: the fitted shadow does not match the photos; range_k is an "
-                        "upper bound")
-    if fit.n_in_umbra < MIN_UMBRA_SAMPLES:
-        reliable = False
-        warnings.append(f"rho not measured: only {fit.n_in_umbra} samples lie in the fitted umbra (fewer than "
-                        f"{MIN_UMBRA_SAMPLES}), so rho rests on the penumbra's model")
-    if not scene_off:
-        for p in fit.photos:
-            if why := _umbra_levels(p):
-                reliable = False
-                warnings.append(f"{p.photo}: {why}; rho is a compromise")
-    ratios = [p.rms_lit / p.predicted_depth for p in fit.photos
-              if p.n_lit >= _MIN_SIDE_SAMPLES and _finite(p.rms_lit) and _finite(p.predicted_depth)
-              and p.predicted_depth > 0]
-    if ratios and median(ratios) > TEXTURE_DEPTH_RATIO and not scene_off:
-        reliable = False
-        warnings.append(f"the ground's texture rivals the shadow (lit residual {_pct(median(ratios))} of the "
-                        f"shadow's depth, above {_pct(TEXTURE_DEPTH_RATIO)}): texture edges pass for the penumbra "
-                        "and shift the levels; rho is not measured reliably"
-                        + (f"; or {_SUN_SEARCHED}" if fit.sun_fitted else ""))
-        if identifiable:
-            # What hides the rho measurement hides the penumbra's width too: k is then a bound.
-            identifiable = False
-            range_k = range_upper_bound(fit.k, k_stat, px, k_err)
-            warnings.append("range not identifiable: the ground's texture hides the penumbra's width; "
-                            "range_k is an upper bound")
-    if fit.k > fit.range_k_max and not misfits:
-        reliable = False
-        if _sun_explains(context.sun_check):
-            warnings.append(f"k = {fit.k:.4g} is beyond range_k_max = {fit.range_k_max:g}: "
-                            f"{_likely_cause(fit, context)}")
-        else:
-            # The samples' band and the start were sized for k up to range_k_max: beyond it the band
-            # may cut the penumbra short.
-            warnings.append(f"k = {fit.k:.4g} is beyond range_k_max = {fit.range_k_max:g}: the samples may not "
-                            "cover the whole penumbra (raise --range-k-max)")
-    if not fit.converged:
-        reliable = False
-        warnings.append("the solver stopped before converging")
-    if few_profiles_warning(fit.n_profiles):
-        # Too little of the outline in view: one stretch of edge decides k and rho.
-        reliable = False
-        warnings.append(few_profiles_warning(fit.n_profiles))
-    given = max(context.photos_given, len(fit.photos) + len(context.left_out) + len(fit.photos_without_shadow))
-    shown = sum(_shows_shadow(p) for p in fit.photos)
-    if 2 * shown < given:
-        reliable = False
-        kept = [p.photo for p in fit.photos if _shows_shadow(p)]
-        warnings.append(f"only {shown} of the group's {given} photos measured the shadow (the others were left "
-                        f"out or show none of it): the values rest on {_names(kept) if kept else 'none'} alone")
-    if context.left_out:
-        warnings.append("refitted without " + ", ".join(name for name, _ in context.left_out)
-                        + ", which did not fit the other photos (see skipped)")
-    if lod.note:
-        warnings.append(lod.note)
     estimate = Estimate(range_k=range_k, rho=fit.rho, range_stderr=k_err, rho_stderr=rho_err,
                         range_stderr_stat=k_stat, rho_stderr_stat=rho_stat,
-                        range_stderr_sys=k_sys if _finite(k_sys) else None,
-                        rho_stderr_sys=rho_sys if _finite(rho_sys) else None)
-    return estimate, Verdict(reliable=reliable, identifiable=identifiable, warnings=tuple(warnings))
+                        range_stderr_sys=fit.k_stderr_sys if _finite(fit.k_stderr_sys) else None,
+                        rho_stderr_sys=fit.rho_stderr_sys if _finite(fit.rho_stderr_sys) else None)
+    warnings = tuple(unsampled + flags + [n for n in notes if n])
+    return estimate, Verdict(reliable=not flags, identifiable=bound is None, warnings=warnings)
