@@ -2,8 +2,8 @@
 
 A group's result (``GroupResult``) is built from typed, frozen parts: the values and errors as
 reported and the verdict on them (both from the rule book, ``fitting.verdict``), the sun the fit
-used, diagnostics of the fit, and plot data. ``to_json`` gives exactly the CONVENTIONS
-``results.json`` fields (plus the extra fields ``docs/formats.md`` allows); plot data rides along
+used, diagnostics of the fit, and plot data. ``to_json`` gives exactly the documented
+``results.json`` fields (docs/formats.md, with the extra fields it allows); plot data rides along
 (``ProfilePlotData``, ``OverlayPlotData``) and is not written.
 """
 
@@ -43,13 +43,16 @@ class ProfilePlotData:
 
 @dataclasses.dataclass(frozen=True)
 class OverlayPlotData:
-    """The fitted shadow over a photo: image (H, W) linear gray, alpha (H, W) fitted alpha
-    (NaN where not modelled), samples_uv (n, 2) pixels used by the fit."""
+    """The fitted shadow over a photo: image (h, w) linear gray, possibly a downsampled copy of the
+    photo; alpha (h, w) fitted alpha on the same pixels (NaN where not modelled); samples_uv (n, 2)
+    the pixels used by the fit, in the photo's own pixels; photo_shape (H, W) the photo's size
+    (None: the image is the photo at full size)."""
 
     photo: str
     image: np.ndarray
     alpha: np.ndarray
     samples_uv: np.ndarray
+    photo_shape: tuple[int, int] | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -101,7 +104,8 @@ def _part(part: str, name: str) -> property:
 
 @dataclasses.dataclass(frozen=True)
 class GroupResult:
-    """One time of day (or one photo, without a scene), built from its parts.
+    """One time of day (or one photo, without a scene), built from its parts; fields as in
+    results.json (docs/formats.md).
 
     range_k and rho are physical values; ``range`` and ``brightness`` are the paper's units
     (100 k and 255 rho^(1/2.2)); *_stderr are one-sigma in physical units. When
