@@ -67,7 +67,7 @@ def _sun_check(model, pose, views: list[PhotoView], group: PhotoGroup, options: 
 
 
 def fit_checked(model, pose, views: list[PhotoView], group: PhotoGroup, options: FitOptions, sky_model=None, *,
-                level_of_detail: LevelOfDetail = LevelOfDetail(),
+                level_of_detail: LevelOfDetail | None = None,
                 sun_path: tuple[float, float] | None = None) -> tuple[GroupResult, list[dict]]:
     """Fit a group and judge it (``fitting.verdict.rules``): a photo the rules find out of place is
     left out (a ``skipped`` entry naming the group and why) and the group refitted without it; a
@@ -76,6 +76,7 @@ def fit_checked(model, pose, views: list[PhotoView], group: PhotoGroup, options:
     sun_path: the sun's daily motion at the group's time, (d azimuth, d elevation) in degrees per
     minute (None: not known)."""
     start = _time.perf_counter()
+    level_of_detail = level_of_detail or LevelOfDetail()
     given, left_out = max(len(views), len(group.photos)), []
     while True:
         result, sun_moved = _fit_group_with_sun(model, pose, views, PhotoGroup(group.label, group.time,

@@ -254,10 +254,11 @@ def _others_median(values: list[float], i: int) -> float:
     return float(median(rest)) if rest else math.nan
 
 
-def photo_to_leave_out(fit: FitEvidence, context: GroupContext = GroupContext()) -> tuple[str, str] | None:
+def photo_to_leave_out(fit: FitEvidence, context: GroupContext | None = None) -> tuple[str, str] | None:
     """The photo to leave out of the group (then refitted without it) and why, or None (module
     docstring, rule 2). At most one per refit (the others may only have been bent by it), and never
     more than half of the photos given to the group."""
+    context = context or GroupContext()
     photos = fit.photos
     given = max(context.photos_given, len(photos) + len(context.left_out))
     if len(photos) < 2 or 2 * (len(context.left_out) + 1) > given:
@@ -479,8 +480,9 @@ def _photos_warning(fit: FitEvidence, context: GroupContext) -> str | None:
 
 # ------------------------------------------------------------------------------------- verdict
 
-def judge_fit(fit: FitEvidence, context: GroupContext = GroupContext()) -> tuple[Estimate, Verdict]:
+def judge_fit(fit: FitEvidence, context: GroupContext | None = None) -> tuple[Estimate, Verdict]:
     """The values and errors as reported and the verdict of a fitted group (module docstring)."""
+    context = context or GroupContext()
     unsampled = [f"{photo}: {reason}" for photo, reason in fit.photos_without_shadow]
     flags: list[str] = []  # warnings that make the group unreliable
     notes: list[str | None] = []  # the others
