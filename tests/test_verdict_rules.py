@@ -158,6 +158,13 @@ def test_the_cause_of_a_misfit_from_a_refit_with_the_sun_free():
     size = SunCheck(0.2, 1.6, 3.0, 1.4, 0.006, elevation_deg=51.1, path_deg_per_min=path)
     text = " ".join(rules.judge_fit(fit, GroupContext(3, sun_check=size))[1].warnings)
     assert "likely the object's size" in text and "6 % smaller" in text
+    # The same move with a sun given in scene.toml: that sun may be off.
+    text = " ".join(rules.judge_fit(fit, GroupContext(3, sun_check=dataclasses.replace(size, sun_given=True)))[1].warnings)
+    assert "likely the object's size" in text and "the sun given in scene.toml" in text
+    # Moved across its path in azimuth: the sun, or the object's position (both move the shadow sideways).
+    aside = SunCheck(-0.8, 0.2, 2.3, 1.6, 0.006, elevation_deg=19.5, path_deg_per_min=(0.02, 0.25))
+    text = " ".join(rules.judge_fit(fit, GroupContext(3, sun_check=aside))[1].warnings)
+    assert "likely the sun or the object's position" in text
     # A refit that does not fit either: not the sun.
     stuck = dataclasses.replace(size, misfit_after=2.9)
     text = " ".join(rules.judge_fit(fit, GroupContext(3, sun_check=stuck))[1].warnings)
@@ -174,6 +181,24 @@ def test_k_beyond_the_band_is_the_clock_when_the_sun_explains_it_else_raise_the_
     assert not verdict.identifiable and any("beyond range_k_max" in w and "likely the clock" in w
                                             for w in verdict.warnings)
     assert not any("raise --range-k-max" in w for w in verdict.warnings)
+
+
+def test_a_refit_that_leaves_k_beyond_the_band_does_not_explain_it():
+    """A penumbra under a pixel fitted far too wide (the hard-cases `subpixel` group): the refit with
+    the sun free moves the sun but keeps k beyond the band, and the misfit was fine to begin with."""
+    fit = _fit(k=0.063)
+    moved = SunCheck(0.1, 2.9, 0.69, 0.7, 0.05, elevation_deg=55.0, path_deg_per_min=(0.25, 0.1))
+    _, verdict = rules.judge_fit(fit, GroupContext(3, sun_check=moved))
+    assert any("raise --range-k-max" in w for w in verdict.warnings)
+    assert not any("likely" in w for w in verdict.warnings)
+
+
+def test_the_texture_rule_is_averaged_across_a_wide_penumbra():
+    """A faint shadow (rho 0.67) over asphalt: the lit residual 34 % of the depth, a 25 px penumbra."""
+    rough = [_photo(f"{i}.jpg", rms_lit=0.112, predicted_depth=0.33, k=0.018, rho=0.67) for i in range(3)]
+    assert rules.judge_fit(_fit(rough, k=0.018, rho=0.67, penumbra_px=25.5), GroupContext(3))[1].reliable
+    _, verdict = rules.judge_fit(_fit(rough, k=0.018, rho=0.67, penumbra_px=2.6), GroupContext(3))
+    assert not verdict.reliable and any("texture rivals the shadow" in w for w in verdict.warnings)
 
 
 def test_a_forced_level_of_detail_that_moves_k_is_named():

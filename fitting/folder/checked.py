@@ -63,7 +63,7 @@ def _sun_check(model, pose, views: list[PhotoView], group: PhotoGroup, options: 
                     d_elevation_deg=refit.sun_elevation_deg - views[0].sun_elevation_deg,
                     misfit_before=rules.misfit_of(result.evidence), misfit_after=rules.misfit_of(refit.evidence),
                     k_after=refit.evidence.k, elevation_deg=float(views[0].sun_elevation_deg),
-                    path_deg_per_min=sun_path)
+                    path_deg_per_min=sun_path, sun_given=views[0].sun_source == "given")
 
 
 def fit_checked(model, pose, views: list[PhotoView], group: PhotoGroup, options: FitOptions, sky_model=None, *,

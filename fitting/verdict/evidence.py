@@ -118,7 +118,8 @@ class SunCheck:
     """A diagnostic refit of a group with the sun free (its azimuth and elevation fitted with k
     and rho): how far the sun moved (degrees), the misfit before and after (the photos' median
     ``PhotoEvidence.misfit``), k after; the sun's elevation (degrees) and its daily path at the
-    group's time, (d azimuth, d elevation) in degrees per minute (None: not known, no site)."""
+    group's time, (d azimuth, d elevation) in degrees per minute (None: not known, no site);
+    sun_given: the sun was given in scene.toml (not computed from a time and the site)."""
 
     d_azimuth_deg: float
     d_elevation_deg: float
@@ -127,6 +128,7 @@ class SunCheck:
     k_after: float
     elevation_deg: float = 45.0
     path_deg_per_min: tuple[float, float] | None = None
+    sun_given: bool = False
 
 
 @dataclasses.dataclass(frozen=True)

@@ -351,18 +351,21 @@ def _likely_cause(fit: FitEvidence, context: GroupContext) -> str:
                     f"{check.d_azimuth_deg:+.1f} deg in azimuth, {check.d_elevation_deg:+.1f} deg in elevation, "
                     "along its path): check the camera's clock and the time zone")
         across = abs(check.d_azimuth_deg) * math.cos(math.radians(check.elevation_deg))
+        higher = "higher" if check.d_elevation_deg > 0 else "lower"
         if abs(check.d_elevation_deg) >= ELEVATION_ONLY * across:
             # A sun higher by d casts a shadow shorter by cot(el + d) / cot(el): as an object that much
             # smaller would.
             el = math.radians(check.elevation_deg)
             ratio = math.tan(el) / math.tan(el + math.radians(check.d_elevation_deg))
             size = "smaller" if ratio < 1 else "larger"
+            sun = ("the sun given in scene.toml is that much off in elevation" if check.sun_given
+                   else "the site's latitude is off")
             return (f"likely the object's size: the shadows fit a sun {abs(check.d_elevation_deg):.1f} deg "
-                    f"{'higher' if check.d_elevation_deg > 0 else 'lower'}, as cast by an object "
-                    f"{_pct(abs(1 - ratio))} {size} than scene.toml says (or the site's latitude is off)")
-        return (f"likely the sun: the shadows fit a sun {check.d_azimuth_deg:+.1f} deg in azimuth and "
-                f"{check.d_elevation_deg:+.1f} deg in elevation from the one given: check the site, the time "
-                "zone and the clock")
+                    f"{higher}, as cast by an object {_pct(abs(1 - ratio))} {size} than scene.toml says (or {sun})")
+        what = "the sun given in scene.toml" if check.sun_given else "the site, the time zone and the clock"
+        return (f"likely the sun or the object's position: the shadows fit a sun {check.d_azimuth_deg:+.1f} deg in "
+                f"azimuth and {check.d_elevation_deg:+.1f} deg in elevation from the one given: check {what}, and "
+                "the object's position in scene.toml")
     lod = context.level_of_detail
     if lod.forced and lod.faces and lod.mesh_faces and lod.faces < lod.mesh_faces:
         return (f"likely the level of detail: {lod.faces:,} of the mesh's {lod.mesh_faces:,} faces were "
