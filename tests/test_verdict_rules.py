@@ -84,11 +84,15 @@ def test_a_photo_without_the_shadow_the_others_show_is_left_out_even_among_two()
         assert name == "cap.jpg" and reason.startswith("no shadow edge where the model puts one")
 
 
-def test_a_photo_that_shows_none_of_the_shadow_is_left_out():
-    blind = _photo("blind.jpg", n_umbra=4, n_penumbra=0, shadow_depth=math.nan)
-    name, reason = rules.photo_to_leave_out(_fit([_photo("a.jpg"), blind, _photo("b.jpg")]),
-                                            GroupContext(photos_given=3))
-    assert name == "blind.jpg" and reason.startswith("shows none of the shadow")
+def test_a_photo_that_shows_none_of_the_shadow_is_kept_but_counted():
+    blind = [_photo("blind.jpg", n_umbra=4, n_penumbra=0, shadow_depth=math.nan),
+             _photo("dim.jpg", n_umbra=1, n_penumbra=7, shadow_depth=math.nan)]
+    fit = _fit([_photo("a.jpg")] + blind)
+    assert rules.photo_to_leave_out(fit, GroupContext(photos_given=3)) is None
+    _, verdict = rules.judge_fit(fit, GroupContext(photos_given=3))
+    assert not verdict.reliable and any(w.startswith("only 1 of the group's 3 photos measured the shadow")
+                                        for w in verdict.warnings)
+    assert rules.judge_fit(_fit([_photo("a.jpg"), _photo("b.jpg"), blind[0]]), GroupContext(3))[1].reliable
 
 
 def test_a_photo_that_misfits_alone_is_left_out_but_not_when_every_photo_misfits():
