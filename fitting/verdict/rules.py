@@ -390,7 +390,9 @@ def _birge_ratio(fit: FitEvidence, name: str) -> tuple[float, str | None]:
     group's systematic one, in quadrature; photos with too few samples of the shadow are not compared."""
     if name == "k":
         value, sys, fmt = fit.k, fit.k_stderr_sys, ".4g"
-        pairs = [(p, p.k, p.k_stderr) for p in fit.photos if p.n_penumbra >= MIN_PHOTO_PENUMBRA_SAMPLES]
+        # Under a penumbra narrower than the resolution no photo measures k (it is a bound).
+        resolved = _finite(fit.penumbra_px) and fit.penumbra_px >= MIN_PENUMBRA_PX
+        pairs = [(p, p.k, p.k_stderr) for p in fit.photos if p.n_penumbra >= MIN_PHOTO_PENUMBRA_SAMPLES and resolved]
     else:
         value, sys, fmt = fit.rho, fit.rho_stderr_sys, ".3f"
         pairs = [(p, p.rho, p.rho_stderr) for p in fit.photos if p.n_umbra >= MIN_PHOTO_UMBRA_SAMPLES]
