@@ -17,8 +17,8 @@ from fitting.verdict.evidence import (EdgeEvidence, FitEvidence, GroupContext, L
 def _photo(name="a.jpg", **kw) -> PhotoEvidence:
     """A photo that fits well (the numbers of a table2 photo at 640x480)."""
     base = dict(photo=name, n_samples=1300, n_lit=780, n_umbra=300, n_penumbra=80, rms=0.02, rms_lit=0.023,
-                rms_umbra=0.005, rms_penumbra=0.02, noise_lit=0.022, noise_umbra=0.004, offset_lit=0.0,
-                offset_umbra=-0.001, misfit=0.9, shadow_depth=0.84, predicted_depth=0.84, k=0.0057,
+                rms_umbra=0.005, rms_penumbra=0.02, noise_lit=0.022, noise_umbra=0.004, misfit=0.9,
+                shadow_depth=0.84, predicted_depth=0.84, k=0.0057,
                 k_stderr=0.0002, rho=0.159, rho_stderr=0.001)
     base.update(kw)
     return PhotoEvidence(**base)

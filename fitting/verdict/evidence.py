@@ -41,8 +41,7 @@ class PhotoEvidence:
     rms, rms_lit, rms_umbra, rms_penumbra: the residual's root mean square over all samples and
     per region. noise_lit, noise_umbra: the robust spread (normal-scaled MAD) of the residuals on
     the lit ground and in the umbra: the photo's noise and texture, which the model does not
-    describe. offset_lit, offset_umbra: the median residual there (the fitted level's miss).
-    misfit: the root mean square of the residuals in units of the noise expected at each sample
+    describe. misfit: the root mean square of the residuals in units of the noise expected at each sample
     (the lit ground's noise on the lit side, the umbra's in the umbra, between them by alpha),
     over the 90 % of samples with the smallest such ratio: about 1 when the model describes
     what the photo shows, whatever its texture.
@@ -64,8 +63,6 @@ class PhotoEvidence:
     rms_penumbra: float = NAN
     noise_lit: float = NAN
     noise_umbra: float = NAN
-    offset_lit: float = NAN
-    offset_umbra: float = NAN
     misfit: float = NAN
     shadow_depth: float = NAN
     predicted_depth: float = NAN
