@@ -272,8 +272,8 @@ def photo_to_leave_out(fit: FitEvidence, context: GroupContext | None = None) ->
         if _finite(p.shadow_depth) and others >= NO_SHADOW_DEPTH and p.shadow_depth < DEPTH_RATIO * others:
             candidates.append((p.shadow_depth / others, p.photo,
                                f"no shadow edge where the model puts one (the umbra is {_pct(max(p.shadow_depth, 0))} "
-                               f"below the lit ground, {_pct(others)} in the other photos): shadow out of view, "
-                               "lens cap on, wrong time or wrong camera?"))
+                               f"below the lit ground, {_pct(others)} in the other photos): shadow out of view or "
+                               "narrower than the photo resolves, lens cap on, wrong time or wrong camera?"))
     if candidates:
         _, name, reason = min(candidates)
         return name, reason
