@@ -26,7 +26,7 @@ from __future__ import annotations
 import dataclasses
 import math
 
-__all__ = ["PhotoEvidence", "FitEvidence", "SunCheck", "LevelOfDetail", "GroupContext", "EdgeEvidence", "NAN"]
+__all__ = ["PhotoEvidence", "FitEvidence", "SunFree", "SunCheck", "LevelOfDetail", "GroupContext", "EdgeEvidence", "NAN"]
 
 NAN = math.nan
 
@@ -73,6 +73,18 @@ class PhotoEvidence:
 
 
 @dataclasses.dataclass(frozen=True)
+class SunFree:
+    """The group's solve repeated on the same samples with the sun's azimuth and elevation free:
+    how far the sun moved (degrees) from its elevation ``elevation_deg``, and k there. A sun known
+    from its time and site moves little when the scene is described right."""
+
+    d_azimuth_deg: float
+    d_elevation_deg: float
+    k: float
+    elevation_deg: float = 45.0
+
+
+@dataclasses.dataclass(frozen=True)
 class FitEvidence:
     """One group's fit.
 
@@ -89,6 +101,7 @@ class FitEvidence:
     range_k_max: the largest k the samples' band was planned for. sun_fitted: the sun was fitted
     with k and rho (not known from a time and site, or given). photos: each photo's evidence.
     photos_without_shadow: (photo, reason) for photos that were not sampled (no shadow in view).
+    sun_free: the solve with the sun free (None: the sun was fitted anyway).
     """
 
     k: float
@@ -108,6 +121,7 @@ class FitEvidence:
     no_ramp_k: float | None = None
     sun_fitted: bool = False
     photos_without_shadow: tuple[tuple[str, str], ...] = ()
+    sun_free: SunFree | None = None
 
 
 @dataclasses.dataclass(frozen=True)
