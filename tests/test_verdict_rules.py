@@ -190,15 +190,18 @@ def test_k_beyond_the_band_is_the_clock_when_the_sun_explains_it_else_raise_the_
 def test_shadows_that_fit_another_sun_flag_the_group_with_the_cause():
     """A clock 7 minutes off on a rising bank: every photo fits (misfit 1.2-1.4, texture hides it), but
     the solve with the sun free moves the sun 1 deg; described right, it moves at most 0.12 deg."""
-    still = _fit(sun_free=SunFree(0.02, -0.03, 0.0057, elevation_deg=52.0))
+    still = _fit(sun_free=SunFree(0.02, -0.03, 0.0057, 0.159, elevation_deg=52.0))
     assert not rules.wants_sun_check(still) and rules.judge_fit(still, GroupContext(3))[1].reliable
-    moved = _fit(k=0.027, sun_free=SunFree(-1.0, 0.76, 0.023, elevation_deg=52.3))
+    # A low sun over a narrow shadow: the sun moves, k and rho do not follow it.
+    loose = _fit(sun_free=SunFree(0.1, -4.0, 0.0058, 0.159, elevation_deg=21.0))
+    assert not rules.wants_sun_check(loose) and rules.judge_fit(loose, GroupContext(3))[1].reliable
+    moved = _fit(k=0.027, sun_free=SunFree(-1.0, 0.76, 0.023, 0.159, elevation_deg=52.3))
     assert rules.wants_sun_check(moved) and rules.sun_moves(moved) == pytest.approx(1.0, abs=0.05)
     clock = SunCheck(-1.7, 1.4, 1.3, 1.2, 0.012, elevation_deg=52.3, path_deg_per_min=(-0.21, 0.17))
     estimate, verdict = rules.judge_fit(moved, GroupContext(3, sun_check=clock))
     assert not verdict.reliable and not verdict.identifiable and estimate.range_k > 0.027
     text = " ".join(verdict.warnings)
-    assert "the shadows fit a sun 1.0 deg from the scene's" in text and "likely the clock" in text
+    assert "the shadows fit a sun 1.0 deg from the scene's, and k or rho follow it" in text and "likely the clock" in text
 
 
 def test_a_refit_that_leaves_k_beyond_the_band_does_not_explain_it():

@@ -446,10 +446,10 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
     log = (lambda line: print(f"  {label}: {line}")) if options.verbose else None
     best, cov, _ = choose_model(arrays, pose, plain.params, options, fit_sun, delta, n_eff, log)
     sol, cfg = best.solution, best.config
+    clusters = edge_clusters([s.profile_id for s in samples], len(sol.residuals))
     sun_free = None if fit_sun else _sun_free(sol, cfg, arrays, pose, options, float(used[0].sun_elevation_deg))
     solve_seconds = _time.perf_counter() - solve_start
     est = k_rho_with_errors(sol.params, cov)
-    clusters = edge_clusters([s.profile_id for s in samples], len(sol.residuals))
     robust = k_rho_with_errors(sol.params, cluster_covariance(sol.residuals, sol.jacobian, clusters))
     # One number for the group: the root mean square of the photos' blurs (px).
     raw_blur = np.asarray(sol.params.raw_blur, dtype=np.float64)
@@ -491,11 +491,12 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
 def _sun_free(sol: Solution, cfg: FitConfig, arrays: GroupArrays, pose: Pose, options: FitOptions,
               elevation_deg: float) -> SunFree:
     """The solve repeated from its solution on the same samples with the sun free (the compiled solver
-    takes the switch as an array: no new program), as evidence of how much k depends on the sun."""
+    takes the switch as an array: no new program), as evidence of whether the shadows want another sun,
+    and whether k and rho follow it."""
     free = FitConfig.make(cfg.profile, bool(float(cfg.fit_blur)), True, float(cfg.huber_delta), cfg.rule)
     s = _to_numpy(_solve(sol.params, (arrays, pose, free), options.max_steps, jnp.zeros(9), jnp.asarray(False)))
     d = np.asarray(s.params.sun_delta_deg, dtype=np.float64)
-    return SunFree(float(d[0]), float(d[1]), _k_np(s.params.raw_k), elevation_deg)
+    return SunFree(float(d[0]), float(d[1]), _k_np(s.params.raw_k), _rho_np(s.params.raw_rho), elevation_deg)
 
 
 def _split_reason(warning: str) -> tuple[str, str]:

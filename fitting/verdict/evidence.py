@@ -75,12 +75,14 @@ class PhotoEvidence:
 @dataclasses.dataclass(frozen=True)
 class SunFree:
     """The group's solve repeated on the same samples with the sun's azimuth and elevation free:
-    how far the sun moved (degrees) from its elevation ``elevation_deg``, and k there. A sun known
-    from its time and site moves little when the scene is described right."""
+    how far the sun moved (degrees) from its elevation ``elevation_deg``, and k and rho there. A sun
+    known from its time and site moves little when the scene is described right, and k and rho do
+    not follow it."""
 
     d_azimuth_deg: float
     d_elevation_deg: float
     k: float
+    rho: float
     elevation_deg: float = 45.0
 
 
