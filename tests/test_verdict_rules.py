@@ -317,9 +317,13 @@ def test_the_other_flags():
         _, verdict = rules.judge_fit(_fit(**kw), GroupContext(3))
         assert not verdict.reliable and any(text in w for w in verdict.warnings), text
     assert rules.judge_fit(_fit(n_in_umbra=rules.MIN_UMBRA_SAMPLES), GroupContext(3))[1].reliable
-    # The resolution note does not make a group unreliable.
+    # The resolution note does not make a group on the ground unreliable; on steps or a bank it does.
     _, verdict = rules.judge_fit(_fit(penumbra_px=1.3, blur_px=0.7), GroupContext(3))
     assert verdict.reliable and verdict.warnings[0].startswith("penumbra 1.3 px wide, under the photo's blur spot")
+    _, verdict = rules.judge_fit(_fit(penumbra_px=1.3, blur_px=0.7, receiver="mesh"), GroupContext(3))
+    assert not verdict.reliable and any("on a mesh receiver, whose relief shares its pixels" in w
+                                        for w in verdict.warnings)
+    assert rules.judge_fit(_fit(penumbra_px=3.0, blur_px=0.7, receiver="depth"), GroupContext(3))[1].reliable
 
 
 # ----------------------------------------------------------------------------- without geometry

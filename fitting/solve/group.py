@@ -468,7 +468,8 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
         photos=tuple(photos_evidence(samples, _photo_slices(samples), sol, est, errors, sun_cos, sky_hidden,
                                      fit_sun=fit_sun, fit_blur=bool(float(cfg.fit_blur)))),
         no_ramp_k=no_ramp_k(sol.prediction.u[:n_eff], est.range_k), sun_fitted=fit_sun, sun_free=sun_free,
-        photos_without_shadow=tuple(_split_reason(w) for w in no_shadow))
+        photos_without_shadow=tuple(_split_reason(w) for w in no_shadow),
+        receiver=getattr(used[0].receiver, "kind", "plane") if used[0].receiver is not None else "plane")
     estimate, verdict = judge_fit(evidence, GroupContext(photos_given=len(views)))
     plots = PlotData()
     if options.plots:

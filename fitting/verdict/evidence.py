@@ -104,6 +104,7 @@ class FitEvidence:
     with k and rho (not known from a time and site, or given). photos: each photo's evidence.
     photos_without_shadow: (photo, reason) for photos that were not sampled (no shadow in view).
     sun_free: the solve with the sun free (None: the sun was fitted anyway).
+    receiver: the surface the shadow falls on: "plane" (the ground), "depth" (range images) or "mesh".
     """
 
     k: float
@@ -124,6 +125,7 @@ class FitEvidence:
     sun_fitted: bool = False
     photos_without_shadow: tuple[tuple[str, str], ...] = ()
     sun_free: SunFree | None = None
+    receiver: str = "plane"
 
 
 @dataclasses.dataclass(frozen=True)

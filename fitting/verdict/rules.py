@@ -139,6 +139,10 @@ MIN_UMBRA_SAMPLES = 5
 #: blur model (physical 400x300 folders, penumbrae of 1.1-1.6 px under 0.6-0.9 px of blur: k errors
 #: of -14 % to +13 %, within the stated error).
 RESOLVED_BLUR_WIDTHS = 2.0
+# On a receiver that is not the plane (range images, a mesh) such a penumbra makes the group
+# unreliable: the steps at 416x312 (a 1.5 px penumbra under a 2.1 px spot) read rho 5.4 sigma low, a
+# bank at 472x354 (1.5 under 1.6) 3.6 sigma high; the steps, wall and bank presets at 640x480 resolve
+# their penumbrae.
 #: Fewer shadow-edge profiles than this: one stretch of edge decides k and rho (the same rule as
 #: without geometry, ``fitting.verdict.edge_rules``).
 MIN_PROFILES = 10
@@ -557,6 +561,12 @@ def judge_fit(fit: FitEvidence, context: GroupContext | None = None) -> tuple[Es
         bound = "the ground's texture hides the penumbra's width"
     notes.append(f"range not identifiable: {bound}; range_k is an upper bound" if bound else
                  resolution_warning(fit.penumbra_px, fit.blur_px))
+    if fit.receiver != "plane" and resolution_warning(fit.penumbra_px, fit.blur_px):
+        # The receiver's own relief (risers, a bank's slope) shares the pixels of a penumbra under the
+        # blur spot: the levels mix two surfaces and rho and k follow the blur model.
+        flags.append(f"the penumbra ({fit.penumbra_px:.2g} px) is under the photo's blur spot on a {fit.receiver} "
+                     "receiver, whose relief shares its pixels: rho and k rest on the blur model; photograph "
+                     "closer or at full size")
 
     if fit.n_in_umbra < MIN_UMBRA_SAMPLES:
         flags.append(f"rho not measured: only {fit.n_in_umbra} samples lie in the fitted umbra (fewer than "
