@@ -559,14 +559,15 @@ def judge_fit(fit: FitEvidence, context: GroupContext | None = None) -> tuple[Es
     if bound is None and texture:
         # What hides the rho measurement hides the penumbra's width too: k is then a bound.
         bound = "the ground's texture hides the penumbra's width"
-    notes.append(f"range not identifiable: {bound}; range_k is an upper bound" if bound else
-                 resolution_warning(fit.penumbra_px, fit.blur_px))
-    if fit.receiver != "plane" and resolution_warning(fit.penumbra_px, fit.blur_px):
+    unresolved = resolution_warning(fit.penumbra_px, fit.blur_px)
+    if unresolved and fit.receiver != "plane":
         # The receiver's own relief (risers, a bank's slope) shares the pixels of a penumbra under the
         # blur spot: the levels mix two surfaces and rho and k follow the blur model.
         flags.append(f"the penumbra ({fit.penumbra_px:.2g} px) is under the photo's blur spot on a {fit.receiver} "
                      "receiver, whose relief shares its pixels: rho and k rest on the blur model; photograph "
                      "closer or at full size")
+        unresolved = None
+    notes.append(f"range not identifiable: {bound}; range_k is an upper bound" if bound else unresolved)
 
     if fit.n_in_umbra < MIN_UMBRA_SAMPLES:
         flags.append(f"rho not measured: only {fit.n_in_umbra} samples lie in the fitted umbra (fewer than "
