@@ -55,6 +55,11 @@ def _run_and_report(run, write, result, json_path, report_path) -> dict:
 
 
 def run_bench(args) -> int:
+    if args.what == "coverage":
+        from .coverage import coverage_and_report
+        result = coverage_and_report(args, progress=_progress)
+        print(json.dumps({k: result[k] for k in ("summary", "criteria") if k in result}, indent=1))
+        return 0
     import jax
     import jax.numpy as jnp
     dtype = str(jnp.result_type(float))
