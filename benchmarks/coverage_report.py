@@ -7,7 +7,7 @@ from pathlib import Path
 from .coverage_tables import (COVERAGE_TARGET, FACTORS, MAX_CONFIDENT_MISSES, MAX_FALSE_ALARMS,
                               MIN_RELIABLE_PER_BIN, bin_table, criteria, judge, summarize)
 
-__all__ = ["write_coverage_report", "coverage_plot", "pull_plot"]
+__all__ = ["write_coverage_report", "coverage_plot", "pull_plot", "finding_text"]
 
 COMMAND = ("nice -n 10 softshadow bench --what coverage --groups 300 --seed 0 --json docs/uncertainty_study.json "
            "--report docs/uncertainty_study.md")
@@ -160,7 +160,8 @@ def write_coverage_report(result: dict, md_path: Path, json_name: str | None = N
          f"range {min(loads) if loads else 'n/a'}-{max(loads) if loads else 'n/a'}; at the start "
          f"{_load(m.get('load_average_1_5_15_min'))}",
          f"- Code: commit {result.get('commit') or 'n/a'}; seed {result.get('seed')}; {len(records)} groups; "
-         f"render + fit {sum(seconds) / 3600:.1f} CPU-bound hours in all, median {sorted(seconds)[len(seconds) // 2] if seconds else 0:.0f} s a group",
+         f"render and fit took {sum(seconds) / 3600:.1f} hours of wall time in all, median "
+         f"{sorted(seconds)[len(seconds) // 2] if seconds else 0:.0f} s a group",
          ""]
     L += ["## What is drawn", "",
           "Each group is drawn from `data_synth.draw.ScenePrior` (the study's prior adds the real dragon), "
@@ -234,3 +235,35 @@ def write_coverage_report(result: dict, md_path: Path, json_name: str | None = N
         L += ["None.", ""]
     md_path.parent.mkdir(parents=True, exist_ok=True)
     md_path.write_text("\n".join(L) + "\n")
+
+
+def finding_text(record: dict, kind: str, root: str | None = None) -> str:
+    """A failure of one group written for the verdict's owner: the draw's parameters, what was
+    reported, the truth, and the commands that re-make and refit its folder."""
+    import json
+    d = record["draw"]
+    res = record.get("result") or {}
+    j = judge(record)
+
+    def pull(x):
+        return "n/a" if x is None else f"{x:+.1f} sigma"
+    keep = {k: res.get(k) for k in ("range_k", "range_stderr", "rho", "rho_stderr", "reliable", "identifiable",
+                                     "penumbra_px", "blur_px", "lod_faces", "mesh_faces", "sun_azimuth_deg",
+                                     "sun_elevation_deg", "sun_source", "n_profiles", "rmse", "error")}
+    seed, index = record["seed"], record["index"]
+    folder = f"/tmp/coverage-g{index}"
+    lod = f" --lod {d['fit_lod']}" if d.get("fit_lod") is not None else ""
+    lines = [f"### seed {seed} group {index}: {kind}", "",
+             f"- draw: {_draw_line(d)}; blur {min(p['blur_px'] for p in d['photo_draws']):.2f}-"
+             f"{max(p['blur_px'] for p in d['photo_draws']):.2f} px, {d['full_well_e']:.0f} e-, "
+             f"{d['fmt']} q{d['jpeg_quality']}, {d['texture']}{' + paper' if d['paper'] else ''}, "
+             f"exposure spread {d['exposure_spread']:.2f}, site {d['site']}, time {d['time']}",
+             f"- reported: {json.dumps(keep)}",
+             f"- warnings: {res.get('warnings') or []}; skipped: {record.get('skipped') or []}",
+             f"- truth: k {record.get('k_true'):.5f}, rho {record.get('rho_true'):.4f}, sun "
+             f"{record.get('sun_azimuth_true'):.2f}/{record.get('sun_elevation_true'):.2f} deg, geometric penumbra "
+             f"{record.get('truth_penumbra_px') or float('nan'):.1f} px; pulls: k {pull(j.k_pull)}, rho {pull(j.rho_pull)}",
+             f"- re-create: `cd <checkout> && PYTHONPATH=. python -m benchmarks.coverage --seed {seed} --index {index} "
+             f"--out {folder} && softshadow fit {folder} --out {folder}/fit{lod}`"
+             + (f" (the study's folder: `{record['folder']}`)" if record.get("folder") else ""), ""]
+    return "\n".join(lines)
