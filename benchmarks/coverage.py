@@ -267,7 +267,7 @@ def coverage_and_report(args, progress=None) -> dict:
                                progress=progress)
         env["load_average_at_end"] = load_average()
         env["run_minutes"] = round((time.perf_counter() - t0) / 60.0, 1)
-        env["finished_utc"] = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+        env["finished_utc"] = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")
         if getattr(args, "only", None) is None:
             root = Path(getattr(args, "root", None) or f"/tmp/softshadow-coverage-s{seed}")
             records = [r for r in _latest(read_records(root / RECORDS_FILE)) if r["seed"] == seed]

@@ -47,7 +47,7 @@ def environment() -> dict:
         except metadata.PackageNotFoundError:
             versions[name] = None
     cpus = os.sched_getaffinity(0) if hasattr(os, "sched_getaffinity") else None
-    return {"date_utc": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+    return {"date_utc": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC"),
             "machine": {"cpu": _cpu_model(), "cores": len(cpus) if cpus else os.cpu_count(),
                         "memory_gb": _memory_gb(), "platform": platform.platform(),
                         "load_average_1_5_15_min": load_average()},

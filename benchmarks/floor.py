@@ -72,7 +72,7 @@ def bench_floor(quick: bool = False, progress=print) -> dict:
         err["near_1m_share"] = _near_share(image, scene, grid)
         out.setdefault(profile, {})[name] = {"forward_ms": 1e3 * float(np.median(samples[(profile, name)])),
                                              "first_call_s": first, **err}
-    for profile, rows in out.items():
+    for rows in out.values():
         rows["after_over_before_time"] = rows["after"]["forward_ms"] / rows["before"]["forward_ms"]
         rows["corners_time_ratio"] = rows["corners"]["forward_ms"] / rows["after"]["forward_ms"]
     return {"scene": {"mesh": "pillar", "pixels": settings.base_pixels, "pixel_m": grid.pixel_m,

@@ -99,7 +99,7 @@ def lod_grid(quick: bool = False, report_path=None, progress=None) -> dict:
               "hidden": (ssim >= HIDDEN_SSIM).tolist(), "image_size": [width, height],
               "supersample": supersample,
               "render_seconds_per_image": [round(s, 3) for s in seconds],
-              "date_utc": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")}
+              "date_utc": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")}
     if report_path:
         report = Path(report_path)
         report.parent.mkdir(parents=True, exist_ok=True)

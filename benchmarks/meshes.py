@@ -24,7 +24,7 @@ MIT_DRAGON_FULL_PATH = Path(__file__).parent / "data" / "mit_dragon_41384.ply"
 BENCH_MESHES = ("pillar", "ball", "dragon", "knot")
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def mit_dragon(length_m: float = 1.6, full: bool = False) -> trimesh.Trimesh:
     """The vendored dragon posed on the ground: its y-up frame turned z-up, scaled to
     ``length_m`` along x (the built-in knot's size), standing on z = 0. full: the undecimated

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 
 from .measure import timed
 from .scenes import SUN_RADIUS_DEG, SweepSettings, build_scenes, image_error, linear_equivalent_k

@@ -96,7 +96,7 @@ def depth_receiver_scene(size: int = 512, mesh: str = "dragon"):
 
     A camera (``size`` x ``size`` pixels) looks at the scene; each pixel's ray is cast
     against the ground, the step and the mesh itself (trimesh), its distance along the
-    optical axis kept as a range image (CONVENTIONS: z_cam, metres), and the receiver
+    optical axis kept as a range image (docs/formats.md: z_cam, metres), and the receiver
     points are unprojected from that range image. Returns (model, points (N, 3),
     normals (N, 3), camera); pixels that see nothing are left out.
     """

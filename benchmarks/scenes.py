@@ -76,7 +76,7 @@ class SweepSettings:
         s.profiles, s.dtypes, s.lod_faces = ("linear",), ("float32",), ()
         return s
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def linear_equivalent_k(k_disk: float) -> float:
     """The linear ramp's k closest (least squares over the penumbra) to a disk profile of k_disk.
 

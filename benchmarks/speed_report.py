@@ -3,11 +3,9 @@ from the JSON a sweep wrote (no figure is typed in)."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
-__all__ = ["image_cases", "pareto_front", "pareto_plot", "write_report", "write_overview_report",
-           "report_from_json"]
+__all__ = ["image_cases", "pareto_front", "pareto_plot", "write_report", "write_overview_report"]
 
 
 def image_cases(result: dict) -> list[tuple[str, str, dict]]:
@@ -464,10 +462,6 @@ def write_report(result: dict, md_path: Path, json_name: str | None = None) -> N
         L += ["", f"The raw figures: [{json_name}]({json_name})."]
     md_path.parent.mkdir(parents=True, exist_ok=True)
     md_path.write_text("\n".join(L) + "\n")
-
-
-def report_from_json(json_path: Path, md_path: Path) -> None:
-    write_report(json.loads(Path(json_path).read_text()), md_path, Path(json_path).name)
 
 
 def write_overview_report(result: dict, md_path: Path, json_name: str | None = None) -> None:

@@ -12,7 +12,6 @@ the pixels near the shadow), and its outlines give S = D + 2 k d and H = D - 2 k
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 

@@ -57,7 +57,7 @@ from .camera_pipeline import SensorSettings
 from .lighting import SunSky
 from .misdescription import Misdescription
 from .presets import PhotoPlan, PresetPlan, ViewSpec
-from .receivers import MeshReceiver, PlaneReceiver, rising_bank, steps_receiver, wall_receiver
+from .receivers import PlaneReceiver, rising_bank, steps_receiver, wall_receiver
 from .renderers import RenderQuality
 from .sun_site import site_and_time_for_sun
 from .synth import posed_mesh, synthesize_plan

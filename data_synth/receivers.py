@@ -14,7 +14,7 @@ dense mesh. ``MeshReceiver`` is any mesh (steps, a kerb, a wall), flat-shaded.
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 import trimesh

@@ -89,7 +89,7 @@ def site_and_time_for_sun(azimuth_deg: float, elevation_deg: float, rng: np.rand
             latitude, hour_angle = lat_h
             # Apparent solar time 12 h + H / 15; UTC = solar time - longitude / 15 - equation of time.
             utc_hours = 12.0 + hour_angle / 15.0 - longitude / 15.0 - _equation_of_time_min(day) / 60.0
-            start = _dt.datetime(year, 1, 1, tzinfo=_dt.timezone.utc) + _dt.timedelta(days=day - 1)
+            start = _dt.datetime(year, 1, 1, tzinfo=_dt.UTC) + _dt.timedelta(days=day - 1)
             when_utc = start + _dt.timedelta(hours=utc_hours)
             zone_name, zone = fixed_offset_zone(longitude)
             when = when_utc.astimezone(zone).replace(microsecond=0)

@@ -1,6 +1,6 @@
 """``synthesize``: render a preset into a photo folder (images, scene.toml, truth.json).
 
-Folder format per CONVENTIONS ("Photo folders", "scene.toml",
+Folder format as in docs/formats.md ("Photo folders", "scene.toml",
 "softshadow synth"). truth.json holds, per group, the physical truth of the
 light (range_k = tan(sun radius), rho = E_sky / (E_sun_h + E_sky) on open
 ground), the group's sun, and its photos; plus per-photo details (exact time

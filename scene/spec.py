@@ -1,4 +1,4 @@
-"""``scene.toml``: reading and writing the photo-folder scene description (CONVENTIONS).
+"""``scene.toml``: reading and writing the photo-folder scene description (docs/formats.md).
 
 Plain dataclasses, validated on load with messages that name the file and
 key. Unknown tables and keys are refused by name (with the nearest known

@@ -44,7 +44,7 @@ _SHARP_TAU = 1e-6  # below this the linear ramp is its unblurred self (keeps 1/t
 _INV_SQRT_2PI = float(1.0 / np.sqrt(2.0 * np.pi))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _penumbra_nodes(profile: str, nodes: int) -> tuple[np.ndarray, np.ndarray]:
     """Nodes s (M,) in (-1, 1) and weights (M,) of the integral over the penumbra of the
     profile's density -d alpha/ds: the midpoint rule in theta, s = cos theta."""

@@ -43,7 +43,7 @@ def fixed_shape_plan(mdl, sun, pose, points, range_k_max):
 
 
 def check_point_gradients(mdl, theta0: np.ndarray, points: np.ndarray, range_k_max: float,
-                          min_points: int = 8, keep=None, params=range(len(PARAM_NAMES)),
+                          min_points: int = 8, keep=None, params=None,
                           steps=None, smooth_fraction: float = 0.85, pixel_axes=None):
     """Autodiff Jacobian (N, 10) of shading at points vs central differences, plan held fixed.
 
@@ -70,7 +70,7 @@ def check_point_gradients(mdl, theta0: np.ndarray, points: np.ndarray, range_k_m
     jac = np.asarray(jax.jacfwd(shading)(jnp.asarray(theta0)))
     assert np.all(np.isfinite(jac)), "non-finite autodiff gradient"
     steps = STEPS if steps is None else np.asarray(steps, np.float64)
-    for i in params:
+    for i in range(len(PARAM_NAMES)) if params is None else params:
         name = PARAM_NAMES[i]
         e = np.zeros(10)
         e[i] = steps[i]

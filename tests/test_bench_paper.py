@@ -15,7 +15,7 @@ from benchmarks.scenes import scene_grid
 
 
 def _sun(az, el):
-    """Unit vector towards the sun (CONVENTIONS)."""
+    """Unit vector towards the sun (docs/formats.md)."""
     return -np.asarray(Sun(az, el).light_np)
 
 

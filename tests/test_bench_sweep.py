@@ -20,7 +20,6 @@ from benchmarks.speed_report import pareto_front
 from benchmarks.scenes import image_error, linear_equivalent_k
 from benchmarks.scaling import loglog_slope
 from benchmarks.table1 import crossing_width
-from softshadow_cli.main import main
 
 
 def test_pareto_front_keeps_only_undominated_points():
@@ -82,7 +81,7 @@ def test_naive_renderer_matches_the_renderer_on_the_pillar():
 
 
 def test_linear_ramp_closest_to_the_disk_profile():
-    # CONVENTIONS: the best-fitting linear ramp to a real disk is about 0.854 tan r.
+    # docs/formats.md: the best-fitting linear ramp to a real disk is about 0.854 tan r.
     assert linear_equivalent_k(0.01) == pytest.approx(0.00854, abs=3e-5)
 
 

@@ -102,7 +102,7 @@ def test_misdescription_changes_what_is_written():
     assert Misdescription().kinds == ()
     assert told.scale(2.0) == pytest.approx(2.2)
     assert told.sun(359.5, 40.0) == pytest.approx((0.5, 39.5))
-    t = dt.datetime(2026, 4, 20, 10, 0, tzinfo=dt.timezone.utc)
+    t = dt.datetime(2026, 4, 20, 10, 0, tzinfo=dt.UTC)
     assert told.time(t) - t == dt.timedelta(minutes=10)
     with pytest.raises(ValueError):
         Misdescription(scale_factor=0.0)
@@ -149,7 +149,7 @@ def test_receivers_of_a_draw_are_written(tmp_path):
     folder = synthesize_draw(bank, tmp_path / "bank", render_quality=FAST)
     spec = load_scene(folder / "scene.toml")
     assert spec.receiver.kind == "depth"
-    for name, photo in spec.photos.items():
+    for photo in spec.photos.values():
         depth = np.load(folder / photo.depth)
         assert depth.dtype == np.float32 and np.isfinite(depth).mean() > 0.5
     wall = _tiny(5, receivers={"mesh": 1.0}, elevation_deg=(25.0, 40.0), meshes=("pillar",))

@@ -248,3 +248,15 @@ def test_command_and_synthesis_steps_run_no_eager_jax(no_eager_jax):
         grid = _default_grid(model, pose, sun, 64, 64, None)
         mesh = posed_mesh("ball", (0.0, 0.0, 0.5), (10.0, 0.0, 30.0), 1.0)
     assert grid.width == 64 and len(mesh.vertices) > 0
+
+
+def test_code_cites_nothing_outside_the_repository():
+    """Comments and docstrings point at the repository's own docs, never at files a user does not have."""
+    import re
+    bad = []
+    for package in PACKAGES + ("examples",):
+        for path in _files(package):
+            for i, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+                if re.search(r"CONVENTIONS|\.\./shared|/work/shared", line):
+                    bad.append(f"{path.relative_to(ROOT)}:{i}: {line.strip()[:100]}")
+    assert not bad, "\n".join(bad)

@@ -95,7 +95,7 @@ def test_noise_lets_a_coarser_level_through(ball_folder, tmp_path):
 
     from data_synth import model_topdown_folder
     from fitting.solve.lod import LevelsOfDetail, ShadowReference, choice_samples
-    from softshadow import Pose, SoftShadowModel, Sun
+    from softshadow import Pose, SoftShadowModel
     from fitting.photos.views import PhotoView
     import cv2
 

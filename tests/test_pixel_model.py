@@ -103,7 +103,7 @@ def test_blurred_profile_vectorised_jvp_and_float32_gradients(profile):
     np.testing.assert_allclose(np.stack(g32), g64, atol=2e-4)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _view_samples(max_samples):
     from fitting.samples.ground import select_samples
     _, _, view = _oblique_view()

@@ -33,7 +33,7 @@ from softshadow import (GroundGrid, Pose, Projector, SceneLights, ShadowParams, 
 from softshadow.internal import GROUND, NOTHING, Surface, object_mask, projector_shadow_map, visible_surfaces
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def model_of(name: str) -> SoftShadowModel:
     # The geometric model (pixel centres, no hidden sky), as the scene image samples it.
     return SoftShadowModel.from_mesh(name, footprint=False, hidden_sky=False)

@@ -9,7 +9,6 @@ import math
 import cv2
 import numpy as np
 import pytest
-import trimesh
 
 from softshadow import look_at_camera
 
@@ -62,7 +61,7 @@ def test_tilted_light_matches_the_physical_renderer():
 def test_range_image_of_the_plane_gives_the_plane():
     """A range image of the ground z = 0 back-projects onto it, with normal +z and the plane's
     own pixel Jacobian; .npy metres and 16-bit .png millimetres read alike."""
-    from fitting.samples.receiver_points import ReceiverSurface, read_depth
+    from fitting.samples.receiver_points import ReceiverSurface
     from fitting.photos.views import PhotoView
     cam = look_at_camera((0.5, -4.0, 1.7), (0.0, 1.0, 0.0), 96, 72, 60.0)
     rows, cols = np.mgrid[0:72, 0:96]

@@ -112,7 +112,7 @@ def test_footprint_float32_matches_float64():
         assert np.all(np.isfinite(np.asarray(g)))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def pillar(profile="disk", footprint=True, hidden_sky=True) -> SoftShadowModel:
     return SoftShadowModel.from_mesh(builtin_mesh("pillar"), profile=profile, footprint=footprint,
                                      hidden_sky=hidden_sky)

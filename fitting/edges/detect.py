@@ -6,7 +6,7 @@ All detection therefore works on the log image. This module only finds places
 worth measuring and samples them; deciding which are shadow edges is the job of
 ``fitting.edges.measure``.
 
-Pixel coordinates follow CONVENTIONS: (u, v) = (column, row), (0, 0) is the
+Pixel coordinates follow docs/formats.md: (u, v) = (column, row), (0, 0) is the
 centre of the top-left pixel.
 """
 
@@ -62,7 +62,7 @@ class WorkImage:
     bad: (H // f, W // f) bool, True where half or more of the block's pixels were bad.
     factor: f, full-resolution pixels per working pixel along each axis.
     A working pixel (u, v) covers full-resolution pixels centred at
-    f u + (f - 1) / 2, f v + (f - 1) / 2 (CONVENTIONS pixel centres).
+    f u + (f - 1) / 2, f v + (f - 1) / 2 (pixel centres as in docs/formats.md).
     """
 
     gray: np.ndarray

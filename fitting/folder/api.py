@@ -11,10 +11,10 @@ from __future__ import annotations
 
 import concurrent.futures
 from pathlib import Path
-from typing import Callable
+from collections.abc import Callable
 
 from scene import SceneError, SceneSpec, load_scene
-from softshadow import one_blas_thread
+from softshadow import one_blas_thread, use_compilation_cache
 
 from ..photos.grouping import photo_time
 from ..photos.read import Photo
@@ -41,7 +41,13 @@ def fit_photos(photos: list[Photo], scene: SceneSpec | None = None, options: Fit
     on_group: called with each group's result as soon as it is finished.
     progress: a callable returning a progress bar (tqdm-like: update, close) for the groups.
     jobs: groups fitted at once (threads).
+
+    Like the command line, it keeps compiled and traced programs between processes
+    (``softshadow.use_compilation_cache``: ``~/.cache/softshadow/jax``, or ``SOFTSHADOW_JAX_CACHE``;
+    ``SOFTSHADOW_JAX_CACHE=off`` leaves them off), so a new process fits as fast as ``softshadow fit``.
     """
+    # The caches that let a new process skip tracing and compiling the solver, as the command line has.
+    use_compilation_cache()
     # One BLAS thread (softshadow.one_blas_thread); fits with geometry run in float64 (``groups.in_float64``).
     with one_blas_thread():
         return _fit_photos(photos, scene, options or FitOptions(), half_size, progress, store, on_group,
@@ -59,7 +65,7 @@ def _fit_photos(photos, scene, options, half_size, progress, store, on_group, jo
             # One entry per photo: the unreadable time, not also "no time" from the grouping.
             skipped.append({"photo": p.name, "reason": str(exc)})
     if scene is None or scene.object is None:
-        # No geometry: each photo on its own (CONVENTIONS).
+        # No geometry: each photo on its own (docs/formats.md).
         groups_out: list[GroupResult] = []
         for p in photos:
             result = measure_without_scene(p, times.get(p.name), scene)

@@ -2,7 +2,7 @@
 
 Every folder under ``root`` that holds photos is fitted by ``fit_and_report`` into
 ``out/<its path relative to root>/``; ``out/summary.csv`` has one row per group of every
-folder (CONVENTIONS columns, then ``error``) and ``out/summary.png`` plots k and rho
+folder (the documented columns, then ``error``) and ``out/summary.png`` plots k and rho
 against time of day, one line per folder.
 
 The work runs on ``dask.distributed``: a ``LocalCluster`` of worker processes with one
@@ -29,7 +29,7 @@ import os
 import sys
 import time as _time
 from pathlib import Path
-from typing import Callable
+from collections.abc import Callable
 
 from softshadow import use_compilation_cache
 
@@ -40,7 +40,7 @@ from ..solve.options import FitOptions
 __all__ = ["SUMMARY_COLUMNS", "DONE_MARKER", "find_photo_folders", "fit_many", "folder_rows",
            "write_summary"]
 
-#: summary.csv columns: the CONVENTIONS contract, then the reason a folder or group failed.
+#: summary.csv columns: the documented contract (docs/formats.md), then the reason a folder or group failed.
 SUMMARY_COLUMNS = ("folder", "label", "time", "range_k", "range_stderr", "rho", "rho_stderr",
                    "sun_azimuth_deg", "sun_elevation_deg", "reliable", "photos", "error")
 #: Written into a folder's output after its results.json: the folder is done (JSON: finished,
@@ -110,7 +110,7 @@ def fit_one_folder(folder, out_dir, options: FitOptions | None = None, force: bo
     out_dir.mkdir(parents=True, exist_ok=True)
     results: FitResults = fit_and_report(folder, out_dir, options, force=force)
     seconds = _time.perf_counter() - start
-    marker = {"finished": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+    marker = {"finished": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
               "groups": len(results.groups), "fitted": results.n_fitted, "seconds": round(seconds, 3)}
     (out_dir / DONE_MARKER).write_text(json.dumps(marker) + "\n")
     return [g.to_json() for g in results.groups], seconds
@@ -125,6 +125,13 @@ def _task(folder: str, out_dir: str, options, force: bool, cache_dir) -> dict:
         from .read import FolderError
         reason = str(exc) if isinstance(exc, FolderError) else f"{type(exc).__name__}: {exc}"
         return {"groups": [], "seconds": 0.0, "error": reason.splitlines()[0] if reason else type(exc).__name__}
+
+
+def _require_dask() -> None:
+    """Dask is an extra (only many folders need it): a one-line ValueError naming it when missing."""
+    if importlib.util.find_spec("distributed") is None:
+        raise ValueError("many folders (--recursive) run on Dask, which is not installed: "
+                         "pip install 'softshadow[many]'")
 
 
 def _check_scheduler(scheduler: str) -> None:
@@ -186,11 +193,14 @@ def fit_many(root, out, scheduler: str = "local", workers: int | None = None,
     ``softshadow.internal.default_cache_dir()`` as each worker sees it).
     progress: a tqdm bar over folders on stderr; log: where one-line notes go (the
     dashboard address; default stderr).
-    Raises ValueError when ``root`` holds no photo folder or the scheduler is not valid.
+    Raises ValueError when ``root`` holds no photo folder, the scheduler is not valid or Dask is not
+    installed (the ``many`` extra).
     """
     import pandas as pd
-    from dask.distributed import as_completed
     from tqdm import tqdm
+
+    _require_dask()
+    from dask.distributed import as_completed
 
     log = log or (lambda text: print(text, file=sys.stderr))
     _check_scheduler(scheduler)

@@ -116,7 +116,7 @@ def photo_time_from_exif(exif: dict) -> _dt.datetime | None:
     offset = exif.get("OffsetTimeOriginal")
     if isinstance(offset, str):
         if offset.strip().upper() == "Z":
-            return when.replace(tzinfo=_dt.timezone.utc)
+            return when.replace(tzinfo=_dt.UTC)
         om = _OFFSET.match(offset)
         if om:
             minutes = int(om.group(2)) * 60 + int(om.group(3))

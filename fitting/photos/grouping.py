@@ -1,4 +1,4 @@
-"""Photo times and their grouping into times of day (CONVENTIONS "Photo folders").
+"""Photo times and their grouping into times of day (docs/formats.md, "Photo folders").
 
 A photo's time is its EXIF DateTimeOriginal (with OffsetTimeOriginal), else
 the ``time`` of its scene.toml entry. Groups compare *local clock time of
@@ -13,7 +13,7 @@ from __future__ import annotations
 import dataclasses
 import datetime as _dt
 import math
-from typing import Mapping
+from collections.abc import Mapping
 
 from scene import SceneSpec, parse_time
 

@@ -8,7 +8,7 @@ board lies north-up on the ground, so a board point (x, y) sits at world
 
 Detection is OpenCV's CharucoDetector on an 8-bit image; the pose comes from
 cv2.solvePnP on world points directly, so R, t are world-to-camera as in
-CONVENTIONS. Planar poses have a two-fold ambiguity: both IPPE solutions are
+docs/formats.md. Planar poses have a two-fold ambiguity: both IPPE solutions are
 refined and the one with the camera above the ground and the lower error is
 kept. Without K (scene.toml) or an EXIF focal length, the focal length is
 fitted from the single view (square pixels, principal point at the image

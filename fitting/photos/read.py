@@ -1,4 +1,4 @@
-"""Reading photos into linear radiometry (CONVENTIONS "Photo folders").
+"""Reading photos into linear radiometry (docs/formats.md, "Photo folders").
 
 8-bit JPEG/PNG/TIFF are sRGB-encoded and are linearised with the exact
 piecewise sRGB EOTF; 16-bit PNG/TIFF are linear (unless the caller says they
@@ -32,7 +32,7 @@ __all__ = ["IMAGE_EXTENSIONS", "RAW_EXTENSIONS", "ALL_PHOTO_EXTENSIONS", "IGNORE
 
 # Display-referred (or linear 16-bit) image files, lower case.
 IMAGE_EXTENSIONS = frozenset({".jpg", ".jpeg", ".png", ".tif", ".tiff"})
-# Camera RAW read with rawpy/LibRaw: the CONVENTIONS list first, then other
+# Camera RAW read with rawpy/LibRaw: the documented list first, then other
 # formats LibRaw decodes (e.g. the Kodak .kdc and Apple QuickTake .qtk test files).
 RAW_EXTENSIONS = frozenset({".dng", ".nef", ".cr2", ".arw", ".orf", ".rw2", ".raf", ".pef",
                             ".cr3", ".crw", ".nrw", ".srw", ".sr2", ".srf", ".x3f", ".3fr",
@@ -275,7 +275,7 @@ def read_photo(path, half_size: bool = False, assume_16bit: str = "linear") -> P
     half_size: halve the resolution (RAW: LibRaw's half-size decode; other files:
         a 2x2 mean in linear units, the saturation mask or-ed over the 2x2 block).
         A camera's K must then be scaled with ``PinholeCamera.with_size``.
-    assume_16bit: "linear" (CONVENTIONS default) or "srgb" for 16-bit PNG/TIFF.
+    assume_16bit: "linear" (the documented default) or "srgb" for 16-bit PNG/TIFF.
     Raises PhotoError with a one-line reason naming the file.
     """
     path = Path(path)

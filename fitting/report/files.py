@@ -10,12 +10,13 @@ from __future__ import annotations
 import contextlib
 import io
 import os
+import re
 import tempfile
 from importlib import metadata
 from pathlib import Path
-from typing import Iterator
+from collections.abc import Iterator
 
-__all__ = ["atomic_path", "atomic_writer", "software_versions"]
+__all__ = ["atomic_path", "atomic_writer", "safe_name", "software_versions"]
 
 _OPENCV_DISTRIBUTIONS = ("opencv-contrib-python-headless", "opencv-python-headless",
                          "opencv-contrib-python", "opencv-python")
@@ -72,3 +73,10 @@ def _umask() -> int:
     mask = os.umask(0o022)
     os.umask(mask)
     return mask
+
+
+def safe_name(text: str) -> str:
+    """A file-name-safe version of a label or photo stem: ':' becomes '-', anything but
+    letters, digits, '.', '_' and '-' becomes '_' ('09:20' -> '09-20')."""
+    name = re.sub(r"[^A-Za-z0-9._-]", "_", str(text).replace(":", "-")).strip(".")
+    return name or "group"

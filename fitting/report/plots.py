@@ -15,9 +15,8 @@ threads and never touches the user's pyplot backend.
 from __future__ import annotations
 
 import math
-import re
 from pathlib import Path
-from typing import Mapping
+from collections.abc import Mapping
 
 import numpy as np
 from matplotlib.collections import LineCollection
@@ -28,24 +27,18 @@ from matplotlib.transforms import offset_copy
 from .comparison import (brightness_stderr, groups_in_time_order, minutes_of_day, range_stderr_paper,
                          reference_for_group, truth_for_group)
 from softshadow import brightness_to_paper, range_to_paper
-from .files import atomic_path
+from .files import atomic_path, safe_name
 from .results import FitResults, GroupResult, OverlayPlotData, ProfilePlotData
 
-__all__ = ["safe_name", "plot_group", "plot_profiles", "plot_overlay", "plot_range_vs_time",
+__all__ = ["safe_name", "plot_group", "plot_profiles", "plot_overlay", "overlay_figure", "plot_range_vs_time",
            "plot_folders_vs_time", "MAX_OVERLAY_SIDE"]
 
 #: Overlays show the photo downsampled to at most this many pixels on its longer side.
 MAX_OVERLAY_SIDE = 800
 #: At most this many individual profiles are drawn as lines per photo (the rest only as dots).
 MAX_PROFILE_LINES = 60
-_DPI = 100
-
-
-def safe_name(text: str) -> str:
-    """A file-name-safe version of a label or photo stem: ':' becomes '-', anything but
-    letters, digits, '.', '_' and '-' becomes '_' ('09:20' -> '09-20')."""
-    name = re.sub(r"[^A-Za-z0-9._-]", "_", str(text).replace(":", "-")).strip(".")
-    return name or "group"
+#: PNG resolution (dots per inch of the figure's size).
+_DPI = 150
 
 
 def _plots_dir(out_dir) -> Path:
@@ -62,11 +55,15 @@ def _fixed_margins(fig: Figure, left: float, right: float, bottom: float, top: f
                         **spacing)
 
 
-def _save(fig: Figure, path: Path) -> Path:
-    """Save atomically (temporary name in the same folder, then replace)."""
+def _save(fig: Figure, path: Path, vector: bool = False) -> Path:
+    """Save atomically (temporary name in the same folder, then replace) as PNG, and as SVG beside it
+    when ``vector`` (plots of points and lines; an overlay is a photo, a raster either way)."""
     with atomic_path(path) as tmp:
         # Light PNG compression: several times faster to write, files somewhat larger.
-        fig.savefig(tmp, dpi=_DPI, pil_kwargs={"compress_level": 1})
+        fig.savefig(tmp, dpi=_DPI, format="png", pil_kwargs={"compress_level": 1})
+    if vector:
+        with atomic_path(path.with_suffix(".svg")) as tmp:
+            fig.savefig(tmp, format="svg")
     return path
 
 
@@ -161,7 +158,7 @@ def plot_profiles(group: GroupResult, out_dir) -> Path | None:
         ax.set_visible(False)
     axes.flat[0].legend(fontsize=7, loc="lower right", markerscale=3)
     fig.suptitle(_group_title(group), fontsize=10)
-    return _save(fig, _plots_dir(out_dir) / f"{safe_name(group.label)}_profiles.png")
+    return _save(fig, _plots_dir(out_dir) / f"{safe_name(group.label)}_profiles.png", vector=True)
 
 
 def _group_title(g: GroupResult) -> str:
@@ -189,19 +186,31 @@ def _display(image: np.ndarray) -> np.ndarray:
 
 
 def plot_overlay(group: GroupResult, overlay: OverlayPlotData, out_dir, stem: str | None = None) -> Path | None:
-    """OUT_DIR/plots/<label>_overlay_<photo stem>.png: the photo in gray, the fitted
+    """OUT_DIR/plots/<label>_overlay_<photo stem>.png (``overlay_figure``); None when there is no image."""
+    fig = overlay_figure(group, overlay)
+    if fig is None:
+        return None
+    stem = stem if stem is not None else safe_name(Path(overlay.photo).stem)
+    return _save(fig, _plots_dir(out_dir) / f"{safe_name(group.label)}_overlay_{stem}.png")
+
+
+def overlay_figure(group: GroupResult, overlay: OverlayPlotData) -> Figure | None:
+    """The overlay of a group's fit on one photo: the photo in gray, the fitted
     alpha as a translucent colour overlay, the fitted boundary (alpha = 0.5) as a
-    contour, and the fit's sample pixels as tiny dots. Big photos are shown with a
-    stride so the longer side is at most MAX_OVERLAY_SIDE; coordinates stay in the
-    photo's pixels. None when there is no image."""
+    contour, and the fit's sample pixels as tiny dots. Big images are shown with a
+    stride so the longer side is at most MAX_OVERLAY_SIDE; the axes are the photo's own
+    pixels (``overlay.photo_shape``), also when the image is a downsampled copy. None when
+    there is no image."""
     if not _has_overlay_data(overlay):
         return None
     image = np.asarray(overlay.image)
     h, w = image.shape[:2]
+    photo_h, photo_w = overlay.photo_shape or (h, w)
     step = max(1, math.ceil(max(h, w) / MAX_OVERLAY_SIDE))
     gray = _display(image[::step, ::step])
-    # Pixel centres at integers (OpenCV convention); a strided pixel covers `step` pixels.
-    extent = (-0.5, -0.5 + step * gray.shape[1], -0.5 + step * gray.shape[0], -0.5)
+    # The shown image covers the photo; pixel centres at integers (OpenCV convention).
+    sx, sy = photo_w / gray.shape[1], photo_h / gray.shape[0]
+    extent = (-0.5, photo_w - 0.5, photo_h - 0.5, -0.5)
 
     aspect = h / w
     width_in = 7.0
@@ -219,8 +228,9 @@ def plot_overlay(group: GroupResult, overlay: OverlayPlotData, out_dir, stem: st
         rgba[..., 3] = 0.4 * a_clip * np.isfinite(a)
         ax.imshow(rgba, extent=extent, interpolation="nearest")
         if np.isfinite(a).any() and np.nanmin(a) < 0.5 < np.nanmax(a):
-            ys = np.arange(a.shape[0]) * step
-            xs = np.arange(a.shape[1]) * step
+            # The centres of the shown pixels, in photo pixels.
+            ys = (np.arange(a.shape[0]) + 0.5) * sy - 0.5
+            xs = (np.arange(a.shape[1]) + 0.5) * sx - 0.5
             ax.contour(xs, ys, np.where(np.isfinite(a), a, np.nan), levels=[0.5],
                        colors="yellow", linewidths=0.8)
     uv = np.asarray(overlay.samples_uv, float).reshape(-1, 2) if np.size(overlay.samples_uv) else np.empty((0, 2))
@@ -230,10 +240,9 @@ def plot_overlay(group: GroupResult, overlay: OverlayPlotData, out_dir, stem: st
     ax.set_ylim(extent[2], extent[3])
     ax.set_title(f"{_group_title(group)}\n{overlay.photo}: fitted alpha (red), "
                  f"boundary alpha=0.5 (yellow), samples (cyan)", fontsize=8)
-    ax.set_xlabel("u [px]")
-    ax.set_ylabel("v [px]")
-    stem = stem if stem is not None else safe_name(Path(overlay.photo).stem)
-    return _save(fig, _plots_dir(out_dir) / f"{safe_name(group.label)}_overlay_{stem}.png")
+    ax.set_xlabel("u [photo px]")
+    ax.set_ylabel("v [photo px]")
+    return fig
 
 
 def plot_group(group: GroupResult, out_dir) -> list[Path]:
@@ -264,9 +273,10 @@ def _hhmm(minutes: float, _pos=None) -> str:
 
 def plot_range_vs_time(results: FitResults, out_dir, reference: Mapping | None = None,
                        truth: Mapping | None = None) -> Path | None:
-    """OUT_DIR/plots/range_vs_time.png: range (100 k) and brightness (255 rho^(1/2.2))
-    against time of day, one-sigma error bars, upper bounds as down-arrows; reference
-    and truth values as open markers when given. None when no fitted group has a time."""
+    """OUT_DIR/plots/range_vs_time.png (and .svg): range (100 k) and brightness (255 rho^(1/2.2))
+    against time of day, one-sigma error bars, upper bounds as down-arrows; truth values as open
+    markers when given, and the paper's hand-set values (``reference``), whose range is on an axis of
+    its own. None when no fitted group has a time."""
     groups = [g for g in groups_in_time_order(results.groups) if g.fitted and minutes_of_day(g.time) is not None]
     if not groups:
         return None
@@ -304,10 +314,18 @@ def plot_range_vs_time(results: FitResults, out_dir, reference: Mapping | None =
     refs = [(tm, reference_for_group(g, reference)) for tm, g in zip(t, groups)]
     refs = [(tm, r) for tm, r in refs if r is not None]
     if refs:
-        ax_r.plot([tm for tm, _ in refs], [r[0] for _, r in refs], "s", mfc="none",
-                  color="tab:green", label="reference")
+        # The paper's ranges were set by hand with its own expansion rule and profile: an order of
+        # magnitude above a measured k's 100 k. On their own axis they neither squash the error bars
+        # nor read as a miss.
+        ax_paper = ax_r.twinx()
+        ax_paper.plot([tm for tm, _ in refs], [r[0] for _, r in refs], "s", mfc="none", color="tab:green",
+                      label="paper's Table 2 (right axis)")
+        ax_paper.set_ylabel("paper's Table 2 range\n(set by hand, its own units)", color="tab:green")
+        ax_paper.tick_params(axis="y", colors="tab:green")
+        ax_paper.set_ylim(bottom=0.0, top=1.15 * max(r[0] for _, r in refs))
+        ax_r.plot([], [], "s", mfc="none", color="tab:green", label="paper's Table 2 (right axis)")
         ax_b.plot([tm for tm, _ in refs], [r[1] for _, r in refs], "s", mfc="none",
-                  color="tab:green", label="reference")
+                  color="tab:green", label="paper's Table 2")
     truths = [(tm, truth_for_group(g, truth)) for tm, g in zip(t, groups)]
     truths = [(tm, tr) for tm, tr in truths if tr is not None]
     tk = [(tm, tr["range_k"]) for tm, tr in truths if tr.get("range_k") is not None]
@@ -333,7 +351,7 @@ def plot_range_vs_time(results: FitResults, out_dir, reference: Mapping | None =
         ax.grid(alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=8)
-    return _save(fig, _plots_dir(out_dir) / "range_vs_time.png")
+    return _save(fig, _plots_dir(out_dir) / "range_vs_time.png", vector=True)
 
 
 def plot_folders_vs_time(summary, path) -> Path | None:

@@ -1,6 +1,6 @@
 """Result records of a fit: what ``fit_folder`` returns and ``softshadow fit`` writes.
 
-Plain dataclasses whose ``to_json`` gives exactly the CONVENTIONS
+Plain dataclasses whose ``to_json`` gives exactly the documented
 ``results.json`` fields; plot data rides along in ``ProfilePlotData`` and
 ``OverlayPlotData`` (not written to JSON).
 """
@@ -36,18 +36,21 @@ class ProfilePlotData:
 
 @dataclasses.dataclass
 class OverlayPlotData:
-    """The fitted shadow over a photo: image (H, W) linear gray, alpha (H, W) fitted alpha
-    (NaN where not modelled), samples_uv (n, 2) pixels used by the fit."""
+    """The fitted shadow over a photo: image (h, w) linear gray, possibly a downsampled copy of the
+    photo; alpha (h, w) fitted alpha on the same pixels (NaN where not modelled); samples_uv (n, 2)
+    the pixels used by the fit, in the photo's own pixels; photo_shape (H, W) the photo's size
+    (None: the image is the photo at full size)."""
 
     photo: str
     image: np.ndarray
     alpha: np.ndarray
     samples_uv: np.ndarray
+    photo_shape: tuple[int, int] | None = None
 
 
 @dataclasses.dataclass
 class GroupResult:
-    """One time of day (or one photo, without a scene). Fields as in CONVENTIONS results.json.
+    """One time of day (or one photo, without a scene). Fields as in results.json (docs/formats.md).
 
     range_k and rho are physical values; ``range`` and ``brightness`` are the paper's units
     (100 k and 255 rho^(1/2.2)); *_stderr are one-sigma in physical units. When

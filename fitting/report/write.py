@@ -1,7 +1,7 @@
 """Files written from a fit: results.json, the paper's Table 2 (Markdown and CSV), plots.
 
 ``write_report`` writes everything ``softshadow fit PHOTO_DIR --out OUT_DIR`` puts in
-OUT_DIR (CONVENTIONS "softshadow fit ... writes"); ``format_table`` gives the same
+OUT_DIR (docs/formats.md, "softshadow fit writes"); ``format_table`` gives the same
 table as plain text for the terminal. Every file is written atomically (a temporary
 file in the same folder, then ``os.replace``), so an interruption leaves either the
 old file or the new one, never half of one.
@@ -21,7 +21,7 @@ import logging
 import math
 import os
 from pathlib import Path
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -47,8 +47,8 @@ MISSING = "—"
 RANGE_NAME = "Range of the soft shadow"
 BRIGHTNESS_NAME = "Brightness of the shadow"
 
-#: The files of a finished report in OUT_DIR (besides plots/*.png).
-REPORT_FILES = ("results.json", "table2.md", "table2.csv")
+#: The files of a finished report in OUT_DIR (besides plots/*.png and *.svg).
+REPORT_FILES = ("results.json", "table2.md", "table2.csv", "index.html")
 
 
 def clear_report(out_dir) -> None:
@@ -59,7 +59,7 @@ def clear_report(out_dir) -> None:
         (out_dir / name).unlink(missing_ok=True)
     plots = out_dir / "plots"
     if plots.is_dir():
-        for f in plots.glob("*.png"):
+        for f in [*plots.glob("*.png"), *plots.glob("*.svg")]:
             f.unlink(missing_ok=True)
 
 
@@ -84,7 +84,7 @@ def results_document(results: FitResults) -> dict:
 
 
 def write_results_json(results: FitResults, out_dir) -> Path:
-    """Write OUT_DIR/results.json (CONVENTIONS format) atomically; returns its path.
+    """Write OUT_DIR/results.json (docs/formats.md) atomically; returns its path.
 
     Non-finite numbers are already None in ``GroupResult.to_json``; ``allow_nan=False``
     makes any that slip through (say in ``skipped``) an error instead of invalid JSON.
@@ -176,9 +176,9 @@ def _table_rows(groups: Sequence[GroupResult], reference, truth
     if reference:
         refs = [reference_for_group(g, reference) for g in groups]
         if any(r is not None for r in refs):
-            rows.append(("Reference: range", "reference_range",
+            rows.append(("Paper, set by hand: range (its own units)", "reference_range",
                          [TableCell(None if r is None else float(r[0])) for r in refs]))
-            rows.append(("Reference: brightness", "reference_brightness",
+            rows.append(("Paper, set by hand: brightness", "reference_brightness",
                          [TableCell(None if r is None else float(r[1])) for r in refs]))
     if truth:
         truths = [truth_for_group(g, truth) for g in groups]
@@ -289,8 +289,9 @@ def table2_markdown(results: FitResults, reference=None, truth=None) -> str:
               "propagated to first order; " f"{UPPER_BOUND} marks an upper bound, "
               f"{MISSING} a value that could not be measured."]
     if reference:
-        lines.append("Reference values are matched to a column by its label or by the "
-                     f"nearest time of day within {PAPER_TIME_TOLERANCE_MIN:.0f} minutes.")
+        lines.append("The paper's values (its Table 2) were set by hand from photos with its own expansion "
+                     "rule, so its range is not on the scale of a measured 100 k; they are matched to a column "
+                     f"by its label or by the nearest time of day within {PAPER_TIME_TOLERANCE_MIN:.0f} minutes.")
     if notes:
         lines += ["", "Notes:", ""] + [f"{i}. {_md_escape(t)}" for i, t in enumerate(notes, 1)]
     if results.skipped:
@@ -371,8 +372,8 @@ def write_table2(results: FitResults, out_dir, reference=None, truth=None) -> tu
 
 def write_report(results: FitResults, out_dir, reference=None, truth=None,
                  plots: bool = True, group_plots: list[Path] | None = None) -> dict[str, Path]:
-    """Write results.json, table2.md/.csv and (unless ``plots`` is False) the plots
-    into OUT_DIR.
+    """Write results.json, table2.md/.csv, (unless ``plots`` is False) the plots, and index.html (the
+    page that shows them all) into OUT_DIR.
 
     group_plots: the groups' plots when they were already written (``plot_group_safely``
     while the fit went on); then only the range-against-time plot is drawn here.
@@ -385,6 +386,11 @@ def write_report(results: FitResults, out_dir, reference=None, truth=None,
     written += write_table2(results, out_dir, reference, truth)
     if plots:
         written += _write_plots(results, out_dir, reference, truth, group_plots)
+    from .page import write_index_html
+    try:
+        written.append(write_index_html(results_document(results), out_dir))
+    except Exception as exc:  # the page must never cost the results
+        logger.warning("index.html skipped: %s: %s", type(exc).__name__, exc)
     return {p.relative_to(out_dir).as_posix(): p for p in written}
 
 

@@ -10,14 +10,13 @@ out; the albedo class (the white paper against the ground) is found per pixel.
 
 from __future__ import annotations
 
-import dataclasses
 
 import cv2
 import numpy as np
 import trimesh
 
 from softshadow import Pose, SoftShadowModel, Sun
-from softshadow.internal import (PointPlan, PosedOccluder, edge_band_widths, object_mask, posed_vertices,
+from softshadow.internal import (PosedOccluder, edge_band_widths, object_mask, posed_vertices,
     project_to_ground)
 
 from softshadow.internal import hidden_sky_fraction

@@ -482,7 +482,7 @@ def _overlay(model: SoftShadowModel, pose: Pose, view: PhotoView, params: FitPar
         small_view = view.camera.with_size(sw, sh)
     alpha = fitted_alpha_image(model.with_options(profile=cfg.profile), pose, sun,
                                _k_np(params.raw_k), small_view)
-    return OverlayPlotData(view.name, small, alpha, s.uv * f)
+    return OverlayPlotData(view.name, small, alpha, s.uv, photo_shape=(h, w))
 
 
 def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label: str,

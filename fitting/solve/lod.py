@@ -35,7 +35,7 @@ import dataclasses
 import hashlib
 import math
 import threading
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 import trimesh

@@ -38,7 +38,7 @@ from ..samples.receiver_light import shadow_factor
 
 __all__ = ["GroupArrays", "FitConfig", "FitParams", "Prediction", "K_SCALE", "k_from_raw", "raw_from_k", "rho_from_raw",
            "raw_from_rho", "predict", "angular_pixel_gradient", "residuals", "pseudo_huber",
-           "sample_light", "edge_terms", "shadow_terms", "shadow_alpha", "residuals_of"]
+           "sample_light", "edge_terms", "shadow_terms", "residuals_of"]
 
 K_SCALE = 0.01
 
@@ -193,7 +193,7 @@ def angular_pixel_gradient(group: GroupArrays, pose: Pose, k, rule: str = "edge"
     return jnp.where(ok, slope / jnp.where(ok, dudt, 1.0), 0.0)
 
 
-def _shape_vector(params: FitParams) -> Float[Array, "3+P"]:
+def _shape_vector(params: FitParams) -> Float[Array, "3+P"]:  # noqa: F821 (a jaxtyping shape)
     """The parameters the shadow's shape depends on: raw_k, sun azimuth and elevation
     corrections (degrees), then each photo's raw_blur (P,). The rest (levels, gradients, rho)
     enter linearly."""
@@ -216,13 +216,13 @@ def _edge_terms_per_sample(geometry: Float[Array, "3"], raw_blur: Float[Array, "
     return blurred_profile_alpha(u, tau, config.profile), u, slope
 
 
-def edge_terms(shape: Float[Array, "3+P"], group: GroupArrays, pose: Pose, config: FitConfig):
+def edge_terms(shape: Float[Array, "3+P"], group: GroupArrays, pose: Pose, config: FitConfig):  # noqa: F821
     """Alpha (n,), penumbra coordinate u (n,) and |du/dpixel| (n,) from the shape vector."""
     return _edge_terms_per_sample(shape[:3], shape[3:][group.photo], group, pose, config)
 
 
 @jax.custom_jvp
-def shadow_terms(shape: Float[Array, "3+P"], group: GroupArrays, pose: Pose, config: FitConfig):
+def shadow_terms(shape: Float[Array, "3+P"], group: GroupArrays, pose: Pose, config: FitConfig):  # noqa: F821
     """Alpha, u and |du/dpixel| (n,) each, as ``edge_terms``, differentiable in ``shape`` only
     (the fit's constants group, pose and config get no derivative).
 
@@ -246,11 +246,6 @@ def _shadow_terms_jvp(primals, tangents):
     dblur = linear(jnp.zeros(3, dtype=shape.dtype), jnp.ones_like(blur))
     tangent_blur = tangent[3:][group.photo]
     return out, tuple(j @ tangent[:3] + d * tangent_blur for j, d in zip(jacs, dblur))
-
-
-def shadow_alpha(shape: Float[Array, "3+P"], group: GroupArrays, pose: Pose, config: FitConfig):
-    """Alpha (n,) of ``shadow_terms``."""
-    return shadow_terms(shape, group, pose, config)[0]
 
 
 def _shaded(params: FitParams, group: GroupArrays, alpha):

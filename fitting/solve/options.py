@@ -12,7 +12,7 @@ class FitOptions:
     """Choices of the fit. profiles / blur: candidates compared by BIC.
 
     The default profile is ``disk``: the sun is a disk, and with it k reads tan(sun radius),
-    the truth convention of CONVENTIONS and the Mitsuba renders. ("linear", "disk") lets BIC
+    the truth convention of docs/formats.md and the Mitsuba renders. ("linear", "disk") lets BIC
     choose; a linear ramp fitted to a real sun reads about 0.854 of that k.
     """
 

@@ -113,7 +113,7 @@ def call_saved(name: str, fn, *args) -> tuple:
     return tuple(program(*leaves))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _jitted(fn):
     return eqx.filter_jit(fn)
 
