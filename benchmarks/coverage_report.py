@@ -7,7 +7,8 @@ from pathlib import Path
 from .coverage_tables import (COVERAGE_TARGET, FACTORS, MAX_CONFIDENT_MISSES, MAX_FALSE_ALARMS,
                               MIN_RELIABLE_PER_BIN, bin_table, criteria, judge, summarize)
 
-__all__ = ["write_coverage_report", "coverage_plot", "pull_plot", "finding_text"]
+__all__ = ["write_coverage_report", "coverage_plot", "pull_plot", "finding_text", "summary_section",
+           "update_summary_section", "SECTION_BEGIN", "SECTION_END"]
 
 COMMAND = ("nice -n 10 softshadow bench --what coverage --groups 300 --seed 0 --json docs/uncertainty_study.json "
            "--report docs/uncertainty_study.md")
@@ -19,6 +20,10 @@ def _pct(x) -> str:
 
 def _frac(num: int, den: int) -> str:
     return f"{num}/{den}" if den else "0/0"
+
+
+def _where(failing: dict) -> str:
+    return "all groups" if failing["factor"] == "all" else f"{failing['factor']} {failing['bin']}"
 
 
 def _load(values) -> str:
@@ -55,9 +60,10 @@ def coverage_plot(records: list[dict], path: Path) -> None:
             for xi, v, a in zip(x, vals, alpha):
                 ax.bar(xi + off, v, width=0.4, color=colour, alpha=a, label=what if xi == 0 else None)
         ax.axhline(COVERAGE_TARGET, color="k", lw=0.8, ls="--")
-        ax.set_ylim(0.5, 1.02)
+        ax.set_ylim(0.0, 1.02)
         ax.set_xticks(list(x))
-        ax.set_xticklabels([f"{row['bin']}\n({row['reliable']})" for row in table], fontsize=7, rotation=0)
+        ax.set_xticklabels([f"{row['bin'].replace(' ', chr(10))}\n({row['reliable']})" for row in table],
+                           fontsize=7, rotation=0)
         ax.set_title(factor, fontsize=9)
     for ax in axes.ravel()[len(factors):]:
         ax.axis("off")
@@ -72,7 +78,7 @@ def coverage_plot(records: list[dict], path: Path) -> None:
 
 def pull_plot(records: list[dict], path: Path) -> None:
     """Histograms of the pulls (value - truth) / stated sigma of the reliable groups (k: identifiable
-    only), with the unit normal for reference."""
+    only), well-described and misdescribed stacked, with the unit normal scaled to the counts."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -81,16 +87,24 @@ def pull_plot(records: list[dict], path: Path) -> None:
     fig, axes = plt.subplots(1, 2, figsize=(9, 3.2))
     grid = np.linspace(-5, 5, 201)
     for ax, what in zip(axes, ("k", "rho")):
-        pulls = np.array([getattr(j, f"{what}_pull") for j in js if j.reliable and getattr(j, f"{what}_pull") is not None])
-        pulls = pulls[np.isfinite(pulls)]
-        clipped = np.clip(pulls, -5.99, 5.99)
-        ax.hist(clipped, bins=np.linspace(-6, 6, 49), density=True, color="tab:blue" if what == "k" else "tab:orange",
-                alpha=0.7, label=f"{len(pulls)} reliable groups")
-        ax.plot(grid, np.exp(-grid ** 2 / 2) / np.sqrt(2 * np.pi), "k-", lw=1, label="unit normal")
+        def pulls_of(well):
+            p = np.array([getattr(j, f"{what}_pull") for j in js if j.reliable and j.well_described == well
+                          and getattr(j, f"{what}_pull") is not None], dtype=float)
+            return p[np.isfinite(p)]
+        good, bad = pulls_of(True), pulls_of(False)
+        pulls = np.concatenate([good, bad])
+        ax.hist([np.clip(good, -5.99, 5.99), np.clip(bad, -5.99, 5.99)], bins=np.linspace(-6, 6, 49), stacked=True,
+                density=False, color=["tab:blue", "tab:red"], alpha=0.75,
+                label=[f"well described ({len(good)})", f"misdescribed or forced LOD ({len(bad)})"])
+        scale = max(len(pulls), 1) * 0.25  # the unit normal scaled to the counts (bins 0.25 wide)
+        grid_y = scale * np.exp(-grid ** 2 / 2) / np.sqrt(2 * np.pi)
+        ax.plot(grid, grid_y, "k-", lw=1, label="unit normal")
         for v in (-2, 2):
             ax.axvline(v, color="k", lw=0.6, ls="--")
         ax.set_xlabel(f"({what} - truth) / stated sigma (clipped at 6)")
-        ax.set_title(f"{what}: median |pull| {np.median(np.abs(pulls)):.2f}" if len(pulls) else what, fontsize=9)
+        ax.set_ylabel("reliable groups")
+        ax.set_title(f"{what}: median |pull| {np.median(np.abs(pulls)):.2f} (well described "
+                     f"{np.median(np.abs(good)) if len(good) else float('nan'):.2f})", fontsize=9)
         ax.legend(fontsize=7)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -195,7 +209,7 @@ def write_coverage_report(result: dict, md_path: Path, json_name: str | None = N
           f"- Coverage >= {COVERAGE_TARGET:.0%} for k and for rho in every bin with >= {MIN_RELIABLE_PER_BIN} "
           f"reliable groups: **{'met' if crit['coverage_ok'] else 'not met'}**"
           + ("" if crit["coverage_ok"] else " (" + "; ".join(
-              f"{f['factor']} {f['bin']}: {f['what']} {_pct(f['coverage'])} of {f['reliable']}"
+              f"{_where(f)}: {f['what']} {_pct(f['coverage'])} of {f['reliable']}"
               for f in crit["coverage_bins_failing"]) + ")"),
           f"- Confident misses <= {MAX_CONFIDENT_MISSES:.0%} of all groups: "
           f"**{'met' if crit['confident_misses_ok'] else 'not met'}** ({total['confident_misses']} of "
@@ -235,6 +249,8 @@ def write_coverage_report(result: dict, md_path: Path, json_name: str | None = N
         L += ["None.", ""]
     md_path.parent.mkdir(parents=True, exist_ok=True)
     md_path.write_text("\n".join(L) + "\n")
+    # The summary in docs/uncertainty.md beside the report (when it has the study's markers).
+    update_summary_section(md_path.parent / "uncertainty.md", result, md_path.name)
 
 
 def finding_text(record: dict, kind: str, root: str | None = None) -> str:
@@ -267,3 +283,56 @@ def finding_text(record: dict, kind: str, root: str | None = None) -> str:
              f"--out {folder} && softshadow fit {folder} --out {folder}/fit{lod}`"
              + (f" (the study's folder: `{record['folder']}`)" if record.get("folder") else ""), ""]
     return "\n".join(lines)
+
+
+SECTION_BEGIN = "<!-- coverage-study: generated by softshadow bench --what coverage; edit benchmarks/coverage_report.py -->"
+SECTION_END = "<!-- coverage-study: end -->"
+
+
+def summary_section(result: dict, study_page: str = "uncertainty_study.md") -> str:
+    """The study's summary for docs/uncertainty.md (between SECTION_BEGIN and SECTION_END)."""
+    records = result["records"]
+    env = result.get("environment") or {}
+    m = env.get("machine") or {}
+    total = summarize(records)
+    crit = criteria(records)
+    well = summarize([r for r in records if judge(r).well_described])
+    wrong = summarize([r for r in records if not judge(r).well_described])
+    loads = sorted(r["load_average"][0] for r in records if r.get("load_average"))
+    L = [SECTION_BEGIN,
+         f"## Calibration study (measured {env.get('date_utc', 'n/a')}, {m.get('cores', '?')}-core shared machine, "
+         f"load {loads[0] if loads else 'n/a'}-{loads[-1] if loads else 'n/a'})", "",
+         f"{total['groups']} groups drawn at random from a documented prior (sun elevation 8-85 deg at any "
+         "azimuth, 320x240 to 4000x3000, 1-6 photos, k 0.002-0.03, rho 0.03-0.9, pillar, ball, knot and the real "
+         "dragon, ground, range-image and mesh receivers, the sun from time and site, given or fitted, camera "
+         "blur, noise, JPEG and exposures, and misdescribed scenes), rendered by `data_synth`'s physical "
+         "renderer and fitted with the default options. The whole study, its prior, every group's draw, result "
+         f"and truth, and the tables per factor bin: [{study_page}]({study_page}). Re-run it with "
+         "`softshadow bench --what coverage --json docs/uncertainty_study.json --report docs/uncertainty_study.md` "
+         "(hours of CPU; resumable).", "", *_HEAD, _row("all", total), _row("well described", well),
+         _row("misdescribed", wrong), "",
+         f"- Coverage >= {COVERAGE_TARGET:.0%} for k and rho in every bin with >= {MIN_RELIABLE_PER_BIN} reliable "
+         f"groups: {'met' if crit['coverage_ok'] else 'not met'}"
+         + ("" if crit["coverage_ok"] else " (" + "; ".join(
+             f"{_where(f)}: {f['what']} {_pct(f['coverage'])}" for f in crit["coverage_bins_failing"])
+            + ")") + ".",
+         f"- Confident misses (reliable, beyond 3 stated sigma): {total['confident_misses']} of {total['groups']} "
+         f"groups ({_pct(total['confident_miss_share'])}; target <= {MAX_CONFIDENT_MISSES:.0%}).",
+         f"- False alarms (well-described groups flagged): {total['false_alarms']} of {total['well_described']} "
+         f"({_pct(total['false_alarm_rate'])}; target <= {MAX_FALSE_ALARMS:.0%}).", "",
+         "Coverage counts the groups reported reliable; a k that is not identifiable is covered when the truth "
+         "lies under its bound.", SECTION_END]
+    return "\n".join(L)
+
+
+def update_summary_section(doc: Path, result: dict, study_page: str = "uncertainty_study.md") -> bool:
+    """Replace the study's section of ``doc`` (between its markers); False when the doc has none."""
+    doc = Path(doc)
+    if not doc.exists():
+        return False
+    text = doc.read_text()
+    a, b = text.find(SECTION_BEGIN), text.find(SECTION_END)
+    if a < 0 or b < a:
+        return False
+    doc.write_text(text[:a] + summary_section(result, study_page) + text[b + len(SECTION_END):])
+    return True
