@@ -15,7 +15,8 @@ Definitions (docs/uncertainty_study.md repeats them):
 - **confident miss**: reliable, and k or rho beyond 3 stated sigma of the truth (for a bound:
   the truth above the bound by more than one stated sigma, the bound being k + 2 sigma);
 - **false alarm**: a well-described group (no misdescription, no forced level of detail)
-  that is flagged.
+  that is flagged; a **needless** one had its k and rho within their stated errors anyway
+  (the others were flagged rightly: the data could not give the values).
 """
 
 from __future__ import annotations
@@ -50,6 +51,7 @@ class Judgement:
     k_pull: float | None
     rho_pull: float | None
     k_miss_kind: str | None  # "low", "high", "above bound" when not covered
+    values_covered: bool | None  # k and rho within their stated errors, reliable or not (None: no values)
 
 
 def _num(x) -> float | None:
@@ -89,7 +91,7 @@ def judge(record: dict) -> Judgement:
     sk = _num(r.get("range_stderr"))
     k_pull = _pull(k, k_true, sk) if fitted and identifiable else None
     rho_pull = _pull(rho, rho_true, r.get("rho_stderr")) if fitted else None
-    k_cov = rho_cov = None
+    k_cov = rho_cov = values = None
     miss = False
     kind = None
     if fitted:
@@ -104,11 +106,12 @@ def judge(record: dict) -> Judgement:
             if not k_ok:
                 kind = "above bound"
         rho_ok = abs(rho_pull) <= 2.0
+        values = bool(k_ok and rho_ok)
         if reliable:
             k_cov, rho_cov = bool(k_ok), bool(rho_ok)
             miss = bool(k_bad or abs(rho_pull) > 3.0)
     return Judgement(fitted, reliable, identifiable, flagged, well_described(draw), k_cov, rho_cov, miss,
-                     k_pull, rho_pull, kind)
+                     k_pull, rho_pull, kind, values)
 
 
 def _edges_bin(value: float, edges: tuple[float, ...], fmt: Callable[[float], str]) -> str:
@@ -182,6 +185,7 @@ def summarize(records: Iterable[dict]) -> dict:
         "confident_misses": sum(j.confident_miss for j in js),
         "well_described": len(well),
         "false_alarms": sum(j.flagged for j in well),
+        "needless_flags": sum(j.flagged and bool(j.values_covered) for j in well),
     }
     out.update({
         "k_coverage": _share(out["k_covered"], out["reliable"]),

@@ -203,6 +203,9 @@ def test_tables_from_hand_made_records():
     assert (s["k_covered"], s["rho_covered"], s["k_bounds"]) == (3, 5, 3)
     assert s["k_coverage"] == pytest.approx(0.5) and s["rho_coverage"] == pytest.approx(5 / 6, abs=1e-4)
     assert (s["confident_misses"], s["well_described"], s["false_alarms"]) == (2, 8, 2)
+    assert s["needless_flags"] == 0  # neither flagged well-described group had its values right
+    assert judge(_record(0.0050, 0.0005, 0.200, 0.002, reliable=False)).values_covered
+    assert summarize([_record(0.0050, 0.0005, 0.200, 0.002, reliable=False)])["needless_flags"] == 1
     assert s["confident_miss_share"] == pytest.approx(2 / 9, abs=1e-4)
     mesh = {row["bin"]: row for row in bin_table(recs, "mesh")}
     assert list(mesh) == ["pillar", "ball", "knot", "dragon"]
