@@ -128,13 +128,19 @@ def _depth_image(camera: PinholeCamera, render) -> np.ndarray:
     return z.reshape(render.receiver_valid.shape).astype(np.float32)
 
 
+def _mean_azimuth(azimuths_deg) -> float:
+    """The circular mean of compass azimuths in degrees, in [0, 360) (359 and 1 average to 0, not 180)."""
+    a = np.radians(np.asarray(azimuths_deg, dtype=np.float64))
+    return float(np.degrees(np.arctan2(np.sin(a).mean(), np.cos(a).mean())) % 360.0)
+
+
 def _group_truth(label: str, photos: list[PhotoPlan]) -> dict:
     light = photos[0].light
     truth = light.truth()
     truth.update(
         label=label,
         photos=[],
-        sun_azimuth_deg=float(np.mean([p.light.azimuth_deg for p in photos])),
+        sun_azimuth_deg=_mean_azimuth([p.light.azimuth_deg for p in photos]),
         sun_elevation_deg=float(np.mean([p.light.elevation_deg for p in photos])),
         range=100.0 * light.range_k,
         brightness=float(brightness_to_paper(light.rho)),

@@ -95,6 +95,12 @@ def test_rising_bank_gradient_matches_its_heights():
     assert bank.max_slope() < 1.5 * 0.4 / 1.5 + 3.5 * 0.02
 
 
+def test_group_truth_averages_azimuths_around_north():
+    from data_synth.synth import _mean_azimuth
+    assert _mean_azimuth([359.0, 1.0, 3.0]) == pytest.approx(1.0)
+    assert _mean_azimuth([350.0, 350.0]) == pytest.approx(350.0)
+
+
 def test_misdescription_changes_what_is_written():
     told = Misdescription(scale_factor=1.1, position_offset_m=(0.03, 0.0, 0.0), sun_offset_deg=(1.0, -0.5),
                           clock_offset_s=600)
