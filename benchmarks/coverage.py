@@ -108,7 +108,9 @@ def _truth_fields(folder: Path) -> dict:
     truth = json.loads((folder / "truth.json").read_text())
     g = truth["groups"][0]
     px = [d["penumbra_px"] for d in truth["photos_detail"].values()]
-    return {"k_true": g["range_k"], "rho_true": g["rho"], "sun_azimuth_true": g["sun_azimuth_deg"],
+    az = np.radians([d["sun_azimuth_deg"] for d in truth["photos_detail"].values()])
+    mean_az = float(np.degrees(np.arctan2(np.sin(az).mean(), np.cos(az).mean())) % 360.0) if len(az) else None
+    return {"k_true": g["range_k"], "rho_true": g["rho"], "sun_azimuth_true": mean_az,
             "sun_elevation_true": g["sun_elevation_deg"], "truth_penumbra_px": float(np.median(px)) if px else None,
             "photos_true": list(g["photos"])}
 
