@@ -116,9 +116,9 @@ def test_one_blas_thread_entered_first_still_limits_every_blas():
     assert len(blas) >= 2 and set(blas) == {1}
 
 
-def test_no_plots_asks_the_fit_for_no_overlay(monkeypatch):
-    # The photo check needs the fit's profile data (plots=True inside), not its overlays (a render
-    # of the fitted shadow, 0.4-0.5 s a group): under --no-plots none is drawn.
+def test_no_plots_asks_the_fit_for_no_plot_data(monkeypatch):
+    # The rule book judges the fit's evidence, not its plot data: under --no-plots the fit builds
+    # neither the profiles nor the overlays (a render of the fitted shadow, 0.4-0.5 s a group).
     import types
 
     import fitting.folder.checked as checked
@@ -126,11 +126,11 @@ def test_no_plots_asks_the_fit_for_no_overlay(monkeypatch):
     from fitting import FitOptions, GroupResult, PhotoGroup
     asked = []
 
-    def fit_group(model, pose, views, label, time, options, *more):
-        asked.append((options.plots, options.overlays))
-        return GroupResult(label, time, [v.name for v in views], error="stopped here")
+    def fit_group(model, pose, views, label, time, options, *more, **kw):
+        asked.append(options.plots)
+        return GroupResult.failed(label, time, [v.name for v in views], "stopped here")
     monkeypatch.setattr(solve, "fit_group", fit_group)
     views = [types.SimpleNamespace(name="a.jpg", sun_source="scene")]
     for plots in (False, True):
         checked.fit_checked(None, None, views, PhotoGroup("10:30", "10:30", ["a.jpg"]), FitOptions(plots=plots))
-    assert asked == [(True, "none"), (True, "first")]
+    assert asked == [False, True]

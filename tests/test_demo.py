@@ -1,11 +1,9 @@
-"""``softshadow demo``: the README's first command prints the table, a verdict against the truth and where
-it wrote its folders."""
+"""``softshadow demo``'s verdict line (the demo itself runs as the README says, in tests/test_readme.py)."""
 
 from __future__ import annotations
 
 from fitting import FitResults, GroupResult
 from softshadow_cli.demo_command import demo_verdict
-from softshadow_cli.main import main
 
 TRUTH = {"groups": [{"label": "09:20", "photos": ["a.jpg"], "range_k": 0.0056, "rho": 0.157},
                     {"label": "13:21", "photos": ["b.jpg"], "range_k": 0.0052, "rho": 0.190},
@@ -31,13 +29,3 @@ def test_verdict_names_a_bound_under_the_truth_and_a_failed_group():
                           GroupResult("13:22", "13:22", ["b.jpg"], error="no shadow in view")], [], {})
     line = demo_verdict(results, TRUTH)
     assert "in 0 of 2 groups" in line and "bound 0.004 under the truth" in line and "not fitted" in line
-
-
-def test_demo_runs_and_says_where_it_wrote(tmp_path, capsys):
-    code = main(["demo", "--size", "400x300", "--out", str(tmp_path / "demo")])
-    out = capsys.readouterr().out
-    assert code == 0, out
-    assert "verdict: k and ρ within two stated errors of the truth in" in out
-    assert "Paper, set by hand: range (its own units)" in out
-    assert str((tmp_path / "demo" / "fit" / "index.html").resolve()) in out
-    assert (tmp_path / "demo" / "fit" / "index.html").exists()

@@ -178,7 +178,7 @@ def test_hard_cases_preset_reports_its_bad_photos(hard_cases_preset):
 # Groups of the preset at 320 x 240 that come back with a wrong value neither flagged as an upper
 # bound nor unreliable (strict expected failures with the measured symptom as the reason); none since
 # 2026-11-25 (low-sun, subpixel: the penumbra and umbra sample counts; zenith: those and the no-ramp
-# bound of k; out-of-frame, clutter: fitting.verdict.photo_check.fit_quality).
+# bound of k; out-of-frame, clutter: the rule book, fitting.verdict.rules).
 HARD_PRESET_FAILURES: dict[str, str] = {}
 
 

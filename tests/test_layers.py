@@ -33,7 +33,7 @@ ALLOWED = {
 }
 ENTRY_POINTS = {Path("softshadow/__main__.py")}  # may import the command line
 #: fitting's subpackages, top floor first: each imports only those after it.
-FITTING_FLOORS = ("folder", "solve", "verdict", "samples", "edges", "photos", "report")
+FITTING_FLOORS = ("folder", "solve", "samples", "edges", "photos", "report", "verdict")
 PUBLIC_ONLY = ("softshadow", "scene")  # imported from above by their public names only
 DISCRETE_RENDERER_MODULES = ("meshes", "camera", "occluder", "raster", "posed", "plan", "colour", "threads",
                              "shadowmap", "slides", "projector", "visibility", "clip", "sky")

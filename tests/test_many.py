@@ -76,6 +76,18 @@ def test_two_workers_fit_the_good_folders_and_record_the_broken_one(root, first_
     assert sorted(on_disk["folder"]) == sorted(table["folder"])
 
 
+def test_a_failed_group_is_never_reliable_in_the_summary():
+    from fitting import GroupResult
+    from fitting.folder.many import folder_rows
+    failed = GroupResult.failed("13:21", "13:21", ["a.jpg"], "fit failed: boom").to_json()
+    # results.json written before a failed group was unreliable said reliable beside its error.
+    old = dict(failed, reliable=True, identifiable=True)
+    fitted = GroupResult.from_json({"label": "09:20", "time": "09:20", "photos": ["b.jpg"], "rho": 0.2}).to_json()
+    rows = folder_rows("f", [failed, old, fitted])
+    assert [r["reliable"] for r in rows] == [False, False, True]
+    assert [r["error"] for r in rows] == ["fit failed: boom", "fit failed: boom", None]
+
+
 def test_summary_plot_is_written(first_run):
     out, _ = first_run
     png = out / "summary.png"

@@ -19,7 +19,8 @@ from fitting.edges.measure import measure_shadow_edges
 from fitting.edges.ground_region import ground_region
 from fitting.photos.ignore_masks import IgnoreMaskError, ignore_mask_path, is_auxiliary, read_ignore_mask
 from fitting.photos.read import list_photos
-from fitting.edges.cues import bluer_umbrae, log_rho_modes, mode_of_log_rho, reliability
+from fitting.edges.cues import bluer_umbrae, edge_evidence, log_rho_modes, mode_of_log_rho
+from fitting.verdict.edge_rules import judge_edges
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 SUN = np.array([1.0, 0.97, 0.9])
@@ -111,6 +112,15 @@ def test_a_kerb_beside_the_shadow_is_either_left_out_or_flagged():
 
 
 # ----------------------------------------------------------------------------- cues and confidence
+
+def reliability(shadow_like_log_rho, positions, shape, lowest_log, kept_log_rho=None):
+    """(warnings, reliable) of the rule book on a measurement's cues; without ``kept_log_rho`` every
+    kept profile has one step (its outlines agree)."""
+    positions = np.asarray(positions, float).reshape(-1, 2)
+    kept = np.zeros(len(positions)) if kept_log_rho is None else kept_log_rho
+    verdict = judge_edges(edge_evidence(shadow_like_log_rho, positions, shape, lowest_log, kept, None))
+    return list(verdict.warnings), verdict.reliable
+
 
 def test_bluer_umbrae_apply_only_when_enough_edges_are_bluer():
     assert bluer_umbrae(np.array([0.5, 0.4, 0.02, 0.3, 0.6, 0.45, 0.0])).tolist() == [

@@ -21,8 +21,9 @@ Used by ``fitting.edges.measure`` after the per-profile tests:
   shadow is one connected region; the dark sides of a shadow's profiles all
   fall in it, while edges picked up on unrelated dark things (gaps, stains,
   dark stones, facade details) each have a dark blob of their own.
-- ``reliability``: the warnings (one line each) and the ``reliable`` flag
-  derived from the above.
+- ``edge_evidence``: the above for the profiles a measurement rests on, as the
+  typed evidence the rule book judges (``fitting.verdict.edge_rules``: the
+  warnings and the ``reliable`` flag are decided there).
 """
 
 from __future__ import annotations
@@ -32,9 +33,10 @@ from scipy import ndimage, stats
 from scipy.cluster.hierarchy import fcluster, linkage
 from scipy.signal import find_peaks
 
-__all__ = ["bluer_umbrae", "log_rho_modes", "edge_structures", "reliability", "mode_of_log_rho",
-           "disagreement_warning", "few_profiles_warning", "outline_disagreement", "textured_outlines",
-           "dark_side_regions", "scattered_dark_sides"]
+from ..verdict.evidence import EdgeEvidence
+
+__all__ = ["bluer_umbrae", "log_rho_modes", "edge_structures", "mode_of_log_rho", "textured_outlines",
+           "dark_side_regions", "outlines", "edge_evidence"]
 
 # Skylit umbrae are bluer: on the real photo DSC_0569 the blue step minus the
 # red step was about 0.8 (log) across shadow edges, about 0 across paint; the
@@ -46,14 +48,6 @@ BLUER_MIN_COUNT = 5
 BLUER_MIN_SHARE = 0.2
 MODE_BANDWIDTH_LOG = 0.05      # kernel density bandwidth of log rho
 MODE_WINDOW_LOG = 0.25         # a mode's members lie within this of its peak (farther: other edges)
-# A second mode holding this share of the first's members (and at least
-# SECOND_MODE_MIN profiles): the edges disagree. On DSC_0569 the second mode
-# held 11 profiles against 105 (paint); on the street preset a kerb's mode
-# held 40 against the shadows' 43, and on other seeds the shadows' mode was
-# the smaller one.
-SECOND_MODE_SHARE = 0.25
-SECOND_MODE_MIN = 8
-RELIABLE_MIN_PROFILES = 10     # fewer kept profiles than this: too little evidence
 # A shadow does not change the fine texture of the ground: along a shadow
 # outline the dark/lit ratio of the high-pass log texture stays near 1, or
 # grows to 1 / sqrt(rho) where shot noise dominates a smooth surface (the
@@ -65,18 +59,6 @@ RELIABLE_MIN_PROFILES = 10     # fewer kept profiles than this: too little evide
 # median is above this is two materials, not a shadow.
 OUTLINE_TEXTURE_MAX = 1.35
 OUTLINE_TEXTURE_MIN_PROFILES = 3
-# One sun and one sky give every shadow outline on the ground the same step:
-# separate outlines (structures) of at least OUTLINE_MIN_PROFILES kept
-# profiles whose median log rho differ by more than this disagree. On the
-# street preset the kerb's outline read 0.27-0.29 against 0.32-0.34 on the
-# shadows of the same photo (0.15-0.2 in log); shadows near facades, which
-# see less sky, read up to 0.06 lower in log. Only outlines that each hold at
-# least OUTLINE_MIN_SHARE of the kept profiles are compared: on the real
-# asphalt photo DSC_0569 outlines of 8 profiles scattered from 0.19 to 0.27
-# (texture, parking lines) while the two that held 63 of 105 read 0.228-0.229.
-OUTLINE_DISAGREE_LOG = 0.12
-OUTLINE_MIN_PROFILES = 4
-OUTLINE_MIN_SHARE = 0.2
 # The dark-side cue. The working log image is smoothed (Gaussian, this sigma in
 # working pixels, masked pixels left out) so that texture does not cut a
 # shadow into pieces, thresholded halfway (in log) between the kept profiles'
@@ -84,15 +66,7 @@ OUTLINE_MIN_SHARE = 0.2
 # side is sampled DARK_SIDE_STEP_PX beyond its ramp's dark end.
 DARK_SMOOTH_PX = 1.5
 DARK_SIDE_STEP_PX = 2.0
-# A dark region holding at least this many of the kept profiles' dark sides is
-# a shadow (one shadow, several profiles along its outline). When less than
-# DARK_MAIN_SHARE of the profiles with a dark side fall in such regions, the
-# evidence is scattered over unrelated dark blobs: a warning, not a drop
-# (see docs/edge_measure.md, "The dark side is one region").
-DARK_MAIN_MIN_PROFILES = 3
-DARK_MAIN_SHARE = 0.5
 STRUCTURE_LINK = 0.04          # profiles closer than this fraction of the image diagonal: one structure
-PROFILES_PER_STRUCTURE = 5     # more structures than kept / this (and than 2): scattered evidence
 
 
 def bluer_umbrae(blue_shift_log: np.ndarray) -> np.ndarray | None:
@@ -154,54 +128,6 @@ def edge_structures(positions_uv: np.ndarray, image_shape: tuple[int, int]) -> n
     return fcluster(linkage(pts, method="single"), t=link, criterion="distance")
 
 
-def few_profiles_warning(n_profiles: int) -> str | None:
-    """The warning for a measurement that rests on fewer than RELIABLE_MIN_PROFILES profiles
-    (with or without geometry), or None."""
-    return f"only {n_profiles} shadow-edge profiles" if n_profiles < RELIABLE_MIN_PROFILES else None
-
-
-def disagreement_warning(modes: list[tuple[float, int]], measured_log: float) -> str:
-    """The one "edges disagree" warning: the mode the reported rho comes from (the highest
-    density, ``mode_of_log_rho``: ``measured_log``) named first as "measured", then the fullest
-    other mode. Modes are (log peak, profiles) as ``log_rho_modes`` gives them, two or more.
-    Named this way, the warning, the table's value and results.json's rho always agree on
-    which mode was measured (ordering by profile count alone named the other one first when
-    the denser mode held fewer profiles)."""
-    i = int(np.argmin([abs(peak - measured_log) for peak, _ in modes]))
-    other = next(m for j, m in enumerate(modes) if j != i)
-    return (f"edges disagree: measured rho {np.exp(modes[i][0]):.3f} ({modes[i][1]} profiles), "
-            f"another mode at rho {np.exp(other[0]):.3f} ({other[1]} profiles)")
-
-
-def reliability(shadow_like_log_rho: np.ndarray, kept_positions_uv: np.ndarray, image_shape: tuple[int, int],
-                lowest_log: float, kept_log_rho: np.ndarray | None = None) -> tuple[list[str], bool]:
-    """(warnings, reliable) of a single-photo measurement.
-
-    shadow_like_log_rho: (M,) log rho of every profile that passed the
-        per-profile tests (before the dominant mode was chosen).
-    kept_positions_uv: (N,) positions of the profiles the result rests on.
-    kept_log_rho: (N,) their log rho; given, separate outlines must agree (``outline_disagreement``).
-    """
-    warnings: list[str] = []
-    modes = log_rho_modes(shadow_like_log_rho, lowest_log)
-    if len(modes) > 1 and modes[1][1] >= max(SECOND_MODE_SHARE * modes[0][1], SECOND_MODE_MIN):
-        warnings.append(disagreement_warning(modes, mode_of_log_rho(shadow_like_log_rho, lowest_log)))
-    n = int(np.asarray(kept_positions_uv).reshape(-1, 2).shape[0])
-    if few_profiles_warning(n):
-        warnings.append(few_profiles_warning(n))
-    if n:
-        labels = edge_structures(kept_positions_uv, image_shape)
-        n_struct = int(np.unique(labels).size)
-        if n_struct > max(2, n / PROFILES_PER_STRUCTURE):
-            warnings.append(f"{n} profiles spread over {n_struct} separate structures")
-        if kept_log_rho is not None:
-            spread = outline_disagreement(kept_log_rho, labels)
-            if spread is not None:
-                warnings.append(f"shadow outlines disagree: rho {np.exp(spread[0]):.3f} and {np.exp(spread[1]):.3f} "
-                                "on separate outlines (an albedo edge, or ground that sees different sky)")
-    return warnings, not warnings
-
-
 def textured_outlines(texture_ratio: np.ndarray, rho: np.ndarray, labels: np.ndarray) -> np.ndarray:
     """(N,) bool: the profiles on outlines whose median texture ratio (dark/lit) times sqrt(rho) exceeds
     OUTLINE_TEXTURE_MAX.
@@ -218,20 +144,6 @@ def textured_outlines(texture_ratio: np.ndarray, rho: np.ndarray, labels: np.nda
         if measured.size >= OUTLINE_TEXTURE_MIN_PROFILES and np.median(measured) > OUTLINE_TEXTURE_MAX:
             out |= member
     return out
-
-
-def outline_disagreement(log_rho: np.ndarray, labels: np.ndarray) -> tuple[float, float] | None:
-    """(lowest, highest) median log rho of the outlines holding OUTLINE_MIN_SHARE of the profiles (and at least
-    OUTLINE_MIN_PROFILES), when they differ by more than OUTLINE_DISAGREE_LOG; else None.
-
-    log_rho: (N,) log rho of the kept profiles; labels: (N,) their structures (``edge_structures``).
-    """
-    x = np.asarray(log_rho, float)
-    need = max(OUTLINE_MIN_PROFILES, OUTLINE_MIN_SHARE * x.size)
-    medians = [float(np.median(x[labels == k])) for k in np.unique(labels) if np.sum(labels == k) >= need]
-    if len(medians) < 2 or max(medians) - min(medians) <= OUTLINE_DISAGREE_LOG:
-        return None
-    return min(medians), max(medians)
 
 
 def dark_side_regions(log_image: np.ndarray, valid: np.ndarray, dark_uv: np.ndarray,
@@ -265,20 +177,30 @@ def dark_side_regions(log_image: np.ndarray, valid: np.ndarray, dark_uv: np.ndar
     return out
 
 
-def scattered_dark_sides(region_labels: np.ndarray) -> str | None:
-    """The warning for kept profiles whose dark sides lie scattered over many separate dark regions, or None.
+def outlines(log_rho: np.ndarray, labels: np.ndarray) -> tuple[tuple[float, int], ...]:
+    """(median log rho, profiles) of each outline: log_rho (N,) of the kept profiles, labels (N,) their
+    structures (``edge_structures``)."""
+    x = np.asarray(log_rho, float)
+    return tuple((float(np.median(x[labels == k])), int(np.sum(labels == k))) for k in np.unique(labels))
 
-    region_labels: (N,) from ``dark_side_regions`` (0: the dark side is not in a dark region; not judged).
-    A region holding at least DARK_MAIN_MIN_PROFILES dark sides is a shadow; when fewer than DARK_MAIN_SHARE
-    of the judged profiles lie in such regions, the profiles are on unrelated dark things.
+
+def edge_evidence(shadow_like_log_rho: np.ndarray, kept_positions_uv: np.ndarray, image_shape: tuple[int, int],
+                  lowest_log: float, kept_log_rho: np.ndarray, dark_region_labels: np.ndarray | None) -> EdgeEvidence:
+    """The cues of a single-photo measurement, for the rule book (``fitting.verdict.edge_rules``).
+
+    shadow_like_log_rho: (M,) log rho of every profile that passed the per-profile tests (before the
+        dominant mode was chosen).
+    kept_positions_uv: (N, 2) positions of the profiles the result rests on; kept_log_rho: (N,) their
+        log rho. dark_region_labels: (N,) ``dark_side_regions`` of their dark sides (None: not found).
     """
-    lab = np.asarray(region_labels, int)
-    lab = lab[lab > 0]
-    if lab.size < DARK_MAIN_MIN_PROFILES:
-        return None
-    _, counts = np.unique(lab, return_counts=True)
-    in_main = int(counts[counts >= DARK_MAIN_MIN_PROFILES].sum())
-    if in_main >= DARK_MAIN_SHARE * lab.size:
-        return None
-    return (f"dark sides scattered: {lab.size} profiles' dark sides lie in {counts.size} separate dark regions "
-            f"({in_main} in regions of {DARK_MAIN_MIN_PROFILES}+), not one shadow")
+    modes = tuple(log_rho_modes(shadow_like_log_rho, lowest_log))
+    measured = mode_of_log_rho(shadow_like_log_rho, lowest_log) if len(shadow_like_log_rho) else float("nan")
+    positions = np.asarray(kept_positions_uv).reshape(-1, 2)
+    labels = edge_structures(positions, image_shape) if len(positions) else np.zeros(0, int)
+    dark = ()
+    if dark_region_labels is not None:
+        lab = np.asarray(dark_region_labels, int)
+        dark = tuple(int(c) for c in np.unique(lab[lab > 0], return_counts=True)[1])
+    return EdgeEvidence(modes=modes, measured_log=float(measured), n_kept=int(len(positions)),
+                        n_structures=int(np.unique(labels).size), outlines=outlines(kept_log_rho, labels),
+                        dark_side_regions=dark)

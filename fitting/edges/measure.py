@@ -31,8 +31,10 @@ from fitting.edges.ramp import (RHO_MIN, SAMPLING_BLUR_PX, RampFit, RampFits, fi
                                ramp_alpha, ramp_log_model, robust_std)
 from fitting.edges.ground_region import ground_region
 from fitting.edges.cues import (DARK_SIDE_STEP_PX, MODE_WINDOW_LOG, bluer_umbrae, dark_side_regions,
-                                  edge_structures, mode_of_log_rho, reliability, scattered_dark_sides,
-                                  textured_outlines)
+                                  edge_evidence, edge_structures, mode_of_log_rho, textured_outlines)
+from fitting.verdict.edge_rules import judge_edges, nothing_measured
+from fitting.verdict.evidence import EdgeEvidence
+from fitting.verdict.outcome import Verdict
 
 __all__ = ["EdgeMeasurement", "EdgeProfile", "RampFit", "measure_shadow_edges", "fit_edge_profile", "ramp_alpha",
            "ramp_log_model"]
@@ -140,10 +142,13 @@ class EdgeMeasurement:
     edges_found: False when no shadow edge could be measured.
     profiles: every fitted profile, kept or not (EdgeProfile).
     reason: why nothing was measured (None when edges_found).
-    warnings: one-line reasons to doubt the result (``fitting.edges.cues``):
-        edges that disagree, too few profiles, profiles scattered over
-        unrelated structures, dark sides scattered over separate dark regions.
-    reliable: False when there is any warning (the value is still given).
+    verdict: the rule book's (``fitting.verdict.edge_rules``) on ``evidence``, the
+        cues of the kept profiles (``fitting.edges.cues.edge_evidence``; None when
+        nothing was measured). Its ``warnings`` (also ``warnings`` here) are
+        one-line reasons to doubt the result: edges that disagree, too few
+        profiles, profiles scattered over unrelated structures, dark sides
+        scattered over separate dark regions; ``reliable`` is False when there
+        is any warning (the value is still given).
     """
 
     rho: float
@@ -155,8 +160,16 @@ class EdgeMeasurement:
     edges_found: bool
     profiles: list[EdgeProfile]
     reason: str | None
-    warnings: tuple[str, ...] = ()
-    reliable: bool = True
+    verdict: Verdict = dataclasses.field(default_factory=nothing_measured)
+    evidence: EdgeEvidence | None = None
+
+    @property
+    def warnings(self) -> tuple[str, ...]:
+        return self.verdict.warnings
+
+    @property
+    def reliable(self) -> bool:
+        return self.verdict.reliable
 
 
 def measure_shadow_edges(linear_gray: np.ndarray, mask: np.ndarray | None = None, pixel_m: float | None = None,
@@ -226,7 +239,7 @@ def measure_shadow_edges(linear_gray: np.ndarray, mask: np.ndarray | None = None
     profiles = _drop_textured_outlines(profiles, work.gray.shape)
     shadow_like_log_rho = np.log([p.rho for p in profiles if p.kept])
     profiles = _keep_dominant_mode(profiles)
-    dark_sides = _dark_sides_warning(img, profiles)
+    dark_sides = _dark_side_labels(img, profiles)
     profiles = [_to_full_scale(p, work) for p in profiles]
     kept = [p for p in profiles if p.kept]
     if len(kept) < MIN_PROFILES:
@@ -238,13 +251,11 @@ def measure_shadow_edges(linear_gray: np.ndarray, mask: np.ndarray | None = None
     rho = float(np.exp(np.median(log_rho)))
     rho_stderr = _block_bootstrap_median_stderr(np.exp(log_rho), positions, rng)
     q25, q50, q75 = np.percentile(widths, [25, 50, 75])
-    warnings, reliable = reliability(shadow_like_log_rho, positions, gray.shape, np.log(RHO_MIN), log_rho)
-    if dark_sides is not None:
-        warnings, reliable = [*warnings, dark_sides], False
+    evidence = edge_evidence(shadow_like_log_rho, positions, gray.shape, np.log(RHO_MIN), log_rho, dark_sides)
     return EdgeMeasurement(rho=rho, rho_stderr=rho_stderr, penumbra_px=float(q50), penumbra_px_iqr=float(q75 - q25),
                            penumbra_m=None if pixel_m is None else float(q50 * pixel_m), n_profiles=len(kept),
-                           edges_found=True, profiles=profiles, reason=None, warnings=tuple(warnings),
-                           reliable=reliable)
+                           edges_found=True, profiles=profiles, reason=None, verdict=judge_edges(evidence),
+                           evidence=evidence)
 
 
 @dataclass(frozen=True)
@@ -560,21 +571,22 @@ def _keep_dominant_mode(profiles: list[EdgeProfile]) -> list[EdgeProfile]:
     return out
 
 
-def _dark_sides_warning(img, profiles: list[EdgeProfile]) -> str | None:
-    """``scattered_dark_sides`` for the kept profiles (working-scale positions) on the working log image.
+def _dark_side_labels(img, profiles: list[EdgeProfile]) -> np.ndarray | None:
+    """``dark_side_regions`` of the kept profiles' dark sides (working-scale positions) on the working
+    log image, or None without kept profiles.
 
     Threshold: halfway in log between the kept profiles' median umbra and lit levels (the fitted model at
-    the ends of each profile). A warning rather than a drop: on the street preset and DSC_0569 the kept
-    profiles' dark sides fall in one or a few large regions, and dropping the profiles on small regions
-    would remove true shadow profiles whose umbra is cut up by texture or masks, with nothing gained for
-    the value (see docs/edge_measure.md).
+    the ends of each profile). The rule book warns on scattered dark sides rather than dropping profiles:
+    on the street preset and DSC_0569 the kept profiles' dark sides fall in one or a few large regions,
+    and dropping the profiles on small regions would remove true shadow profiles whose umbra is cut up by
+    texture or masks, with nothing gained for the value (see docs/edge_measure.md).
     """
     kept = [p for p in profiles if p.kept]
     if not kept:
         return None
     threshold = float(np.median([0.5 * (p.fitted_log[0] + p.fitted_log[-1]) for p in kept]))
     dark_uv = np.array([p.position_uv - p.normal_uv * (0.5 * p.width_px + DARK_SIDE_STEP_PX) for p in kept])
-    return scattered_dark_sides(dark_side_regions(img.log, img.valid, dark_uv, threshold))
+    return dark_side_regions(img.log, img.valid, dark_uv, threshold)
 
 
 def _with_reason(p: EdgeProfile, reason: str) -> EdgeProfile:

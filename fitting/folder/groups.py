@@ -5,16 +5,19 @@ the others."""
 from __future__ import annotations
 
 import concurrent.futures
+import datetime as _dt
+import math
 import re
 import threading
 import time as _time
 
-from scene import SceneError
+from scene import SceneError, photo_sun
 from softshadow import one_blas_thread
 
 from ..photos.grouping import PhotoGroup, group_photos
 from ..photos.views import PhotoView
 from ..report.results import GroupResult
+from ..verdict.evidence import LevelOfDetail
 from .checked import fit_checked
 from .read import FolderError
 from .resume import group_key, photo_digest
@@ -25,6 +28,19 @@ __all__ = ["fit_groups", "in_float64"]
 
 def _safe_label(label: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", label).strip("_") or "group"
+
+
+def _sun_path(scene, views: list[PhotoView]) -> tuple[float, float] | None:
+    """The sun's daily motion at the first photo's time, (d azimuth, d elevation) in degrees per
+    minute, when its sun comes from its time and the site; else None."""
+    view = views[0]
+    if view.sun_source != "time+site" or view.time is None:
+        return None
+    later = photo_sun(scene, view.name, view.time + _dt.timedelta(minutes=1))
+    if later is None:
+        return None
+    d_az = (later.azimuth_deg - view.sun_azimuth_deg + 180.0) % 360.0 - 180.0
+    return float(d_az), float(later.elevation_deg - view.sun_elevation_deg)
 
 
 def in_float64(fn, *args):
@@ -93,29 +109,30 @@ def fit_groups(photos, scene, options, half_size, progress, store, on_group, job
                 continue
             views.append(view)
         if not views:
-            result = GroupResult(group.label, group.time, group.photos,
-                                 error="no usable photo in this group (see skipped)")
+            result = GroupResult.failed(group.label, group.time, group.photos,
+                                        "no usable photo in this group (see skipped)")
         else:
             lod_start = _time.perf_counter()
             try:
                 with lod_lock:
-                    group_model, faces = lods.for_group(pose, views, options)
+                    group_model, faces, check = lods.for_group(pose, views, options)
                     sky_model = lods.sky_level(faces) if options.lod == "auto" else None
-                lod_note = None
+                level = LevelOfDetail(faces, lods.full_faces, forced=options.lod not in ("auto", "off"),
+                                      shift_k_se=check.shift_k_se if check else math.nan,
+                                      shift_rho_se=check.shift_rho_se if check else math.nan)
             except Exception as exc:  # a failed choice costs the saving, never the group
-                group_model, faces, sky_model = model, lods.full_faces, None
-                lod_note = f"level of detail not chosen ({type(exc).__name__}: {exc}); the full mesh is used"
+                group_model, sky_model = model, None
+                note = f"level of detail not chosen ({type(exc).__name__}: {exc}); the full mesh is used"
+                level = LevelOfDetail(lods.full_faces, lods.full_faces, note=note.splitlines()[0])
             lod_seconds = _time.perf_counter() - lod_start
             try:
-                result, left_out = fit_checked(group_model, pose, views, group, options, sky_model)
-                result.seconds += lod_seconds
-                result.lod_faces, result.mesh_faces = faces, lods.full_faces
-                if lod_note:
-                    result.warnings.append(lod_note.splitlines()[0])
+                result, left_out = fit_checked(group_model, pose, views, group, options, sky_model,
+                                               level_of_detail=level, sun_path=_sun_path(scene, views))
+                result = result.with_time(lod_seconds)
                 group_skipped += left_out
             except Exception as exc:  # a failed group must not lose the others
-                result = GroupResult(group.label, group.time, [v.name for v in views],
-                                     error=f"fit failed: {type(exc).__name__}: {exc}".splitlines()[0])
+                result = GroupResult.failed(group.label, group.time, [v.name for v in views],
+                                            f"fit failed: {type(exc).__name__}: {exc}".splitlines()[0])
         if store is not None:
             store.put(result, key, group_skipped, _safe_label(group.label))
         return result, group_skipped

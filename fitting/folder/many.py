@@ -34,7 +34,7 @@ from collections.abc import Callable
 from softshadow import use_compilation_cache
 
 from ..photos.read import list_photos
-from ..report.results import FitResults
+from ..report.results import FitResults, GroupResult
 from ..solve.options import FitOptions
 
 __all__ = ["SUMMARY_COLUMNS", "DONE_MARKER", "find_photo_folders", "fit_many", "folder_rows",
@@ -73,19 +73,22 @@ def _relative(folder: Path, root: Path) -> str:
 
 
 def folder_rows(folder: str, groups: list[dict]) -> list[dict]:
-    """summary.csv rows of one folder from its results.json groups."""
+    """summary.csv rows of one folder from its results.json groups, read back as results
+    (``GroupResult.from_json``): a group with an error is never reliable, even in a results.json
+    written before that was so."""
     rows = []
     for g in groups:
-        row = {c: g.get(c) for c in SUMMARY_COLUMNS if c not in ("folder", "photos", "error")}
-        row.update(folder=folder, photos=";".join(g.get("photos") or []), error=g.get("error"))
+        data = GroupResult.from_json(g).to_json()
+        row = {c: data.get(c) for c in SUMMARY_COLUMNS if c not in ("folder", "photos")}
+        row.update(folder=folder, photos=";".join(data["photos"]))
         rows.append(row)
     return rows
 
 
 def _failure_row(folder: str, reason: str) -> dict:
-    row = dict.fromkeys(SUMMARY_COLUMNS)
-    row.update(folder=folder, reliable=False, photos="", error=reason.splitlines()[0] if reason else "failed")
-    return row
+    """The row of a folder that failed as a whole: a failed group with no label."""
+    failed = GroupResult.failed(None, None, (), reason.splitlines()[0] if reason else "failed")
+    return folder_rows(folder, [failed.to_json()])[0]
 
 
 def _read_done(out_dir: Path) -> list[dict] | None:

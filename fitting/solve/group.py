@@ -31,40 +31,27 @@ from .model import (K_SCALE, FitConfig, FitParams, GroupArrays, Prediction, angu
 from .options import FitOptions
 from ..report.overlay import fitted_alpha_image
 from ..samples.receiver_light import shadow_factor
-from ..report.results import GroupResult, OverlayPlotData, ProfilePlotData
+from ..report.results import FitDiagnostics, GroupResult, OverlayPlotData, PlotData, ProfilePlotData, SunUsed
 from .saved_programs import call_saved
 from ..samples.ground import select_samples
 from ..samples.photo_samples import NoShadowInView, PhotoSamples
-from ..edges.cues import few_profiles_warning
-from .uncertainty import cluster_covariance, combine_errors, edge_clusters, range_upper_bound, resolution_warning
+from .evidence import no_ramp_k, photos_evidence
+from .uncertainty import cluster_covariance, combine_errors, edge_clusters
+from ..verdict.evidence import FitEvidence, GroupContext
+from ..verdict.rules import judge_fit
 from ..photos.views import PhotoView
 
-__all__ = ["FitOptions", "fit_group", "Solution", "Trial", "KRho", "Identifiability", "sample_views",
+__all__ = ["FitOptions", "fit_group", "Solution", "Trial", "KRho", "sample_views", "UMBRA_ALPHA",
            "initial_params", "plain_config", "start_grid", "plain_start", "choose_model", "covariance", "k_rho_with_errors",
-           "penumbra_width_px", "SampleCounts", "sample_counts", "no_ramp_bound", "identifiability",
-           "umbra_warning", "profile_plot_data"]
+           "penumbra_width_px", "SampleCounts", "sample_counts", "profile_plot_data"]
 
 #: Levenberg-Marquardt tolerances (relative, absolute) on the parameters and on each residual
 #: (residuals are relative to the lit level, whose noise is ~1e-2: 1e-4 is 1 % of it).
 LM_RTOL, LM_ATOL = 1e-4, 1e-4
 #: Singular values of J below this fraction of the largest count as zero (switched-off terms).
 COV_RCOND = 1e-6
-#: Not identifiable below this penumbra width (pixels) or above this relative error of k.
-MIN_PENUMBRA_PX, MAX_K_REL_STDERR = 0.8, 0.5
-#: Not identifiable when fewer samples than MIN_PENUMBRA_SAMPLES lie inside a fitted penumbra
-#: (|u| < 1) narrower than NARROW_PENUMBRA_PX: its width, as wide as a camera's blur spot
-#: (2 sqrt(1/12 + blur^2) = 1.6 px at 0.7 px of blur), and k then rest on a handful of pixels,
-#: where a sharper shadow under the blur or JPEG fits as well (hard-cases preset, 320x240: the sun
-#: at 5 deg read k 2.4x the truth from 16 samples of a 1.6 px penumbra, a shadow partly out of
-#: frame 2.0x from 12; groups with penumbrae of 1.3-1.95 px that measured k had 185 or more,
-#: and 26 samples of a 5.6 px penumbra measured k within 0.5 %: docs/uncertainty.md, "Counting
-#: the samples").
-MIN_PENUMBRA_SAMPLES, NARROW_PENUMBRA_PX = 40, 2.0
-#: rho is not measured when fewer samples than this lie in the fitted umbra (alpha, blur included,
-#: at least UMBRA_ALPHA): rho is the umbra's level, and without umbra pixels it comes from the
-#: penumbra's model and trades off with k (a shadow a pixel or two wide, no umbra sample, read rho
-#: 0.55 for 0.25; a long thin shadow at a low sun measured rho within 0.005 from 15).
-MIN_UMBRA_SAMPLES, UMBRA_ALPHA = 5, 0.99
+#: A sample is in the fitted umbra when its alpha (blur included) is at least this.
+UMBRA_ALPHA = 0.99
 
 
 def _group_arrays(samples: list[PhotoSamples], views: list[PhotoView]) -> GroupArrays:
@@ -383,17 +370,6 @@ def penumbra_width_px(samples: list[PhotoSamples], prediction: Prediction) -> tu
     return float(np.median(w)), float(q75 - q25)
 
 
-def no_ramp_bound(samples: list[PhotoSamples], prediction: Prediction, k: float) -> float | None:
-    """Step 5a': when no sample lies inside the fitted penumbra (|u| >= 1 everywhere), the largest k
-    the samples allow: the penumbra's half-width grows in proportion to k, so the penumbra of
-    k * min |u| would just reach the nearest sample, which shows no ramp. None when every sample
-    lies beyond the planned bands (u = +-1e6: no bound from them)."""
-    n = sum(len(s.observed) for s in samples)
-    u = np.abs(np.asarray(prediction.u, dtype=np.float64)[:n])
-    u = u[u < 1e5]
-    return float(k * u.min()) if len(u) else None
-
-
 class SampleCounts(NamedTuple):
     """How many of the fit's samples (padding left out) the fitted shadow puts inside the
     penumbra (|u| < 1) and in the umbra (alpha >= UMBRA_ALPHA, the pixel's blur included)."""
@@ -407,47 +383,6 @@ def sample_counts(samples: list[PhotoSamples], prediction: Prediction) -> Sample
     n = sum(len(s.observed) for s in samples)
     u, alpha = np.asarray(prediction.u)[:n], np.asarray(prediction.alpha)[:n]
     return SampleCounts(int(np.count_nonzero(np.abs(u) < 1)), int(np.count_nonzero(alpha >= UMBRA_ALPHA)))
-
-
-def umbra_warning(n_umbra: int) -> str | None:
-    """The warning (the group is then not reliable) for a fit with fewer than MIN_UMBRA_SAMPLES
-    samples in the fitted umbra, or None."""
-    if n_umbra >= MIN_UMBRA_SAMPLES:
-        return None
-    return (f"rho not measured: only {n_umbra} samples lie in the fitted umbra (fewer than "
-            f"{MIN_UMBRA_SAMPLES}), so rho rests on the penumbra's model")
-
-
-class Identifiability(NamedTuple):
-    """Whether k was measured; when not, range_k is an upper bound and ``warning`` says so."""
-
-    identifiable: bool
-    range_k: float
-    warning: str | None
-
-
-def identifiability(k: float, k_stderr: float, penumbra_px: float | None,
-                    bound_stderr: float | None = None, n_penumbra: int | None = None) -> Identifiability:
-    """Step 5b: k is not identifiable when the penumbra is narrower than MIN_PENUMBRA_PX
-    (or not seen), when it is narrower than NARROW_PENUMBRA_PX and fewer than
-    MIN_PENUMBRA_SAMPLES samples lie inside it (``n_penumbra``; None: not checked), or when
-    k is lost in its own noise (statistical error ``k_stderr``
-    above MAX_K_REL_STDERR of k). Then the reported range_k is an upper bound: k + 2 sigma
-    (sigma = ``bound_stderr``, the stated error with its systematic part, when given; else
-    ``k_stderr``), and at least the k whose penumbra would be one pixel wide
-    (k / penumbra_px, the width scaling with k)."""
-    resolved = penumbra_px is not None and penumbra_px >= MIN_PENUMBRA_PX
-    seen = n_penumbra is None or n_penumbra >= MIN_PENUMBRA_SAMPLES or (resolved and penumbra_px >= NARROW_PENUMBRA_PX)
-    if resolved and seen and k_stderr <= MAX_K_REL_STDERR * max(k, 1e-12):
-        return Identifiability(True, float(k), None)
-    upper = range_upper_bound(k, k_stderr, penumbra_px, bound_stderr)
-    if resolved and not seen:
-        # Blur and JPEG widen a penumbra that few pixels sample: k reads high, so it bounds k.
-        return Identifiability(False, float(upper), f"range not identifiable: only {n_penumbra} samples lie "
-                               f"inside the fitted penumbra (fewer than {MIN_PENUMBRA_SAMPLES}); range_k is "
-                               "an upper bound")
-    return Identifiability(False, float(upper), "range not identifiable: the penumbra is narrower than "
-                           "the resolution; range_k is an upper bound")
 
 
 def profile_plot_data(samples: list[PhotoSamples], prediction: Prediction, rho: float,
@@ -487,19 +422,22 @@ def _overlay(model: SoftShadowModel, pose: Pose, view: PhotoView, params: FitPar
 
 def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label: str,
               time_label: str | None, options: FitOptions | None = None,
-              sky_model: SoftShadowModel | None = None) -> GroupResult:
-    """Fit k and rho shared by ``views`` (one time of day). Never raises for bad data:
-    failures come back as a GroupResult with ``error`` set. sky_model: the mesh the hidden sky
-    is cast from (a coarse level of detail, ``fitting.solve.lod``; default ``model``)."""
+              sky_model: SoftShadowModel | None = None, *, fit_sun: bool | None = None) -> GroupResult:
+    """Fit k and rho shared by ``views`` (one time of day), judged by the rule book
+    (``fitting.verdict.rules``) on this fit alone. Never raises for bad data: failures come back as
+    a GroupResult with ``error`` set. sky_model: the mesh the hidden sky is cast from (a coarse
+    level of detail, ``fitting.solve.lod``; default ``model``). fit_sun: fit the sun's azimuth and
+    elevation with k and rho (default: when a view's sun is "fitted")."""
     options = options or FitOptions()
     start = _time.perf_counter()
-    result = GroupResult(label=label, time=time_label, photos=[v.name for v in views])
-    samples, used, result.warnings = sample_views(model, pose, views, options, sky_model)
+    names = [v.name for v in views]
+    samples, used, no_shadow = sample_views(model, pose, views, options, sky_model)
     if not samples:
-        result.error = "no shadow in view: " + "; ".join(result.warnings)
-        result.seconds = _time.perf_counter() - start
-        return result
-    fit_sun = any(v.sun_source == "fitted" for v in used)
+        return GroupResult.failed(label, time_label, names, "no shadow in view: " + "; ".join(no_shadow),
+                                  warnings=no_shadow,
+                                  diagnostics=FitDiagnostics(seconds=_time.perf_counter() - start))
+    if fit_sun is None:
+        fit_sun = any(v.sun_source == "fitted" for v in used)
     solve_start = _time.perf_counter()
     arrays = _group_arrays(samples, used)
     n_eff = sum(len(s.observed) for s in samples)
@@ -508,58 +446,48 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
     log = (lambda line: print(f"  {label}: {line}")) if options.verbose else None
     best, cov, _ = choose_model(arrays, pose, plain.params, options, fit_sun, delta, n_eff, log)
     sol, cfg = best.solution, best.config
-    result.solve_seconds = _time.perf_counter() - solve_start
+    solve_seconds = _time.perf_counter() - solve_start
     est = k_rho_with_errors(sol.params, cov)
     clusters = edge_clusters([s.profile_id for s in samples], len(sol.residuals))
     robust = k_rho_with_errors(sol.params, cluster_covariance(sol.residuals, sol.jacobian, clusters))
-    result.rho = est.rho
-    result.profile = cfg.profile
     # One number for the group: the root mean square of the photos' blurs (px).
     raw_blur = np.asarray(sol.params.raw_blur, dtype=np.float64)
-    result.blur_px = float(np.sqrt(np.mean(np.maximum(raw_blur, 0.0)))) if float(cfg.fit_blur) else None
-    result.rmse = float(np.sqrt(best.rss / n_eff))
-    result.converged = sol.converged
-    result.n_samples = n_eff
-    result.n_profiles = int(sum(s.n_profiles for s in samples))
-    errors = [v.reprojection_error_px for v in used if v.reprojection_error_px is not None]
-    result.reprojection_error_px = max(errors) if errors else None
-    d = np.asarray(sol.params.sun_delta_deg) * float(cfg.fit_sun)
-    result.sun_azimuth_deg = float(used[0].sun_azimuth_deg) + float(d[0])
-    result.sun_elevation_deg = float(used[0].sun_elevation_deg) + float(d[1])
-    result.sun_source = used[0].sun_source
-    result.penumbra_px, result.penumbra_px_iqr = penumbra_width_px(samples, sol.prediction)
+    blur_px = float(np.sqrt(np.mean(np.maximum(raw_blur, 0.0)))) if float(cfg.fit_blur) else None
+    penumbra_px, penumbra_iqr = penumbra_width_px(samples, sol.prediction)
     errors = combine_errors(est.range_k, est.rho, (est.range_stderr, est.rho_stderr),
-                            (robust.range_stderr, robust.rho_stderr), result.penumbra_px)
-    result.range_stderr, result.rho_stderr = errors.range_stderr, errors.rho_stderr
-    result.range_stderr_stat, result.rho_stderr_stat = errors.range_stderr_stat, errors.rho_stderr_stat
-    result.range_stderr_sys, result.rho_stderr_sys = errors.range_stderr_sys, errors.rho_stderr_sys
+                            (robust.range_stderr, robust.rho_stderr), penumbra_px)
     counts = sample_counts(samples, sol.prediction)
-    ident = identifiability(est.range_k, errors.range_stderr_stat, result.penumbra_px, errors.range_stderr,
-                            counts.penumbra)
-    result.identifiable, result.range_k = ident.identifiable, ident.range_k
-    if not ident.identifiable and result.penumbra_px is None:
-        # No sample inside the penumbra (the object hides it from the camera, or it is far below a
-        # pixel): k + 2 sigma bounds nothing there, since k did not move from its start.
-        bound = no_ramp_bound(samples, sol.prediction, est.range_k)
-        result.range_k = max(result.range_k, bound) if bound is not None else result.range_k
-    if ident.warning:
-        result.warnings.append(ident.warning)
-    elif resolution_warning(result.penumbra_px, result.blur_px):
-        result.warnings.append(resolution_warning(result.penumbra_px, result.blur_px))
-    if umbra_warning(counts.umbra):
-        result.warnings.append(umbra_warning(counts.umbra))
-        result.reliable = False
+    sky_hidden, sun_cos = np.asarray(arrays.sky_hidden), np.asarray(arrays.sun_cos)
+    evidence = FitEvidence(
+        k=est.range_k, rho=est.rho, k_stderr_stat=errors.range_stderr_stat, rho_stderr_stat=errors.rho_stderr_stat,
+        k_stderr_sys=errors.range_stderr_sys, rho_stderr_sys=errors.rho_stderr_sys, penumbra_px=penumbra_px,
+        blur_px=blur_px, n_in_penumbra=counts.penumbra, n_in_umbra=counts.umbra,
+        n_profiles=int(sum(s.n_profiles for s in samples)), converged=bool(sol.converged),
+        range_k_max=options.range_k_max,
+        photos=tuple(photos_evidence(samples, _photo_slices(samples), sol, est, errors, sun_cos, sky_hidden,
+                                     fit_sun=fit_sun, fit_blur=bool(float(cfg.fit_blur)))),
+        no_ramp_k=no_ramp_k(sol.prediction.u[:n_eff], est.range_k), sun_fitted=fit_sun,
+        photos_without_shadow=tuple(_split_reason(w) for w in no_shadow))
+    estimate, verdict = judge_fit(evidence, GroupContext(photos_given=len(views)))
+    plots = PlotData()
     if options.plots:
-        result.plot_profiles = profile_plot_data(samples, sol.prediction, est.rho, np.asarray(arrays.sky_hidden),
-                                                  np.asarray(arrays.sun_cos))
-        result.plot_overlays = [_overlay(model, pose, used[i], sol.params, cfg, samples[i])
-                                for i in range(len(samples))
-                                if options.overlays == "all" or (options.overlays == "first" and i == 0)]
-    if not sol.converged:
-        result.warnings.append("the solver stopped before converging")
-    if few_profiles_warning(result.n_profiles):
-        # Too little of the outline in view: one stretch of edge decides k and rho.
-        result.warnings.append(few_profiles_warning(result.n_profiles))
-        result.reliable = False
-    result.seconds = _time.perf_counter() - start
-    return result
+        plots = PlotData(
+            tuple(profile_plot_data(samples, sol.prediction, est.rho, sky_hidden, sun_cos)),
+            tuple(_overlay(model, pose, used[i], sol.params, cfg, samples[i]) for i in range(len(samples))
+                  if options.overlays == "all" or (options.overlays == "first" and i == 0)))
+    d = np.asarray(sol.params.sun_delta_deg) * float(cfg.fit_sun)
+    registration = [v.reprojection_error_px for v in used if v.reprojection_error_px is not None]
+    diagnostics = FitDiagnostics(
+        rmse=float(np.sqrt(best.rss / n_eff)), n_profiles=evidence.n_profiles, n_samples=n_eff,
+        converged=bool(sol.converged), profile=cfg.profile, blur_px=blur_px, penumbra_px=penumbra_px,
+        penumbra_px_iqr=penumbra_iqr, reprojection_error_px=max(registration) if registration else None,
+        seconds=_time.perf_counter() - start, solve_seconds=solve_seconds)
+    sun = SunUsed(float(used[0].sun_azimuth_deg) + float(d[0]), float(used[0].sun_elevation_deg) + float(d[1]),
+                  used[0].sun_source)
+    return GroupResult(label, time_label, names, verdict, estimate, sun, diagnostics, plots, evidence=evidence)
+
+
+def _split_reason(warning: str) -> tuple[str, str]:
+    """("photo", "reason") from a "photo: reason" line of ``sample_views``."""
+    photo, _, reason = warning.partition(": ")
+    return photo, reason

@@ -304,16 +304,35 @@ class LevelsOfDetail:
                   f"{tolerance:g} of their standard errors (first order, k = {reference.k_ref:.4g})")
         return LodChoice(model, faces, self.full_faces, tuple(checks[i] for i in sorted(checks)), reason)
 
-    def for_group(self, pose: Pose, views: list[PhotoView], options) -> tuple[SoftShadowModel, int]:
-        """(model, faces) for one group under ``options`` (a FitOptions: ``lod``, ``lod_tolerance``)."""
+    def for_group(self, pose: Pose, views: list[PhotoView], options
+                  ) -> tuple[SoftShadowModel, int, LevelCheck | None]:
+        """(model, faces, check) for one group under ``options`` (a FitOptions: ``lod``,
+        ``lod_tolerance``). check: for a level the user forced (a face count below the mesh's), how
+        far it moves k and rho against the full mesh (``ShadowReference.check``), which the rule book
+        judges; None otherwise."""
         lod = options.lod
         if lod == "off" or (lod == "auto" and self.full_faces <= LOD_MIN_FACES):
-            return self.full, self.full_faces
+            return self.full, self.full_faces, None
         if lod != "auto":
             faces, model = self.level(int(lod))
-            return model, faces
+            if faces >= self.full_faces:
+                return model, faces, None
+            reference = self._reference(pose, views, options)
+            check = None if reference is None else reference.check(faces, model.with_options(
+                profile=options.profiles[0]))
+            return model, faces, check
+        reference = self._reference(pose, views, options)
+        if reference is None:
+            return self.full, self.full_faces, None
+        log = (lambda line: print(f"  {line}")) if options.verbose else None
+        choice = self.choose(reference, options.lod_tolerance, options.profiles[0], log)
+        return choice.model, choice.faces, None
+
+    def _reference(self, pose: Pose, views: list[PhotoView], options) -> ShadowReference | None:
+        """The full mesh's shadow in one group's samples (``ShadowReference``), or None when there is
+        no fixed shadow to compare (the sun is fitted) or none in view (the fit says so)."""
         if any(v.sun_source == "fitted" for v in views):
-            return self.full, self.full_faces  # the sun moves during the fit: no fixed shadow to compare
+            return None  # the sun moves during the fit: no fixed shadow to compare
         from .group import initial_params
         counts = fitter_face_counts(self.full_faces)
         # The object's mask from the finest decimated level, which the choice checks first anyway.
@@ -321,13 +340,10 @@ class LevelsOfDetail:
                                        options.max_samples_per_photo, options.seed,
                                        mask_model=self.level(counts[1])[1] if len(counts) > 1 else None)
         if not samples:
-            return self.full, self.full_faces  # no shadow in view: the fit says so
+            return None
         profile = options.profiles[0]
-        reference = ShadowReference(self.full.with_options(profile=profile), pose, used, samples,
-                                    initial_params(samples)[1], options.range_k_max)
-        log = (lambda line: print(f"  {line}")) if options.verbose else None
-        choice = self.choose(reference, options.lod_tolerance, profile, log)
-        return choice.model, choice.faces
+        return ShadowReference(self.full.with_options(profile=profile), pose, used, samples,
+                               initial_params(samples)[1], options.range_k_max)
 
 
 #: Meshes whose levels are kept between fits (``levels_of_detail``), most recent last.

@@ -35,7 +35,7 @@ import numpy as np
 
 __all__ = ["SystematicFloor", "CALIBRATED_FLOOR", "Uncertainty", "edge_clusters", "cluster_covariance",
            "systematic_errors", "combine_errors", "CLUSTERS_PER_PHOTO", "EdgeFloor", "CALIBRATED_EDGE_FLOOR",
-           "profile_spread", "edge_rho_errors", "resolution_warning", "RESOLVED_BLUR_WIDTHS", "range_upper_bound"]
+           "profile_spread", "edge_rho_errors"]
 
 #: Stretches of edge per photo for the cluster-robust covariance: few enough that one
 #: stretch spans the residuals' correlation along the edge, enough for a stable sum.
@@ -59,38 +59,6 @@ class SystematicFloor(NamedTuple):
 #: Calibrated on held-out physical data_synth folders (see docs/uncertainty.md: the
 #: calibration seeds are never the coverage seeds).
 CALIBRATED_FLOOR = SystematicFloor(k_rel=0.08, k_rel_px=0.06, rho_abs=0.002, rho_rel=0.0)
-
-
-#: A penumbra narrower than this many standard deviations of the pixel's area plus the camera's
-#: blur (the blur spot, sqrt(1/12 + blur^2) px) is not resolved by the photo: its width then comes
-#: from the difference between the edge's spread and the fitted blur, so k rests on the blur model.
-RESOLVED_BLUR_WIDTHS = 2.0
-
-
-def range_upper_bound(k: float, k_stderr: float, penumbra_px: float | None,
-                      bound_stderr: float | None = None) -> float:
-    """The range_k reported when k is not identifiable: k + 2 sigma (sigma = ``bound_stderr``, the
-    stated error with its systematic part, when given and larger; else the statistical
-    ``k_stderr``), and at least the k whose penumbra would be one pixel wide (k / penumbra_px,
-    the width scaling with k)."""
-    upper = k + 2.0 * (k_stderr if bound_stderr is None else max(k_stderr, bound_stderr))
-    if penumbra_px:
-        upper = max(upper, k / max(penumbra_px, 1e-9))
-    return float(upper)
-
-
-def resolution_warning(penumbra_px: float | None, blur_px: float | None) -> str | None:
-    """The one-line warning for a penumbra (median width, image pixels) under the photo's blur
-    spot (RESOLVED_BLUR_WIDTHS standard deviations of the pixel's area plus the camera blur
-    ``blur_px``, None: none fitted), or None. Measured on physical 400x300 folders (penumbrae of
-    1.1-1.6 px under 0.6-0.9 px of blur): k errors of -14 % to +13 %, within the stated error."""
-    if penumbra_px is None or not np.isfinite(penumbra_px):
-        return None
-    spot = RESOLVED_BLUR_WIDTHS * float(np.sqrt(1.0 / 12.0 + float(blur_px or 0.0) ** 2))
-    if penumbra_px >= spot:
-        return None
-    return (f"penumbra {penumbra_px:.2g} px wide, under the photo's blur spot ({spot:.2g} px): k rests on "
-            "the blur model; photograph closer or at full size")
 
 
 class Uncertainty(NamedTuple):
@@ -149,7 +117,7 @@ def systematic_errors(k: float, rho: float, penumbra_px: float | None,
                       floor: SystematicFloor = CALIBRATED_FLOOR) -> tuple[float, float]:
     """The systematic one-sigma errors (of k, of rho) of ``floor`` at a fitted k, rho and
     penumbra width in pixels (None or below 0.5 px counts as 0.5 px: the resolution then
-    decides k, which ``solve.identifiability`` reports as an upper bound anyway)."""
+    decides k, which the rule book, ``fitting.verdict.rules``, reports as an upper bound anyway)."""
     px = max(float(penumbra_px), 0.5) if penumbra_px else 0.5
     k_rel = float(np.hypot(floor.k_rel, floor.k_rel_px / px))
     return abs(float(k)) * k_rel, float(np.hypot(floor.rho_abs, floor.rho_rel * float(rho)))
