@@ -140,6 +140,7 @@ def study_record(seed: int, index: int, root, prior=None, meshes=None, render_qu
     record["seconds_fit"] = round(time.perf_counter() - t1, 1)
     record["load_average"] = load_average()
     record["finished_utc"] = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
+    record["commit"] = _commit()
     return record
 
 
