@@ -194,8 +194,8 @@ def write_coverage_report(result: dict, md_path: Path, json_name: str | None = N
           "- photos: 1-6 per group, 20-90 s apart; a pixel count log-uniform from 320x240 to 4000x3000 (4:3). "
           "Render cost is capped at 24 megapixels per group: a draw with more photos than that allows keeps "
           "24 MP / (its pixels) of them (a 4000x3000 group has one or two photos);",
-          "- views: handheld across the shadow (facing the lit side of steps or a wall), a fifth of the photos "
-          "on the ground top-down maps;",
+          "- views: handheld across the shadow (35-145 deg off its direction) or facing the lit side of steps "
+          "or a wall (40-75 deg off the sun's azimuth), a fifth of the photos on the ground top-down maps;",
           "- camera: optical blur 0.3-1.3 px per photo, 3,000-40,000 electrons at full scale (log-uniform) and "
           "2-10 e- read noise, vignetting 0-0.35, lit white at 0.45-0.85 of full scale, exposure differences "
           "between photos (log gain normal, sigma 0-0.25), JPEG quality 65-98 or (a tenth) 16-bit PNG;",

@@ -24,8 +24,9 @@ The prior (``ScenePrior``, every range in its fields):
 - photos: 1-6 per group, 20-90 s apart; image size with a log-uniform pixel count
   from 320x240 to 4000x3000 (4:3); render cost capped by at most 24 megapixels per
   group (fewer photos of a large size: a 4000x3000 group has one or two);
-  handheld views across the shadow (or facing a mesh receiver's lit side), a fifth of
-  them top-down maps on the plane;
+  handheld views across the shadow (35-145 deg off its direction) or facing a mesh
+  receiver's lit side (40-75 deg off the sun's azimuth), a fifth of them top-down maps
+  on the plane;
 - camera: optical blur 0.3-1.3 px per photo, shot noise with 3,000-40,000 electrons at
   full scale (log-uniform) and 2-10 e- read noise, vignetting 0-0.35, lit white at
   0.45-0.85 of full scale with exposures that differ between photos (log-normal,
@@ -307,7 +308,9 @@ def draw_parameters(rng: np.random.Generator, prior: ScenePrior = ScenePrior(),
             seconds += float(rng.uniform(*prior.photo_spacing_s))
         side = 1.0 if rng.uniform() < 0.5 else -1.0
         if shape in ("steps", "wall"):
-            bearing = along_az + side * float(rng.uniform(125.0, 160.0))
+            # Facing the lit risers or wall, 40-75 deg off the sun's azimuth: nearer the sun's
+            # direction a bulky object hides its own shadow.
+            bearing = along_az + side * float(rng.uniform(105.0, 140.0))
         else:
             bearing = along_az + side * (90.0 + float(rng.uniform(-55.0, 55.0)))
         topdown = shape == "plane" and rng.uniform() < prior.topdown_share
