@@ -35,7 +35,7 @@ def _use_compilation_cache() -> None:
 
 
 def _fail(command: str, message: str, code: int = 1) -> int:
-    print(f"softshadow {command}: {message}", file=sys.stderr)
+    print(f"softshadow {command}: {message}" if command else f"softshadow: {message}", file=sys.stderr)
     return code
 
 
@@ -98,14 +98,20 @@ def _run_render(args) -> int:
     import numpy as np
 
     from .render_command import render_scene_file
+    from .validate import OptionError
     try:
         image, shading = render_scene_file(args)
+    except OptionError as exc:
+        return _fail("render", str(exc).splitlines()[0], 2)
     except (ValueError, OSError) as exc:
         return _fail("render", str(exc).splitlines()[0])
     from PIL import Image
-    Image.fromarray(image).save(args.out)
-    if args.npy:
-        np.save(args.npy, shading)
+    try:
+        Image.fromarray(image).save(args.out)
+        if args.npy:
+            np.save(args.npy, shading)
+    except (ValueError, OSError) as exc:
+        return _fail("render", f"cannot write the image: {exc}".splitlines()[0])
     print(f"wrote {args.out}" + (f" and {args.npy}" if args.npy else ""))
     return 0
 
@@ -137,14 +143,14 @@ def _add_fit(sub):
     p.add_argument("--half-size", action="store_true", help="decode RAW at half size (faster)")
     p.add_argument("--no-plots", dest="plots", action="store_false",
                    help="write results.json and the tables only (no plots, no index.html figures)")
-    p.add_argument("--overlays", default="first", choices=("first", "all"),
+    p.add_argument("--overlays", default=None, choices=("first", "all"),
                    help="overlay plots of the fitted shadow for the first photo of each group "
                         "(default) or for every photo")
     p.add_argument("--lod", default="auto", type=_lod_value, metavar="auto|off|FACES",
                    help="level of detail of the object's mesh: auto (default: the coarsest level that "
                         "moves k and rho by at most --lod-tolerance of their standard errors), off "
                         "(the mesh as given), or a face count to decimate to")
-    p.add_argument("--lod-tolerance", type=float, default=0.1, metavar="SE",
+    p.add_argument("--lod-tolerance", type=float, default=None, metavar="SE",
                    help="with --lod auto: the largest shift of k or rho allowed, in their stated "
                         "standard errors, systematic part included (default 0.1)")
     p.set_defaults(func=_run_fit)
@@ -276,24 +282,55 @@ def build_parser(with_synth_arguments: bool = True) -> argparse.ArgumentParser:
     return parser
 
 
+def _option_problem(args) -> str | None:
+    """One line on the first option of ``args`` that cannot be used (softshadow_cli.validate)."""
+    from .validate import option_problem
+    return option_problem(args)
+
+
 def main(argv=None) -> int:
-    argv = sys.argv[1:] if argv is None else list(argv)
-    parser = build_parser(with_synth_arguments="synth" in argv)
-    args = parser.parse_args(argv)
+    code = _main(sys.argv[1:] if argv is None else list(argv))
+    if code == 130:
+        from .interrupts import quiet_after_interrupt
+        quiet_after_interrupt()
+    return code
+
+
+def _main(argv: list[str]) -> int:
+    from .interrupts import ctrl_c_never_swallowed, ctrl_c_pressed
+    # The command's name for a message before the arguments are parsed (a Ctrl-C during imports).
+    command = next((a for a in argv if a in ("render", "fit", "synth", "demo", "board", "bench")), "")
+    args = code = None
     try:
-        _use_compilation_cache()
-        from softshadow import one_blas_thread
-        from .interrupts import ctrl_c_never_swallowed
-        with ctrl_c_never_swallowed(), one_blas_thread():
-            return int(args.func(args) or 0)
+        # From the first import on: a Ctrl-C that lands inside an extension module's
+        # initialisation (jaxlib) must not abort the process.
+        with ctrl_c_never_swallowed():
+            args = build_parser(with_synth_arguments="synth" in argv).parse_args(argv)
+            problem = _option_problem(args)
+            if problem:  # before any work
+                return _fail(command, problem, 2)
+            _use_compilation_cache()
+            from softshadow import one_blas_thread
+            with one_blas_thread():
+                code = int(args.func(args) or 0)
+        if ctrl_c_pressed() and code != 130:
+            # A Ctrl-C a library swallowed, pressed too late to stop the work it was meant to stop.
+            return _fail(command, "interrupted (the command had finished its work)", 130)
+        return code
     except KeyboardInterrupt:
-        return _fail(args.command, "interrupted", 130)
+        if code == 130:  # delivered again while the command, interrupted, was ending: said already
+            return 130
+        if code is not None:
+            return _fail(command, "interrupted (the command had finished its work)", 130)
+        return _fail(command, "interrupted", 130)
     except Exception as exc:
+        if ctrl_c_pressed():  # a library turned the KeyboardInterrupt into another exception
+            return _fail(command, "interrupted", 130)
         # A bug or an unforeseen input: one line for the user, the traceback with --verbose.
         if getattr(args, "verbose", False):
             raise
         first = (str(exc).splitlines() or [""])[0]
-        return _fail(args.command, f"unexpected error: {type(exc).__name__}: {first}"
+        return _fail(command, f"unexpected error: {type(exc).__name__}: {first}"
                      + (" (--verbose shows the traceback)" if hasattr(args, "verbose") else ""))
 
 

@@ -12,6 +12,8 @@ from softshadow import (GroundGrid, PinholeCamera, Pose, Projector, SceneLights,
     Sun, linear_to_srgb, load_mesh, look_at_camera, paper_to_range_k, paper_to_rho, render_scene, slide_from_text)
 from softshadow.internal import PosedOccluder, Surface, posed_vertices
 
+from .validate import OptionError
+
 __all__ = ["render_scene_file", "shading_to_srgb8", "draw_outlines", "DEFAULT_VIEW"]
 
 PAPER_ALBEDO = 0.85  # white paper, for display
@@ -43,6 +45,12 @@ def draw_outlines(image: np.ndarray, alpha: np.ndarray) -> np.ndarray:
 def render_scene_file(args):
     """(sRGB image (H, W, 3) uint8, linear shading (H, W)) for the render command's arguments."""
     scene = load_scene(args.scene)
+    if args.photo is not None and args.photo not in scene.photos:
+        import difflib
+        near = difflib.get_close_matches(args.photo, list(scene.photos), n=1)
+        raise OptionError(f"--photo {args.photo!r} is not a [photos] entry of {args.scene}"
+                          + (f"; did you mean {near[0]!r}?" if near else
+                             f" (its entries: {', '.join(scene.photos) or 'none'})"))
     if scene.object is None:
         raise ValueError(f"{args.scene} has no [object]")
     model = SoftShadowModel.from_mesh(load_mesh(scene.object.mesh, scene.base_dir), args.rule,

@@ -1,4 +1,4 @@
-"""A fresh process loads only what its path needs (docs/performance.md).
+"""A fresh process loads only what its path needs (docs/fitting.md, start-up and caches).
 
 JAX, equinox, optimistix and trimesh take seconds to import. ``softshadow`` and ``fitting``
 import their modules on first use (``lazy_loader``), so ``softshadow --help`` and the fit of

@@ -11,8 +11,8 @@ TRUTH = {"groups": [{"label": "09:20", "photos": ["a.jpg"], "range_k": 0.0056, "
 
 
 def _g(label, photo, k, k_err, rho, rho_err, **kw):
-    return GroupResult(label, label, [photo], range_k=k, range_stderr=k_err, rho=rho, rho_stderr=rho_err,
-                       converged=True, **kw)
+    return GroupResult.from_json(dict(label=label, time=label, photos=[photo], range_k=k, range_stderr=k_err, rho=rho,
+                                      rho_stderr=rho_err, converged=True, **kw))
 
 
 def test_verdict_counts_groups_within_two_stated_errors():
@@ -26,6 +26,6 @@ def test_verdict_counts_groups_within_two_stated_errors():
 
 def test_verdict_names_a_bound_under_the_truth_and_a_failed_group():
     results = FitResults([_g("09:21", "a.jpg", 0.0040, 0.0004, 0.157, 0.004, identifiable=False),
-                          GroupResult("13:22", "13:22", ["b.jpg"], error="no shadow in view")], [], {})
+                          GroupResult.failed("13:22", "13:22", ["b.jpg"], "no shadow in view")], [], {})
     line = demo_verdict(results, TRUTH)
     assert "in 0 of 2 groups" in line and "bound 0.004 under the truth" in line and "not fitted" in line

@@ -3,25 +3,28 @@ and OUT_DIR/index.html with the table, the verdicts, the warnings and every plot
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from fitting import FitResults, GroupResult
 from fitting.report import plots
-from fitting.report.results import OverlayPlotData, ProfilePlotData
+from fitting.report.results import OverlayPlotData, PlotData, ProfilePlotData
 from fitting.report.write import PAPER_TABLE2, write_report
 
 
 def _group(label="09:20", time="09:20", **kw) -> GroupResult:
-    g = GroupResult(label, time, ["IMG_0001.jpg", "IMG_0002.jpg"], range_k=0.0056, range_stderr=0.0005, rho=0.157,
-                    rho_stderr=0.004, sun_azimuth_deg=120.0, sun_elevation_deg=45.0, converged=True, **kw)
+    g = GroupResult.from_json(dict(label=label, time=time, photos=["IMG_0001.jpg", "IMG_0002.jpg"], range_k=0.0056,
+                                   range_stderr=0.0005, rho=0.157, rho_stderr=0.004, sun_azimuth_deg=120.0,
+                                   sun_elevation_deg=45.0, converged=True, **kw))
     d = np.linspace(-8, 8, 200)
-    g.plot_profiles = [ProfilePlotData("IMG_0001.jpg", d, np.clip(0.5 + d / 8, 0.16, 1), np.clip(0.5 + d / 8, 0.16, 1),
-                                       np.repeat(np.arange(10), 20))]
+    profiles = (ProfilePlotData("IMG_0001.jpg", d, np.clip(0.5 + d / 8, 0.16, 1), np.clip(0.5 + d / 8, 0.16, 1),
+                                np.repeat(np.arange(10), 20)),)
     small = np.random.default_rng(0).random((240, 320))
     alpha = np.where(np.arange(320)[None, :] < 160, 1.0, 0.0) * np.ones((240, 1))
-    g.plot_overlays = [OverlayPlotData("IMG_0001.jpg", small, alpha, np.array([[600.0, 470.0], [10.0, 5.0]]),
-                                       photo_shape=(480, 640))]
-    return g
+    overlays = (OverlayPlotData("IMG_0001.jpg", small, alpha, np.array([[600.0, 470.0], [10.0, 5.0]]),
+                                photo_shape=(480, 640)),)
+    return dataclasses.replace(g, plots=PlotData(profiles, overlays))
 
 
 def test_overlay_axes_are_the_photo_pixels_for_a_downsampled_copy():
@@ -41,7 +44,7 @@ def test_overlay_of_a_full_size_image():
 
 
 def test_report_writes_index_html_vector_plots_and_the_paper_on_its_own_axis(tmp_path):
-    bad = GroupResult("13:21", "13:21", ["IMG_0003.jpg"], error="no shadow in view")
+    bad = GroupResult.failed("13:21", "13:21", ["IMG_0003.jpg"], "no shadow in view")
     flagged = _group("16:21", "16:21", warnings=["the umbra is not one level"], reliable=False)
     results = FitResults([_group(), bad, flagged], [{"photo": "x.txt", "reason": "not an image"}], {"softshadow": "0"})
     written = write_report(results, tmp_path, reference=PAPER_TABLE2)

@@ -2,8 +2,8 @@
 (the truth within two stated errors; an upper bound at or above it) or flagged with a warning that
 names the likely cause (``fitting.verdict.rules``).
 
-Physical table2 folders (fast render quality) at 640x480 (seed 53) and 400x300 (seed 0, the demo's),
-and the dragon at 400x300; each case fits only the groups it needs.
+Physical table2 folders at 640x480 (seed 53) and 400x300 (seed 0, the demo's), rendered at the default
+quality as the cases were found, and the dragon at 400x300; each case fits only the groups it needs.
 """
 
 from __future__ import annotations
@@ -16,13 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-FAST = dict(sun_samples=16, sky_samples=256, sky_fine_nodes=48, object_sky_samples=16)
-
-
 def _synth(root: Path, preset: str, seed: int, size) -> Path:
-    from data_synth import RenderQuality, synthesize
-    return synthesize(root / f"{preset}-{seed}-{size[0]}", preset, seed=seed, size=size, progress=False,
-                      render_quality=RenderQuality(**FAST))
+    from data_synth import synthesize
+    return synthesize(root / f"{preset}-{seed}-{size[0]}", preset, seed=seed, size=size, progress=False)
 
 
 @pytest.fixture(scope="module")
@@ -158,3 +154,26 @@ def test_a_forced_level_of_detail_on_the_dragon_is_flagged(tmp_path):
     (g,) = _fit(folder, lod=1000).groups
     assert g.lod_faces is not None and g.lod_faces < g.mesh_faces
     _right_or_flagged(g, _truth(folder)["10"], "level of detail")
+
+
+def test_a_free_sun_that_wanders_below_the_horizon_is_a_clear_error(monkeypatch):
+    """A fitted sun whose refit goes below the horizon (a misdescribed scene with no site) ends as the
+    group's error saying so, not as the exception's text."""
+    import types
+
+    import fitting.folder.checked as checked
+    import fitting.solve.group as solve
+    from fitting import FitOptions, PhotoGroup
+    from softshadow import SunBelowHorizonError
+
+    def fit_group(model, pose, views, label, time, options, *more, **kw):
+        raise SunBelowHorizonError("sun elevation -1.65 deg is at or below the horizon (minimum 0.5 deg)")
+    import fitting.photos.sun_search as sun_search
+    monkeypatch.setattr(solve, "fit_group", fit_group)
+    monkeypatch.setattr(sun_search, "search_sun", lambda *a: (333.0, 1.0, None))
+    views = [types.SimpleNamespace(name="a.jpg", sun_source="fitted", sun_azimuth_deg=None,
+                                   sun_elevation_deg=None, time=None)]
+    result, left_out = checked.fit_checked(None, None, views, PhotoGroup("10:30", "10:30", ["a.jpg"]),
+                                           FitOptions(plots=False), sun_path=None)
+    assert result.error.startswith("no sun fits the shadows: the sun fitted from them went below the horizon")
+    assert not result.reliable and not result.identifiable and left_out == []

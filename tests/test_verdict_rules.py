@@ -11,14 +11,14 @@ import pytest
 
 from fitting.verdict import edge_rules, rules
 from fitting.verdict.evidence import (EdgeEvidence, FitEvidence, GroupContext, LevelOfDetail, PhotoEvidence,
-                                      SunCheck)
+                                      SunCheck, SunFree)
 
 
 def _photo(name="a.jpg", **kw) -> PhotoEvidence:
     """A photo that fits well (the numbers of a table2 photo at 640x480)."""
     base = dict(photo=name, n_samples=1300, n_lit=780, n_umbra=300, n_penumbra=80, rms=0.02, rms_lit=0.023,
-                rms_umbra=0.005, rms_penumbra=0.02, noise_lit=0.022, noise_umbra=0.004, offset_lit=0.0,
-                offset_umbra=-0.001, misfit=0.9, shadow_depth=0.84, predicted_depth=0.84, k=0.0057,
+                rms_umbra=0.005, rms_penumbra=0.02, noise_lit=0.022, noise_umbra=0.004, misfit=0.9,
+                shadow_depth=0.84, predicted_depth=0.84, k=0.0057,
                 k_stderr=0.0002, rho=0.159, rho_stderr=0.001)
     base.update(kw)
     return PhotoEvidence(**base)
@@ -84,11 +84,15 @@ def test_a_photo_without_the_shadow_the_others_show_is_left_out_even_among_two()
         assert name == "cap.jpg" and reason.startswith("no shadow edge where the model puts one")
 
 
-def test_a_photo_that_shows_none_of_the_shadow_is_left_out():
-    blind = _photo("blind.jpg", n_umbra=4, n_penumbra=0, shadow_depth=math.nan)
-    name, reason = rules.photo_to_leave_out(_fit([_photo("a.jpg"), blind, _photo("b.jpg")]),
-                                            GroupContext(photos_given=3))
-    assert name == "blind.jpg" and reason.startswith("shows none of the shadow")
+def test_a_photo_that_shows_none_of_the_shadow_is_kept_but_counted():
+    blind = [_photo("blind.jpg", n_umbra=4, n_penumbra=0, shadow_depth=math.nan),
+             _photo("dim.jpg", n_umbra=1, n_penumbra=7, shadow_depth=math.nan)]
+    fit = _fit([_photo("a.jpg")] + blind)
+    assert rules.photo_to_leave_out(fit, GroupContext(photos_given=3)) is None
+    _, verdict = rules.judge_fit(fit, GroupContext(photos_given=3))
+    assert not verdict.reliable and any(w.startswith("only 1 of the group's 3 photos measured the shadow")
+                                        for w in verdict.warnings)
+    assert rules.judge_fit(_fit([_photo("a.jpg"), _photo("b.jpg"), blind[0]]), GroupContext(3))[1].reliable
 
 
 def test_a_photo_that_misfits_alone_is_left_out_but_not_when_every_photo_misfits():
@@ -181,6 +185,20 @@ def test_k_beyond_the_band_is_the_clock_when_the_sun_explains_it_else_raise_the_
     assert not verdict.identifiable and any("beyond range_k_max" in w and "likely the clock" in w
                                             for w in verdict.warnings)
     assert not any("raise --range-k-max" in w for w in verdict.warnings)
+
+
+def test_shadows_that_fit_another_sun_flag_the_group_with_the_cause():
+    """A clock 7 minutes off on a rising bank: every photo fits (misfit 1.2-1.4, texture hides it), but
+    the solve with the sun free moves the sun 1 deg; described right, it moves at most 0.12 deg."""
+    still = _fit(sun_free=SunFree(0.02, -0.03, 0.0057, elevation_deg=52.0))
+    assert not rules.wants_sun_check(still) and rules.judge_fit(still, GroupContext(3))[1].reliable
+    moved = _fit(k=0.027, sun_free=SunFree(-1.0, 0.76, 0.023, elevation_deg=52.3))
+    assert rules.wants_sun_check(moved) and rules.sun_moves(moved) == pytest.approx(1.0, abs=0.05)
+    clock = SunCheck(-1.7, 1.4, 1.3, 1.2, 0.012, elevation_deg=52.3, path_deg_per_min=(-0.21, 0.17))
+    estimate, verdict = rules.judge_fit(moved, GroupContext(3, sun_check=clock))
+    assert not verdict.reliable and not verdict.identifiable and estimate.range_k > 0.027
+    text = " ".join(verdict.warnings)
+    assert "the shadows fit a sun 1.0 deg from the scene's" in text and "likely the clock" in text
 
 
 def test_a_refit_that_leaves_k_beyond_the_band_does_not_explain_it():

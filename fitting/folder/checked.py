@@ -7,6 +7,8 @@ from __future__ import annotations
 import dataclasses
 import time as _time
 
+from softshadow import SunBelowHorizonError
+
 from ..photos.grouping import PhotoGroup
 from ..photos.views import PhotoView
 from ..report.results import GroupResult
@@ -42,7 +44,13 @@ def _fit_group_with_sun(model, pose, views, group: PhotoGroup, options: FitOptio
     # samples' band is planned around the sun it starts from (a table2 sun searched 5 deg high took
     # 7 re-plans to settle; stopped after 3, it read k 1.7 times the truth).
     for _ in range(replans):
-        result = fit_group(model, pose, views, group.label, group.time, options, sky_model, fit_sun=True)
+        try:
+            result = fit_group(model, pose, views, group.label, group.time, options, sky_model, fit_sun=True)
+        except SunBelowHorizonError as exc:
+            # The free sun wandered below the horizon: no sun casts these shadows from this scene.
+            return GroupResult.failed(group.label, group.time, [v.name for v in views], (
+                f"no sun fits the shadows: the sun fitted from them went below the horizon "
+                f"({str(exc).splitlines()[0]}); check the object and the cameras in scene.toml")), None
         if not result.fitted:
             return result, None
         moved = abs(result.sun_azimuth_deg - views[0].sun_azimuth_deg) + abs(

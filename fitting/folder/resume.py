@@ -3,11 +3,13 @@ them has changed.
 
 A group's record is reused when its **key** matches: a SHA-256 over the group's photos (names
 and file contents), the whole scene (scene.toml as read, plus the contents of every file it
-names: meshes, range images, ignore masks; and a photo's ``<stem>.ignore.png``), the fit options that change a result, how photos are decoded (``half_size``) and the
-versions of softshadow, JAX and optimistix. Replacing a photo by another file of the same
-name, editing scene.toml, changing ``--profile`` or upgrading the software therefore refits
-the group instead of reporting stale values. Records are written atomically (a temporary file,
-then ``os.replace``), so an interruption leaves whole records only.
+names: meshes, range images, ignore masks; and a photo's ``<stem>.ignore.png``), the fit
+options that change a result, how photos are decoded (``half_size``) and the versions of
+softshadow, JAX and optimistix. Replacing a photo by another file of the same name, editing
+scene.toml, changing ``--profile`` or upgrading the software therefore refits the group
+instead of reporting stale values. ``folder_key`` is the same key over a whole folder:
+``fit_many`` reuses a finished folder only while it matches. Records are written atomically
+(a temporary file, then ``os.replace``), so an interruption leaves whole records only.
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ from scene import SceneSpec, scene_to_dict
 from ..report.files import atomic_writer
 from ..report.results import GroupResult
 
-__all__ = ["photo_digest", "group_key", "GroupStore", "RESULT_OPTIONS"]
+__all__ = ["photo_digest", "photo_file_digest", "group_key", "folder_key", "GroupStore", "RESULT_OPTIONS"]
 
 #: FitOptions fields that change a group's numbers (plots, overlays and verbosity do not).
 RESULT_OPTIONS = ("profiles", "blur", "rule", "range_k_max", "max_samples_per_photo", "robust",
@@ -34,14 +36,20 @@ def _file_sha256(path: Path) -> str:
         return hashlib.file_digest(fh, "sha256").hexdigest()
 
 
+def photo_file_digest(path) -> str:
+    """SHA-256 of a photo file and of the ignore mask beside it (``<stem>.ignore.png``)."""
+    path = Path(path)
+    digest = _file_sha256(path)
+    beside = path.with_name(path.stem + ".ignore.png")
+    return digest + (":" + _file_sha256(beside) if beside.is_file() else "")
+
+
 def photo_digest(photo) -> str:
     """SHA-256 of a photo's file (``Photo.path``) and of the ignore mask beside it, or of its
     decoded pixels when it has no file."""
     path = getattr(photo, "path", None)
     if path is not None and Path(path).is_file():
-        digest = _file_sha256(Path(path))
-        beside = Path(path).with_name(Path(path).stem + ".ignore.png")
-        return digest + (":" + _file_sha256(beside) if beside.is_file() else "")
+        return photo_file_digest(path)
     return hashlib.sha256(photo.linear.tobytes()).hexdigest()
 
 
@@ -70,11 +78,38 @@ def group_key(photo_digests: dict[str, str], scene: SceneSpec | None, options, s
               extra: dict | None = None) -> str:
     """The resume key of one group: photo name -> digest (its photos), the scene, the options
     (``RESULT_OPTIONS`` of a FitOptions), software versions and anything else in ``extra``."""
+    return _key(photo_digests, _scene_part(scene), options, software, extra)
+
+
+def _key(photo_digests: dict[str, str], scene_part: dict, options, software: dict, extra: dict | None) -> str:
     opts = {k: getattr(options, k) for k in RESULT_OPTIONS if hasattr(options, k)}
-    doc = {"photos": sorted(photo_digests.items()), "scene": _scene_part(scene), "options": opts,
+    doc = {"photos": sorted(photo_digests.items()), "scene": scene_part, "options": opts,
            "software": {k: software.get(k) for k in ("softshadow", "jax", "optimistix")},
            "extra": extra or {}}
     return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def folder_key(folder, options, software: dict, half_size: bool = False) -> str:
+    """The resume key of a whole folder (``fit_many``): the same parts as its groups' keys
+    (``group_key``): every photo's contents and the ignore mask beside it, the scene (scene.toml
+    as read, with the contents of every file it names), the options, ``half_size`` and the
+    software. A scene.toml that cannot be read enters with its bytes (the folder then fails
+    and is never marked done)."""
+    from scene import SceneError, load_scene
+
+    from ..photos.read import list_photos
+    folder = Path(folder)
+    photos, _ = list_photos(folder)
+    digests = {p.name: photo_file_digest(p) for p in photos}
+    scene_file = folder / "scene.toml"
+    if scene_file.is_file():
+        try:
+            scene_part = _scene_part(load_scene(scene_file))
+        except (SceneError, OSError):
+            scene_part = {"_unreadable_sha256": _file_sha256(scene_file)}
+    else:
+        scene_part = {}
+    return _key(digests, scene_part, options, software, {"half_size": half_size, "folder": True})
 
 
 @dataclasses.dataclass

@@ -69,6 +69,9 @@ class Photo:
     exif: EXIF tags by name (see ``fitting.photos.exif.read_exif``), empty when there are none.
     saturated: (H, W) bool, any channel at the encoding's maximum code value.
     ignore: (H, W) bool from the user's ignore mask (``fitting.photos.ignore_masks``), or None.
+    decimation: pixels of the file per pixel of ``linear`` along each axis: 2 for a half-size
+        read (pixel i covers the file's pixels 2i and 2i + 1), else 1. A camera given for the
+        file's size is scaled by it (``fitting.folder.views.camera_view``).
     """
 
     name: str
@@ -80,6 +83,7 @@ class Photo:
     exif: dict
     saturated: np.ndarray
     ignore: np.ndarray | None = None
+    decimation: int = 1
 
     @property
     def excluded(self) -> np.ndarray:
@@ -273,8 +277,8 @@ def read_photo(path, half_size: bool = False, assume_16bit: str = "linear") -> P
 
     path: an image file (``IMAGE_EXTENSIONS`` or ``RAW_EXTENSIONS``).
     half_size: halve the resolution (RAW: LibRaw's half-size decode; other files:
-        a 2x2 mean in linear units, the saturation mask or-ed over the 2x2 block).
-        A camera's K must then be scaled with ``PinholeCamera.with_size``.
+        a 2x2 mean in linear units, the saturation mask or-ed over the 2x2 block); the
+        photo's ``decimation`` is then 2, by which a camera given for the file is scaled.
     assume_16bit: "linear" (the documented default) or "srgb" for 16-bit PNG/TIFF.
     Raises PhotoError with a one-line reason naming the file.
     """
@@ -346,7 +350,8 @@ def read_photo(path, half_size: bool = False, assume_16bit: str = "linear") -> P
         saturated = s[0::2, 0::2] | s[1::2, 0::2] | s[0::2, 1::2] | s[1::2, 1::2]
     return Photo(name=path.name, path=path, linear=np.ascontiguousarray(lin, dtype=np.float32),
                  gray=np.ascontiguousarray(gray, dtype=np.float32), encoding=encoding,
-                 bit_depth=bit_depth, exif=exif, saturated=np.ascontiguousarray(saturated))
+                 bit_depth=bit_depth, exif=exif, saturated=np.ascontiguousarray(saturated),
+                 decimation=2 if half_size else 1)
 
 
 def list_photos(folder) -> tuple[list[Path], list[tuple[str, str]]]:

@@ -52,7 +52,7 @@ REPORT_FILES = ("results.json", "table2.md", "table2.csv", "index.html")
 
 
 def clear_report(out_dir) -> None:
-    """Remove a previous run's report (REPORT_FILES and plots/*.png) from OUT_DIR, so that a
+    """Remove a previous run's report (REPORT_FILES and the plots' PNG and SVG files) from OUT_DIR, so that a
     refit that stops half-way never leaves old results beside new groups."""
     out_dir = Path(out_dir)
     for name in REPORT_FILES:

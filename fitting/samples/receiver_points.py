@@ -72,10 +72,67 @@ def read_depth(path, shape: tuple[int, int]) -> np.ndarray:
     if depth.shape != (h, w):
         raise ReceiverError(f"range image {path.name} is {depth.shape[1]}x{depth.shape[0]}, "
                             f"the photo {w}x{h}: they must match")
+    negative = np.isfinite(depth) & (depth < 0)
+    if negative.any():
+        raise ReceiverError(f"range image {path.name} holds negative depths ({_share(negative)} of its pixels, "
+                            f"down to {_metres(depth[negative].min())}): each value is the distance along the "
+                            "camera's optical axis, positive in front of it")
     depth = np.where(np.isfinite(depth) & (depth > 0), depth, np.nan)
     if not np.isfinite(depth).any():
         raise ReceiverError(f"range image {path.name} holds no valid depth")
+    if np.nanmedian(depth) > MAX_MEDIAN_DEPTH_M:
+        raise ReceiverError(f"range image {path.name}: its depths run {_span(depth)}, too far for a shadow to be "
+                            f"measured: {_unit_hint(path.name, 1000.0)}")
     return depth
+
+
+#: The largest median depth (metres) a range image may have: beyond it, the unit is wrong.
+MAX_MEDIAN_DEPTH_M = 1000.0
+#: A range image's median depth may differ from the camera's distance to the object by this factor.
+DEPTH_SCALE_FACTOR = 20.0
+
+
+def _share(mask: np.ndarray) -> str:
+    share = 100 * float(mask.mean())
+    return f"{share:.2g} %" if share < 10 else f"{share:.0f} %"
+
+
+def _metres(x: float) -> str:
+    x = float(x)
+    if abs(x) >= 1000:
+        return f"{x / 1000:.3g} km"
+    if abs(x) < 0.1:
+        return f"{x * 1000:.3g} mm"
+    return f"{x:.3g} m"
+
+
+def _span(depth: np.ndarray) -> str:
+    lo, med, hi = np.nanpercentile(depth, [1, 50, 99])
+    return f"{_metres(lo)} to {_metres(hi)} (median {_metres(med)})"
+
+
+def _unit_hint(name: str, ratio: float) -> str:
+    """What a range image whose depths are ``ratio`` times too large probably holds."""
+    stored = ".npy holds metres" if name.lower().endswith(".npy") else "a 16-bit .png holds millimetres"
+    if ratio > 1:
+        guess = "millimetres read as metres?" if ratio > 100 else "a unit smaller than the file's?"
+    else:
+        guess = "metres read as millimetres?" if ratio < 0.01 else "a unit larger than the file's?"
+    return f"{guess} ({stored})"
+
+
+def _check_depth_scale(depth: np.ndarray, name: str, camera_centre: np.ndarray, object_position) -> None:
+    """A ReceiverError when the range image's median depth is far (DEPTH_SCALE_FACTOR) from the
+    camera's distance to the object: the depths are in another unit than the file's."""
+    distance = float(np.linalg.norm(np.asarray(camera_centre, float) - np.asarray(object_position, float)))
+    median = float(np.nanmedian(depth))
+    if distance <= 0 or not np.isfinite(median):
+        return
+    ratio = median / distance
+    if 1 / DEPTH_SCALE_FACTOR <= ratio <= DEPTH_SCALE_FACTOR:
+        return
+    raise ReceiverError(f"range image {name}: its depths run {_span(depth)}, but the camera stands "
+                        f"{_metres(distance)} from the object: {_unit_hint(name, ratio)}")
 
 
 def depth_points(depth: np.ndarray, camera: PinholeCamera) -> np.ndarray:
@@ -255,5 +312,10 @@ def receiver_for_photo(scene, name: str, shape: tuple[int, int], meshes: dict) -
         if not file:
             raise ReceiverError("no range image: give [receiver] depth or this photo's depth in scene.toml")
         base = Path(scene.base_dir) if scene.base_dir is not None else Path(".")
-        return ReceiverSurface("depth", depth=read_depth(base / file, shape))
+        depth = read_depth(base / file, shape)
+        camera = scene.camera_for(name)
+        if camera is not None and camera.kind == "explicit" and scene.object is not None:
+            centre = -np.asarray(camera.R, float).T @ np.asarray(camera.t, float)
+            _check_depth_scale(depth, Path(file).name, centre, scene.object.position)
+        return ReceiverSurface("depth", depth=depth)
     raise ReceiverError(f"receiver kind {spec.kind!r} cannot be modelled")

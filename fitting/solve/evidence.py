@@ -95,11 +95,10 @@ def photo_evidence(name: str, observed: np.ndarray, prediction: Prediction, rho:
         photo=name, n_samples=int(ok.sum()), n_lit=int(lit.sum()), n_umbra=int(umbra.sum()),
         n_penumbra=int(inside.sum()), rms=_rms(r[ok]), rms_lit=_rms(r[lit]), rms_umbra=_rms(r[umbra]),
         rms_penumbra=_rms(r[inside]), noise_lit=noise_lit, noise_umbra=noise_umbra,
-        offset_lit=_median(r[lit], _MIN_NOISE_SAMPLES), offset_umbra=_median(r[umbra], _MIN_NOISE_SAMPLES),
         misfit=misfit, shadow_depth=depth, predicted_depth=predicted)
 
 
-def photo_estimates(params: FitParams, residuals: np.ndarray, jacobian: np.ndarray, photo_rows: list[slice],
+def photo_estimates(params: FitParams, residuals: np.ndarray, jacobian: np.ndarray, photo_rows: list[slice], *,
                     fit_sun: bool, fit_blur: bool, stat_scale: tuple[float, float]
                     ) -> list[tuple[float, float, float, float]]:
     """Each photo's own (k, k_stderr, rho, rho_stderr): one Gauss-Newton step from the group's
@@ -150,7 +149,8 @@ def photos_evidence(samples, rows: list[slice], solution, est, errors, sun_cos: 
     errors: the stated errors (``fitting.solve.uncertainty.Uncertainty``); sun_cos, sky_hidden (n,)."""
     scale = (errors.range_stderr_stat / max(est.range_stderr, 1e-300),
              errors.rho_stderr_stat / max(est.rho_stderr, 1e-300))
-    own = photo_estimates(solution.params, solution.residuals, solution.jacobian, rows, fit_sun, fit_blur, scale)
+    own = photo_estimates(solution.params, solution.residuals, solution.jacobian, rows, fit_sun=fit_sun,
+                          fit_blur=fit_blur, stat_scale=scale)
     out = []
     for s, sl, (k, k_se, rho, rho_se) in zip(samples, rows, own):
         prediction = Prediction(*(np.asarray(a)[sl] for a in solution.prediction))

@@ -37,7 +37,7 @@ from ..samples.ground import select_samples
 from ..samples.photo_samples import NoShadowInView, PhotoSamples
 from .evidence import no_ramp_k, photos_evidence
 from .uncertainty import cluster_covariance, combine_errors, edge_clusters
-from ..verdict.evidence import FitEvidence, GroupContext
+from ..verdict.evidence import FitEvidence, GroupContext, SunFree
 from ..verdict.rules import judge_fit
 from ..photos.views import PhotoView
 
@@ -446,6 +446,7 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
     log = (lambda line: print(f"  {label}: {line}")) if options.verbose else None
     best, cov, _ = choose_model(arrays, pose, plain.params, options, fit_sun, delta, n_eff, log)
     sol, cfg = best.solution, best.config
+    sun_free = None if fit_sun else _sun_free(sol, cfg, arrays, pose, options, float(used[0].sun_elevation_deg))
     solve_seconds = _time.perf_counter() - solve_start
     est = k_rho_with_errors(sol.params, cov)
     clusters = edge_clusters([s.profile_id for s in samples], len(sol.residuals))
@@ -466,7 +467,7 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
         range_k_max=options.range_k_max,
         photos=tuple(photos_evidence(samples, _photo_slices(samples), sol, est, errors, sun_cos, sky_hidden,
                                      fit_sun=fit_sun, fit_blur=bool(float(cfg.fit_blur)))),
-        no_ramp_k=no_ramp_k(sol.prediction.u[:n_eff], est.range_k), sun_fitted=fit_sun,
+        no_ramp_k=no_ramp_k(sol.prediction.u[:n_eff], est.range_k), sun_fitted=fit_sun, sun_free=sun_free,
         photos_without_shadow=tuple(_split_reason(w) for w in no_shadow))
     estimate, verdict = judge_fit(evidence, GroupContext(photos_given=len(views)))
     plots = PlotData()
@@ -485,6 +486,16 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
     sun = SunUsed(float(used[0].sun_azimuth_deg) + float(d[0]), float(used[0].sun_elevation_deg) + float(d[1]),
                   used[0].sun_source)
     return GroupResult(label, time_label, names, verdict, estimate, sun, diagnostics, plots, evidence=evidence)
+
+
+def _sun_free(sol: Solution, cfg: FitConfig, arrays: GroupArrays, pose: Pose, options: FitOptions,
+              elevation_deg: float) -> SunFree:
+    """The solve repeated from its solution on the same samples with the sun free (the compiled solver
+    takes the switch as an array: no new program), as evidence of how much k depends on the sun."""
+    free = FitConfig.make(cfg.profile, bool(float(cfg.fit_blur)), True, float(cfg.huber_delta), cfg.rule)
+    s = _to_numpy(_solve(sol.params, (arrays, pose, free), options.max_steps, jnp.zeros(9), jnp.asarray(False)))
+    d = np.asarray(s.params.sun_delta_deg, dtype=np.float64)
+    return SunFree(float(d[0]), float(d[1]), _k_np(s.params.raw_k), elevation_deg)
 
 
 def _split_reason(warning: str) -> tuple[str, str]:

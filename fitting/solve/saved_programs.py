@@ -8,9 +8,9 @@ that follows, because its key is the traced program. Here the traced program its
 a later process with the same inputs' shapes, static choices, package source and JAX version
 loads it and compiles it (from the compilation cache too) without tracing Python.
 
-Off unless a folder is set (``SOFTSHADOW_SAVED_PROGRAMS``; ``softshadow.use_compilation_cache``,
-which the command line calls, sets it next to the compilation cache): a library user's process
-traces as usual. Any failure to export, save or load falls back to the traced call.
+Off unless a folder is set (``SOFTSHADOW_SAVED_PROGRAMS``): ``softshadow.use_compilation_cache``, which the
+command line and the fitter's entry points (``fitting.fit_folder``, ``fitting.fit_photos``) call, sets it next to
+the compilation cache; ``SOFTSHADOW_JAX_CACHE=off`` leaves both off. Any failure to export, save or load falls back to the traced call.
 """
 
 from __future__ import annotations

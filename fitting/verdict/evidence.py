@@ -26,7 +26,7 @@ from __future__ import annotations
 import dataclasses
 import math
 
-__all__ = ["PhotoEvidence", "FitEvidence", "SunCheck", "LevelOfDetail", "GroupContext", "EdgeEvidence", "NAN"]
+__all__ = ["PhotoEvidence", "FitEvidence", "SunFree", "SunCheck", "LevelOfDetail", "GroupContext", "EdgeEvidence", "NAN"]
 
 NAN = math.nan
 
@@ -41,8 +41,7 @@ class PhotoEvidence:
     rms, rms_lit, rms_umbra, rms_penumbra: the residual's root mean square over all samples and
     per region. noise_lit, noise_umbra: the robust spread (normal-scaled MAD) of the residuals on
     the lit ground and in the umbra: the photo's noise and texture, which the model does not
-    describe. offset_lit, offset_umbra: the median residual there (the fitted level's miss).
-    misfit: the root mean square of the residuals in units of the noise expected at each sample
+    describe. misfit: the root mean square of the residuals in units of the noise expected at each sample
     (the lit ground's noise on the lit side, the umbra's in the umbra, between them by alpha),
     over the 90 % of samples with the smallest such ratio: about 1 when the model describes
     what the photo shows, whatever its texture.
@@ -64,8 +63,6 @@ class PhotoEvidence:
     rms_penumbra: float = NAN
     noise_lit: float = NAN
     noise_umbra: float = NAN
-    offset_lit: float = NAN
-    offset_umbra: float = NAN
     misfit: float = NAN
     shadow_depth: float = NAN
     predicted_depth: float = NAN
@@ -73,6 +70,18 @@ class PhotoEvidence:
     k_stderr: float = NAN
     rho: float = NAN
     rho_stderr: float = NAN
+
+
+@dataclasses.dataclass(frozen=True)
+class SunFree:
+    """The group's solve repeated on the same samples with the sun's azimuth and elevation free:
+    how far the sun moved (degrees) from its elevation ``elevation_deg``, and k there. A sun known
+    from its time and site moves little when the scene is described right."""
+
+    d_azimuth_deg: float
+    d_elevation_deg: float
+    k: float
+    elevation_deg: float = 45.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -92,6 +101,7 @@ class FitEvidence:
     range_k_max: the largest k the samples' band was planned for. sun_fitted: the sun was fitted
     with k and rho (not known from a time and site, or given). photos: each photo's evidence.
     photos_without_shadow: (photo, reason) for photos that were not sampled (no shadow in view).
+    sun_free: the solve with the sun free (None: the sun was fitted anyway).
     """
 
     k: float
@@ -111,6 +121,7 @@ class FitEvidence:
     no_ramp_k: float | None = None
     sun_fitted: bool = False
     photos_without_shadow: tuple[tuple[str, str], ...] = ()
+    sun_free: SunFree | None = None
 
 
 @dataclasses.dataclass(frozen=True)
