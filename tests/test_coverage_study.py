@@ -239,6 +239,9 @@ def test_report_is_made_from_the_json_alone(tmp_path):
     src = tmp_path / "study.json"
     src.write_text(json.dumps({"seed": 0, "environment": {}, "records": recs}))
     out, report = tmp_path / "again.json", tmp_path / "docs" / "study.md"
+    report.parent.mkdir()
+    assert main(["bench", "--what", "coverage", "--only", "3,x"]) == 2  # a bad option, before any work
+    assert main(["bench", "--what", "coverage", "--from-json", str(tmp_path / "none.json")]) == 2
     assert main(["bench", "--what", "coverage", "--from-json", str(src), "--json", str(out),
                  "--report", str(report)]) == 0
     text = report.read_text()
