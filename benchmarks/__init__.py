@@ -71,12 +71,31 @@ def _run_and_report(run, write, result, json_path, report_path) -> dict:
 
 def run_bench(args) -> int:
     """Run the bench ``args.what`` with a progress line on stderr; tables on stdout, JSON with --json."""
+    if args.what == "coverage":
+        return _run_coverage(args)
     from .output import StepProgress
     progress = StepProgress()
     try:
         return _run_bench(args, progress)
     finally:
         progress.close()
+
+
+def _run_coverage(args) -> int:
+    """The calibration study: a line per group on stderr (each one matters afterwards), the summary
+    and the tables per factor bin on stdout; the whole JSON with --json (``-``: on stdout instead)."""
+    from .coverage import coverage_and_report
+    from .output import format_tables
+    to_stdout = args.json_path == "-"
+    if to_stdout:
+        args.json_path = None
+    result = coverage_and_report(args, progress=_progress)
+    if to_stdout:
+        print(json.dumps(result, indent=1))
+    else:
+        print(format_tables({"summary": [result["summary"]], "criteria": [result["criteria"]],
+                             **{f"bins: {k}": v for k, v in result["bins"].items()}}))
+    return 0
 
 
 def _run_bench(args, progress) -> int:

@@ -224,7 +224,7 @@ def _add_bench(sub):
     p.add_argument("--quick", action="store_true", help="fewer repeats and sizes")
     p.add_argument("--what", default="overview",
                    choices=("overview", "render", "fit", "all", "sweep", "receiver", "precision", "lod",
-                            "lod-grid", "floor", "startup"),
+                            "lod-grid", "floor", "startup", "coverage"),
                    help="overview (the default, above); the renderer's and fitter's micro benchmarks without "
                         "errors: render / fit, or both (all); the full speed-against-error sweep with its "
                         "image and parameter errors against a known truth (sweep); the light-space back "
@@ -234,10 +234,23 @@ def _add_bench(sub):
                         "levels of detail under its slides with the SSIM masking table (lod-grid); the "
                         "renderer's error floor against a physical render, before and after its pixel "
                         "footprint and hidden sky (floor); a fit in a fresh process through the command line "
-                        "and through the Python API, alternated (startup)")
-    p.add_argument("--report", help="with overview, sweep or lod-grid: also write the Markdown report here (and "
-                                    "its images in img/ beside it), e.g. docs/benchmarks.md, "
-                                    "docs/speed_vs_error.md, docs/lod_masking.md")
+                        "and through the Python API, alternated (startup); the randomized calibration study of "
+                        "the stated errors: groups drawn from a documented prior, rendered by the physical "
+                        "renderer, fitted and compared with their truth, hours of CPU for 300 groups, resumable "
+                        "(coverage)")
+    p.add_argument("--report", help="with overview, sweep, lod-grid or coverage: also write the Markdown report "
+                                    "here (and its images in img/ beside it), e.g. docs/benchmarks.md, "
+                                    "docs/speed_vs_error.md, docs/lod_masking.md, docs/uncertainty_study.md")
+    p.add_argument("--groups", type=int, default=300, help="with coverage: how many groups to draw (default 300)")
+    p.add_argument("--seed", type=int, default=0, help="with coverage: the study's seed (group i is drawn from "
+                                                      "numpy's default_rng([seed, i]))")
+    p.add_argument("--root", help="with coverage: where the groups' folders and records.jsonl go (default "
+                                  "/tmp/softshadow-coverage-sSEED); a stopped run resumes from its records")
+    p.add_argument("--only", help="with coverage: these groups only, e.g. 3,17,40-45")
+    p.add_argument("--refit", action="store_true",
+                   help="with coverage: fit the kept folders again (a changed verdict) instead of reusing records")
+    p.add_argument("--from-json", dest="from_json",
+                   help="with coverage: remake the tables and the report from this JSON, without fitting")
     p.add_argument("--no-fit", dest="fit", action="store_false",
                    help="with --what sweep: leave out the fits (images only)")
     p.set_defaults(func=_run_bench)

@@ -248,6 +248,14 @@ def check_bench_options(args) -> None:
         check_output_file("--json", args.json_path, folder_made=True)
     if getattr(args, "report", None):
         check_output_file("--report", args.report, folder_made=True)
+    if getattr(args, "what", None) == "coverage":
+        _number("--groups", getattr(args, "groups", None), low=1, why="groups to draw")
+        source = getattr(args, "from_json", None)
+        if source and not Path(source).is_file():
+            raise OptionError(f"--from-json {source}: no such file")
+        only = getattr(args, "only", None)
+        if only and not all(p.strip().replace("-", "", 1).isdigit() for p in str(only).split(",")):
+            raise OptionError(f"--only {only}: give group numbers and ranges, e.g. 3,17,40-45")
 
 
 def check_board_options(args) -> None:
