@@ -15,6 +15,7 @@ from ._version import __version__
 # steps (a photo without geometry, ``--help``) never loads JAX or trimesh, which take seconds.
 __getattr__, __dir__, __all__ = _lazy.attach(__name__, submod_attrs={
     "colour": ["linear_to_srgb", "srgb_to_linear"],
+    "dense_plan": ["DensePlan", "plan_dense_points"],
     "compilation_cache": ["default_cache_dir", "use_compilation_cache", "SAVED_PROGRAMS_ENV"],
     "camera": ["GroundGrid", "PinholeCamera", "look_at_camera"],
     "evaluate": ["plan_alpha", "plan_alpha_jit", "plan_coordinate", "plan_coordinate_light"],
@@ -31,7 +32,9 @@ __getattr__, __dir__, __all__ = _lazy.attach(__name__, submod_attrs={
     "projector": ["FALLOFFS", "Projector", "ProjectorShadowMap", "projector_shadow_map"],
     "raster": ["project_to_ground"],
     "render": ["CameraRender", "SoftShadowModel", "object_mask"],
-    "scene_render": ["SceneLights", "SceneRender", "SceneSetup", "prepare_scene", "render_scene", "shade_scene"],
+    "scene_frame": ["FRAME_STEPS", "SceneFrame", "band_alpha", "render_frame"],
+    "scene_render": ["SceneLights", "SceneRender", "SceneSetup", "prepare_scene", "projector_light", "render_scene",
+                     "shade_scene"],
     "shadowmap": ["BIAS_PX", "LightFrame", "ShadowMap", "depth_bias", "faces_away", "rasterise_depth", "shadow_map"],
     "sky": ["SkyNodes", "SkyPatch", "cosine_weighted_directions", "hidden_sky_fraction", "hidden_sky_map", "hidden_sky_nodes",
             "open_sky_fraction"],

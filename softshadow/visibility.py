@@ -19,6 +19,7 @@ each pixel takes the face at its undistorted position (nearest). Faces are cut a
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numpy as np
 import trimesh
@@ -47,13 +48,18 @@ def _albedo(value) -> np.ndarray:
 @dataclasses.dataclass(frozen=True, eq=False)
 class Surface:
     """A triangle mesh in the world: vertices (V, 3) metres, faces (F, 3), albedo (3,) linear RGB
-    (a single number is grey); casts_shadows: drawn in projectors' shadow maps."""
+    (a single number is grey); casts_shadows: drawn in projectors' shadow maps; closed: the
+    mesh is closed with its faces wound counter-clockwise seen from outside (outward normals),
+    so faces turned away from a viewer outside it are never seen and are not drawn; normals:
+    the unit face normals (F, 3) when already known (a posed occluder's), else from the winding."""
 
     vertices: np.ndarray
     faces: np.ndarray
     albedo: np.ndarray = (0.8, 0.8, 0.8)
     name: str = "mesh"
     casts_shadows: bool = True
+    closed: bool = False
+    normals: np.ndarray | None = None
 
     def __post_init__(self):
         v = np.asarray(self.vertices, np.float64)
@@ -65,6 +71,11 @@ class Surface:
         object.__setattr__(self, "vertices", v)
         object.__setattr__(self, "faces", f)
         object.__setattr__(self, "albedo", _albedo(self.albedo))
+        if self.normals is not None:
+            n = np.asarray(self.normals, np.float64)
+            if n.shape != f.shape:
+                raise ValueError(f"surface {self.name!r} needs one normal per face, got shape {n.shape}")
+            object.__setattr__(self, "normals", n)
 
     @classmethod
     def from_trimesh(cls, mesh: trimesh.Trimesh, position=(0.0, 0.0, 0.0), rotation_deg=(0.0, 0.0, 0.0),
@@ -86,7 +97,9 @@ class Surface:
 
     @property
     def face_normals(self) -> np.ndarray:
-        """Unit normals (F, 3) from the winding (zero for degenerate faces)."""
+        """Unit normals (F, 3): ``normals`` if given, else from the winding (zero for degenerate faces)."""
+        if self.normals is not None:
+            return self.normals
         t = self.vertices[self.faces]
         n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
         return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
@@ -111,17 +124,6 @@ class VisibleSurfaces:
     face: np.ndarray
 
 
-def _camera_rays(camera, h: int, w: int, top: float) -> tuple[np.ndarray, np.ndarray]:
-    """Ray origins and directions (H*W, 3) of every pixel centre (row order)."""
-    rows, cols = np.mgrid[0:h, 0:w]
-    if isinstance(camera, GroundGrid):
-        origin = camera.to_world(cols, rows).reshape(-1, 3)
-        origin[:, 2] = top  # above everything, looking straight down
-        return origin, np.tile([0.0, 0.0, -1.0], (len(origin), 1))
-    d = camera.pixel_rays(cols, rows)
-    return np.broadcast_to(camera.centre, d.shape), d
-
-
 def visible_surfaces(camera: PinholeCamera | GroundGrid, surfaces=(), ground_albedo=None,
                      smooth: bool = False) -> VisibleSurfaces:
     """The nearest surface at every pixel of ``camera`` (see the module docstring).
@@ -137,20 +139,33 @@ def visible_surfaces(camera: PinholeCamera | GroundGrid, surfaces=(), ground_alb
     vstart = np.cumsum([0] + [len(s.vertices) for s in surfaces])
     faces = (np.vstack([s.faces + vstart[i] for i, s in enumerate(surfaces)]) if surfaces
              else np.zeros((0, 3), np.int64))
-    origin, direction = _camera_rays(camera, h, w, float(max(verts[:, 2].max(initial=0.0), 0.0)) + 1.0)
+    # Closed, outward-wound surfaces: their faces turned away from the camera are never the
+    # nearest, so the z-buffer skips them (in pixel coordinates, rows down, a face seen from
+    # its front winds with a negative signed area).
+    facing = np.concatenate([np.full(len(s.faces), -1 if s.closed else 0, np.int8) for s in surfaces]) \
+        if surfaces else np.zeros(0, np.int8)
+    top = float(max(verts[:, 2].max(initial=0.0), 0.0)) + 1.0
+    directions = np.zeros((0, 3))
     if isinstance(camera, GroundGrid):
         xy, depth = camera.to_pixel(verts), -verts[:, 2]
         drawn, source = faces, np.arange(len(faces))
         lookup = np.arange(h * w)
     else:
-        # Faces cut at the near plane (a floor passing under and behind the camera stays whole in view).
-        cut, drawn, source = clip_near(verts, verts @ camera.R[2] + camera.t[2], faces, NEAR_M)
+        z_cam = verts @ camera.R[2] + camera.t[2]
+        if len(verts) and z_cam.min() > NEAR_M:  # nothing to cut
+            cut, drawn, source = verts, faces, np.arange(len(faces))
+        else:
+            # Faces cut at the near plane (a floor passing under and behind the camera stays whole
+            # in view); a closed surface cut open shows its inside, so nothing is culled then.
+            cut, drawn, source = clip_near(verts, z_cam, faces, NEAR_M)
+            facing = np.zeros(len(drawn), np.int8)
         pc = cut @ camera.R.T + camera.t
         zs = np.maximum(pc[:, 2], NEAR_M)  # the originals behind the plane are no longer used
         K = camera.K
         a, b = pc[:, 0] / zs, pc[:, 1] / zs
         xy = np.column_stack([K[0, 0] * a + K[0, 1] * b + K[0, 2], K[1, 1] * b + K[1, 2]])
         depth = -1.0 / zs
+        lookup = np.arange(h * w)
         if camera.dist is not None and np.any(camera.dist):
             import cv2
             rows, cols = np.mgrid[0:h, 0:w]
@@ -159,59 +174,158 @@ def visible_surfaces(camera: PinholeCamera | GroundGrid, surfaces=(), ground_alb
             c, r = np.rint(und[:, 0]).astype(np.int64), np.rint(und[:, 1]).astype(np.int64)
             inside = (c >= 0) & (c < w) & (r >= 0) & (r < h)
             lookup = np.where(inside, np.clip(r, 0, h - 1) * w + np.clip(c, 0, w - 1), -1)
-        else:
-            lookup = np.arange(h * w)
-    fid = np.full(h * w, -1, np.int64)
+            directions = camera.pixel_rays(cols, rows)
+    f_img = np.full(h * w, -1, np.int32)
     if len(drawn):
-        _, f_img = rasterise_depth(xy, depth, drawn, (h, w))
-        f_img = f_img.ravel()
-        ok = lookup >= 0
-        fid[ok] = np.where(f_img[lookup[ok]] >= 0, source[np.maximum(f_img[lookup[ok]], 0)], -1)
-    # The ray's distance to the face's plane (exact), and to the ground.
+        f_img = rasterise_depth(xy, depth, drawn, (h, w), facing=facing)[1].ravel()
     all_normals = (np.vstack([s.face_normals for s in surfaces]) if surfaces else np.zeros((0, 3)))
-    t_mesh = np.full(h * w, np.inf)
-    hit = np.flatnonzero(fid >= 0)
-    if len(hit):
-        n = all_normals[fid[hit]]
-        v0 = verts[faces[fid[hit], 0]]
-        denom = np.einsum("ij,ij->i", n, direction[hit])
-        ok = np.abs(denom) > 1e-12
-        t = np.einsum("ij,ij->i", n, v0 - origin[hit]) / np.where(ok, denom, 1.0)
-        t_mesh[hit] = np.where(ok & (t > 0), t, np.inf)
-    t_ground = np.full(h * w, np.inf)
-    if ground_albedo is not None:
-        dz = direction[:, 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = -origin[:, 2] / dz
-        t_ground = np.where((np.abs(dz) > 1e-12) & (t > 0), t, np.inf)
-    mesh_wins = t_mesh <= t_ground
-    t_best = np.minimum(t_mesh, t_ground)
-    pixel = np.flatnonzero(np.isfinite(t_best))
-    points = origin[pixel] + t_best[pixel, None] * direction[pixel]
-    on_mesh = mesh_wins[pixel]
-    normals = np.tile([0.0, 0.0, 1.0], (len(pixel), 1))
-    normals[on_mesh] = all_normals[fid[pixel[on_mesh]]]
-    # Towards the camera: the side the camera sees is the lit side of an open surface.
-    flip = np.einsum("ij,ij->i", normals, direction[pixel]) > 0
-    normals[flip] *= -1
+    face_surface = np.repeat(np.arange(len(surfaces)), np.diff(offsets)) if surfaces else np.zeros(0, np.int64)
+    albedos = np.array([s.albedo for s in surfaces], np.float64).reshape(-1, 3)
+    ground = _albedo(ground_albedo) if ground_albedo is not None else np.zeros(3)
+    if isinstance(camera, GroundGrid):
+        view = np.array([0.0, camera.origin_m[0], camera.origin_m[1], camera.pixel_m, top])
+        rays = np.zeros((3, 3))
+    else:
+        view = np.array([1.0, *camera.centre])
+        Kinv = np.linalg.inv(camera.K)
+        rays = np.stack([Kinv[0], Kinv[1], np.zeros(3)])
+        rays = np.vstack([rays, camera.R])  # rows 0-1: K^-1's, rows 3-5: R
+    surface = np.full(h * w, NOTHING, np.int64)
+    face = np.full(h * w, -1, np.int64)
+    t_best = np.empty(h * w)
+    n = _visible_kernel()(f_img, np.ascontiguousarray(lookup, np.int64), np.ascontiguousarray(source, np.int64),
+                          verts, np.ascontiguousarray(faces, np.int64), all_normals, face_surface,
+                          np.ascontiguousarray(offsets, np.int64), view, rays, directions,
+                          ground_albedo is not None, h, w, surface, face, t_best)
+    pixel = np.empty(n, np.int64)
+    points = np.empty((n, 3))
+    normals = np.empty((n, 3))
+    albedo = np.empty((n, 3))
+    _fill_kernel()(surface, face, t_best, verts, np.ascontiguousarray(faces, np.int64), all_normals,
+                   np.ascontiguousarray(offsets, np.int64), albedos, ground, view, rays, directions, w,
+                   pixel, points, normals, albedo)
+    on_mesh = surface.ravel()[pixel] >= 0
     if smooth and on_mesh.any():
         # Turned as the face is (by the face's side, not the interpolated normal's: near an outline
         # that one may lean away from the camera while the face does not).
         vn = np.vstack([s.vertex_normals for s in surfaces])
-        f = faces[fid[pixel[on_mesh]]]
-        sign = np.where(flip[on_mesh], -1.0, 1.0)[:, None]
+        fid = face[pixel[on_mesh]] + offsets[surface[pixel[on_mesh]]]
+        f = faces[fid]
+        sign = np.where(np.einsum("ij,ij->i", normals[on_mesh], all_normals[fid]) < 0, -1.0, 1.0)[:, None]
         normals[on_mesh] = sign * _interpolate(points[on_mesh], verts[f], vn[f])
-    surface = np.full(h * w, NOTHING, np.int64)
-    face = np.full(h * w, -1, np.int64)
-    which = np.searchsorted(offsets, fid[pixel[on_mesh]], side="right") - 1
-    surface[pixel[on_mesh]] = which
-    face[pixel[on_mesh]] = fid[pixel[on_mesh]] - offsets[which]
-    surface[pixel[~on_mesh]] = GROUND
-    albedos = np.array([s.albedo for s in surfaces]).reshape(-1, 3)
-    albedo = np.empty((len(pixel), 3))
-    albedo[on_mesh] = albedos[which] if len(which) else np.zeros((0, 3))
-    albedo[~on_mesh] = _albedo(ground_albedo) if ground_albedo is not None else 0.0
     return VisibleSurfaces((h, w), pixel, points, normals, albedo, surface.reshape(h, w), face.reshape(h, w))
+
+
+@functools.cache
+def _visible_kernel():
+    """The compiled first pass of ``visible_surfaces`` (numba): per pixel, the ray's distance to
+    its z-buffer face's plane (exact) and to the ground, the nearer kept; returns how many
+    pixels see something. ``surface``/``face`` get the winner (NOTHING, GROUND or a mesh's)."""
+    import numba
+
+    @numba.njit(cache=True, nogil=True)
+    def kernel(f_img, lookup, source, verts, faces, normals, face_surface, offsets, view, rays, directions,
+               has_ground, h, w, surface, face, t_best):
+        n = 0
+        for p in range(h * w):
+            row, col = p // w, p % w
+            # The pixel's ray: a top-down map's (origin, pixel size, height in view[1:5]) or a
+            # pinhole camera's (centre in view[1:4]; K^-1's first two rows and R in rays;
+            # precomputed directions for a camera with lens distortion).
+            if view[0] == 0.0:
+                ox, oy, oz = view[1] + col * view[3], view[2] - row * view[3], view[4]
+                dx, dy, dz = 0.0, 0.0, -1.0
+            elif directions.shape[0]:
+                ox, oy, oz = view[1], view[2], view[3]
+                dx, dy, dz = directions[p, 0], directions[p, 1], directions[p, 2]
+            else:
+                ox, oy, oz = view[1], view[2], view[3]
+                nx = rays[0, 0] * col + rays[0, 1] * row + rays[0, 2]
+                ny = rays[1, 0] * col + rays[1, 1] * row + rays[1, 2]
+                dx = nx * rays[3, 0] + ny * rays[4, 0] + rays[5, 0]
+                dy = nx * rays[3, 1] + ny * rays[4, 1] + rays[5, 1]
+                dz = nx * rays[3, 2] + ny * rays[4, 2] + rays[5, 2]
+            t_mesh = np.inf
+            fid = -1
+            q = lookup[p]
+            if q >= 0 and f_img[q] >= 0:
+                fid = source[f_img[q]]
+                nx, ny, nz = normals[fid, 0], normals[fid, 1], normals[fid, 2]
+                v0 = faces[fid, 0]
+                denom = nx * dx + ny * dy + nz * dz
+                if abs(denom) > 1e-12:
+                    t = (nx * (verts[v0, 0] - ox) + ny * (verts[v0, 1] - oy) + nz * (verts[v0, 2] - oz)) / denom
+                    if t > 0:
+                        t_mesh = t
+            t_ground = np.inf
+            if has_ground and abs(dz) > 1e-12:
+                t = -oz / dz
+                if t > 0:
+                    t_ground = t
+            if t_mesh <= t_ground and np.isfinite(t_mesh):
+                s = face_surface[fid]
+                surface[p] = s
+                face[p] = fid - offsets[s]
+                t_best[p] = t_mesh
+                n += 1
+            elif np.isfinite(t_ground):
+                surface[p] = GROUND
+                t_best[p] = t_ground
+                n += 1
+        return n
+
+    return kernel
+
+
+@functools.cache
+def _fill_kernel():
+    """The compiled second pass of ``visible_surfaces`` (numba): the points, normals (turned
+    towards the camera) and albedos of the pixels that see something, in pixel order."""
+    import numba
+
+    @numba.njit(cache=True, nogil=True)
+    def kernel(surface, face, t_best, verts, faces, normals, offsets, albedos, ground, view, rays, directions,
+               w, pixel, points, out_normals, albedo):
+        i = 0
+        for p in range(surface.shape[0]):
+            s = surface[p]
+            if s == NOTHING:
+                continue
+            row, col = p // w, p % w
+            # The pixel's ray: a top-down map's (origin, pixel size, height in view[1:5]) or a
+            # pinhole camera's (centre in view[1:4]; K^-1's first two rows and R in rays;
+            # precomputed directions for a camera with lens distortion).
+            if view[0] == 0.0:
+                ox, oy, oz = view[1] + col * view[3], view[2] - row * view[3], view[4]
+                dx, dy, dz = 0.0, 0.0, -1.0
+            elif directions.shape[0]:
+                ox, oy, oz = view[1], view[2], view[3]
+                dx, dy, dz = directions[p, 0], directions[p, 1], directions[p, 2]
+            else:
+                ox, oy, oz = view[1], view[2], view[3]
+                nx = rays[0, 0] * col + rays[0, 1] * row + rays[0, 2]
+                ny = rays[1, 0] * col + rays[1, 1] * row + rays[1, 2]
+                dx = nx * rays[3, 0] + ny * rays[4, 0] + rays[5, 0]
+                dy = nx * rays[3, 1] + ny * rays[4, 1] + rays[5, 1]
+                dz = nx * rays[3, 2] + ny * rays[4, 2] + rays[5, 2]
+            t = t_best[p]
+            pixel[i] = p
+            points[i, 0], points[i, 1], points[i, 2] = ox + t * dx, oy + t * dy, oz + t * dz
+            if s >= 0:
+                fid = face[p] + offsets[s]
+                nx, ny, nz = normals[fid, 0], normals[fid, 1], normals[fid, 2]
+                for c in range(3):
+                    albedo[i, c] = albedos[s, c]
+            else:
+                nx, ny, nz = 0.0, 0.0, 1.0
+                for c in range(3):
+                    albedo[i, c] = ground[c]
+            if nx * dx + ny * dy + nz * dz > 0:  # towards the camera: the side it sees is lit
+                nx, ny, nz = -nx, -ny, -nz
+            out_normals[i, 0], out_normals[i, 1], out_normals[i, 2] = nx, ny, nz
+            i += 1
+
+    return kernel
 
 
 def _interpolate(points: np.ndarray, tri: np.ndarray, corner_normals: np.ndarray) -> np.ndarray:
