@@ -22,10 +22,12 @@ from .camera import GroundGrid
 from .occluder import Occluder
 from .params import Pose, Sun
 from .plan import (BAND_FRACTION, CANDIDATE_RADII_PX, CANDIDATE_REACH_PX, MAX_RASTER_SIDE, N_CANDIDATES, EdgeSet,
-                   PointPlan, _clean_outline, _pack_edges, _within_reach, bucket_size, light_band_widths)
+                   PointPlan, _clean_outline, _pack_edges, bucket_size, light_band_widths)
 from .posed import PosedOccluder
 from .raster import candidate_labels, rasterise_shadow
-from .shadowmap import LightFrame, depth_bias, faces_away, shadow_map
+from .scratch import Scratch, scratch_array
+from .shadowmap import (_LOOKUP_OFFSETS, _NEAREST_OFFSETS, BIAS_PX, FACING_TOL, PRECISION_ULPS, SLOPE_PX, TAN_MAX,
+                        LightFrame, faces_away, shadow_map)
 
 __all__ = ["DensePlan", "plan_dense_points"]
 
@@ -81,12 +83,18 @@ def _empty(edges: EdgeSet, hard: np.ndarray) -> DensePlan:
 
 def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k_max: float,
                       normals: np.ndarray | None = None, *, rule: str = "edge", margin_px: float = 2.5,
-                      posed: PosedOccluder | None = None) -> DensePlan:
+                      posed: PosedOccluder | None = None, faces: np.ndarray | None = None,
+                      scratch: Scratch | None = None) -> DensePlan:
     """``plan_points(occ, pose, sun, points, range_k_max, rule, normals=normals, backend="light",
     margin_px=margin_px)``, compact (``DensePlan``) and faster for many points.
 
     points (N, 3) world metres; normals (N, 3) unit or None; posed: the occluder already posed
-    under this sun (``PosedOccluder.make(occ, pose, sun)``), to share it with other steps.
+    under this sun (``PosedOccluder.make(occ, pose, sun)``), to share it with other steps;
+    faces (N,) int, optional: the occluder's face each point lies on (-1: not on it), as a
+    camera's z-buffer knows it. A point whose own face is the shadow map's nearest face at its
+    pixel is lit without the lookup (the lookup would find that face and the point on it).
+    scratch: keep the per-point arrays in these buffers (``softshadow.scratch``; the plan's
+    ``hard`` is then overwritten by the next call with the same scratch).
     """
     posed = PosedOccluder.make(occ, pose, sun) if posed is None else posed
     sil, light, world = posed.silhouette, posed.light, posed.world
@@ -96,29 +104,38 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
         normals = np.ascontiguousarray(normals, np.float64).reshape(-1, 3)
         if len(normals) != n:
             raise ValueError(f"{len(normals)} normals for {n} receiver points")
-    attached = np.zeros(n, bool) if normals is None else faces_away(normals, light)
-    hard = attached.astype(np.float64)
     edges = _pack_edges(occ, sil)
     if not (n and len(sil.vertex_ids)):
-        return _empty(edges, hard)
+        attached = np.zeros(n, bool) if normals is None else faces_away(normals, light)
+        return _empty(edges, attached.astype(np.float64))
     frame = LightFrame.of_light(light, 0.5 * (world.min(0) + world.max(0)))
     uv_v, d_v = frame.project(world)
-    uv_all, d_all = frame.project(points)
+    # Attached shadow (``faces_away``), light-space positions (``LightFrame.project``) and the
+    # deepest point, in one pass.
+    uv_all = scratch_array(scratch, "sun.uv", (n, 2))
+    d_all = scratch_array(scratch, "sun.depth", n)
+    hard = scratch_array(scratch, "sun.hard", n)
+    basis = np.stack([frame.origin, frame.e1, frame.e2, frame.light])
+    d_max = _project_kernel()(points, np.zeros((0, 3)) if normals is None else normals, basis, -FACING_TOL,
+                              uv_all, d_all, hard)
     ids = sil.vertex_ids
     edge_depth = np.minimum(d_v[ids[:, 0]], d_v[ids[:, 1]])
     # The region the shadow can reach, as plan_points takes it (its comments give the reasons).
-    reach = float(light_band_widths(d_all.max() - edge_depth.min(), range_k_max))
+    reach = float(light_band_widths(d_max - edge_depth.min(), range_k_max))
     lo_occ = np.array([uv_v[:, 0].min(), uv_v[:, 1].min()])
     hi_occ = np.array([uv_v[:, 0].max(), uv_v[:, 1].max()])
     extent = float((hi_occ - lo_occ).max()) + 3.0 * reach
     margin_m = (margin_px + CANDIDATE_REACH_PX + 2) * extent / 256
-    cand = _within_reach(uv_all, d_all, lo_occ, hi_occ, float(edge_depth.min()), range_k_max, margin_m)
-    if not len(cand):
+    # Each point within its own reach (``plan._within_reach``), gathered.
+    cand = scratch_array(scratch, "sun.cand", n, np.int64)
+    uv_p = scratch_array(scratch, "sun.cand_uv", (n, 2))
+    d_p = scratch_array(scratch, "sun.cand_depth", n)
+    count = _reach_kernel()(uv_all, d_all, hard, lo_occ, hi_occ, float(edge_depth.min()),
+                            1.5 * float(light_band_widths(np.float64(1.0), range_k_max)), margin_m, cand, uv_p, d_p)
+    if not count:
         return _empty(edges, hard)
-    uv_p = np.empty((len(cand), 2))
-    d_p = np.empty(len(cand))
-    att = np.empty(len(cand), bool)
-    _gather_kernel()(cand, uv_all, d_all, attached, uv_p, d_p, att)
+    cand, uv_p, d_p = cand[:count], uv_p[:count], d_p[:count]
+    att = hard[cand] > 0
     reach = float(light_band_widths(d_p.max() - edge_depth.min(), range_k_max))
     extent = float((hi_occ - lo_occ).max()) + 3.0 * reach
     lo_pts = np.array([uv_p[:, 0].min(), uv_p[:, 1].min()])
@@ -145,10 +162,10 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
     near = np.flatnonzero((dist <= 2.0 * pixel_m) & ~att)
     if len(near):
         in_view[near] = posed.hard_shadow_at(uv_p[near], projected=uv_v)
-    faces = occ.faces[sil.lit] if occ.watertight else occ.faces
+    lit_ids = np.flatnonzero(sil.lit) if occ.watertight else np.arange(len(occ.faces))
     behind = np.zeros(len(cand), bool)
     test = np.flatnonzero((in_view > 0) & ~att)
-    far = d_p[test] > d_v[faces].max(initial=-np.inf) + 0.5 * map_pixel_m
+    far = d_p[test] > d_v[occ.faces[lit_ids]].max(initial=-np.inf) + 0.5 * map_pixel_m
     behind[test[far]] = True
     test = test[~far]
     if len(test):
@@ -158,17 +175,15 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
         map_grid = GroundGrid(map_pixel_m, (float(m_lo[0]), float(m_hi[1])),
                               int(np.ceil((m_hi[0] - m_lo[0]) / map_pixel_m)) + 1,
                               int(np.ceil((m_hi[1] - m_lo[1]) / map_pixel_m)) + 1)
-        smap = shadow_map(map_grid, uv_v, d_v, faces)
-        occ_depth, face_slope, exact = smap.occluder_depth(uv_t)
-        recv_slope = 0.0
-        pts_t = points[cand[test]]
-        if normals is not None:
-            nt = normals[cand[test]]
-            cos = np.abs(nt[:, 0] * light[0] + nt[:, 1] * light[1] + nt[:, 2] * light[2])
-            recv_slope = np.sqrt(np.maximum(1.0 - cos * cos, 0.0)) / np.maximum(cos, 1e-12)
-        scale = max(smap.scale, float(np.abs(pts_t).max()), float(np.abs(world).max()))
-        bias = depth_bias(map_pixel_m, face_slope, recv_slope, scale, np.float64, exact)
-        behind[test] = d_p[test] > occ_depth + bias
+        smap = shadow_map(map_grid, uv_v, d_v, occ.faces[lit_ids])
+        # ``ShadowMap.occluder_depth`` and ``depth_bias`` per point (their rules), the receiver's
+        # slope from its normal, in one pass.
+        scale = max(smap.scale, float(np.abs(world).max()))
+        g = map_grid
+        _depth_test_kernel()(cand[test], uv_t, d_p[test], points, np.zeros((0, 3)) if normals is None else normals,
+                             np.full(0, -1, np.int64) if faces is None else np.asarray(faces, np.int64),
+                             lit_ids, light, g.origin_m[0], g.origin_m[1], map_pixel_m, smap.face_id,
+                             np.ascontiguousarray(smap.triangle), smap.plane, smap.slope, scale, behind, test)
     hard[cand] = behind | att
     act = np.empty(len(cand), bool)
     near_b = np.empty(len(cand), bool)
@@ -215,14 +230,113 @@ def _spacing_kernel():
 
 
 @functools.cache
-def _gather_kernel():
+def _project_kernel():
+    """Per point: attached shadow (n . L >= -FACING_TOL, as ``faces_away``; 1.0 in hard), the
+    light-space position and depth (``LightFrame.project``); returns the largest depth."""
     import numba
 
     @numba.njit(cache=True, nogil=True)
-    def kernel(cand, uv_all, d_all, attached, uv, d, att):
-        for j in range(cand.shape[0]):
-            i = cand[j]
-            uv[j, 0], uv[j, 1], d[j], att[j] = uv_all[i, 0], uv_all[i, 1], d_all[i], attached[i]
+    def kernel(points, normals, basis, tol, uv, d, hard):
+        light = basis[3]
+        d_max = -np.inf
+        for i in range(points.shape[0]):
+            x, y, z = points[i, 0] - basis[0, 0], points[i, 1] - basis[0, 1], points[i, 2] - basis[0, 2]
+            uv[i, 0] = x * basis[1, 0] + y * basis[1, 1] + z * basis[1, 2]
+            uv[i, 1] = x * basis[2, 0] + y * basis[2, 1] + z * basis[2, 2]
+            d[i] = x * basis[3, 0] + y * basis[3, 1] + z * basis[3, 2]
+            d_max = max(d_max, d[i])
+            hard[i] = 0.0
+            if normals.shape[0] and normals[i, 0] * light[0] + normals[i, 1] * light[1] + normals[i, 2] * light[2] >= tol:
+                hard[i] = 1.0
+        return d_max
+
+    return kernel
+
+
+@functools.cache
+def _reach_kernel():
+    """``plan._within_reach``'s test (per_m: 1.5 wedge widths per metre behind the nearest
+    edge), the points within reach gathered in order; returns their count."""
+    import numba
+
+    @numba.njit(cache=True, nogil=True)
+    def kernel(uv_all, d_all, hard, lo, hi, edge_depth, per_m, margin_m, cand, uv, d):
+        count = 0
+        for i in range(uv_all.shape[0]):
+            pad = per_m * max(d_all[i] - edge_depth, 0.0) + margin_m
+            if (uv_all[i, 0] >= lo[0] - pad) & (uv_all[i, 0] <= hi[0] + pad) & (uv_all[i, 1] >= lo[1] - pad) \
+                    & (uv_all[i, 1] <= hi[1] + pad):
+                cand[count] = i
+                uv[count, 0], uv[count, 1], d[count] = uv_all[i, 0], uv_all[i, 1], d_all[i]
+                count += 1
+        return count
+
+    return kernel
+
+
+@functools.cache
+def _depth_test_kernel():
+    """The sun's depth test at the points ``test`` (indices into the candidates; cand[test]
+    into the points): ``ShadowMap.occluder_depth`` (the exact face among the point's map pixel
+    and its 8 neighbours, else the nearest covered pixel's within 2, extrapolated) against
+    the point's depth plus ``depth_bias`` (the receiver's slope from its normal), into
+    behind[test]. A point on the occluder whose own face is the nearest at its pixel is lit."""
+    import numba
+
+    @numba.njit(cache=True, nogil=True)
+    def kernel(index, uv, depth, points, normals, faces, lit_ids, light, ox, oy, pixel_m, face_id, triangle, plane,
+               face_slope, scale, behind, test):
+        h, w = face_id.shape
+        for j in range(index.shape[0]):
+            p = index[j]
+            scale = max(scale, abs(points[p, 0]), abs(points[p, 1]), abs(points[p, 2]))
+        rounding = PRECISION_ULPS * np.finfo(np.float64).eps * scale
+        for j in range(index.shape[0]):
+            p = index[j]
+            u, v = uv[j, 0], uv[j, 1]
+            col = int(np.rint((u - ox) / pixel_m))
+            row = int(np.rint((oy - v) / pixel_m))
+            if faces.shape[0] and faces[p] >= 0 and 0 <= row < h and 0 <= col < w and face_id[row, col] >= 0 \
+                    and lit_ids[face_id[row, col]] == faces[p]:
+                continue
+            best, fs, exact = np.inf, 0.0, False
+            for k in range(_LOOKUP_OFFSETS.shape[0]):
+                r, c = row + _LOOKUP_OFFSETS[k, 0], col + _LOOKUP_OFFSETS[k, 1]
+                if r < 0 or r >= h or c < 0 or c >= w:
+                    continue
+                f = face_id[r, c]
+                if f < 0:
+                    continue
+                t0u, t0v = triangle[f, 0, 0], triangle[f, 0, 1]
+                ex1, ey1 = triangle[f, 1, 0] - t0u, triangle[f, 1, 1] - t0v
+                ex2, ey2 = triangle[f, 2, 0] - t0u, triangle[f, 2, 1] - t0v
+                px, py = u - t0u, v - t0v
+                area = ex1 * ey2 - ey1 * ex2
+                if area == 0:
+                    area = 1.0
+                b1 = (px * ey2 - py * ex2) / area
+                b2 = (ex1 * py - ey1 * px) / area
+                if b1 >= -1e-7 and b2 >= -1e-7 and b1 + b2 <= 1.0 + 1e-7:
+                    best, exact = plane[f, 2] + plane[f, 0] * (u - t0u) + plane[f, 1] * (v - t0v), True
+                    break
+            if not exact:
+                for k in range(_NEAREST_OFFSETS.shape[0]):
+                    r, c = row + _NEAREST_OFFSETS[k, 0], col + _NEAREST_OFFSETS[k, 1]
+                    if r < 0 or r >= h or c < 0 or c >= w:
+                        continue
+                    f = face_id[r, c]
+                    if f >= 0:
+                        best = plane[f, 2] + plane[f, 0] * (u - triangle[f, 0, 0]) + plane[f, 1] * (v - triangle[f, 0, 1])
+                        fs = face_slope[f]
+                        break
+            bias = BIAS_PX * pixel_m + rounding + 0.0
+            if not exact:
+                recv = 0.0
+                if normals.shape[0]:
+                    cos = abs(normals[p, 0] * light[0] + normals[p, 1] * light[1] + normals[p, 2] * light[2])
+                    recv = np.sqrt(max(1.0 - cos * cos, 0.0)) / max(cos, 1e-12)
+                bias += SLOPE_PX * pixel_m * (min(fs, TAN_MAX) + min(recv, TAN_MAX))
+            behind[test[j]] = depth[j] > best + bias
 
     return kernel
 

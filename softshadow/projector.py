@@ -41,6 +41,7 @@ import numpy as np
 
 from .camera import GroundGrid, PinholeCamera, look_at_camera
 from .clip import clip_near
+from .scratch import Scratch, scratch_array
 from .shadowmap import (_LOOKUP_OFFSETS, _NEAREST_OFFSETS, BIAS_PX, FACING_TOL, PRECISION_ULPS, SLOPE_PX, TAN_MAX,
                         ShadowMap, shadow_map)
 
@@ -345,12 +346,14 @@ def _light_kernel():
     return kernel
 
 
-def projector_shadow_map(projector: Projector, vertices, faces, *, facing=None) -> ProjectorShadowMap:
+def projector_shadow_map(projector: Projector, vertices, faces, *, facing=None, scratch: Scratch | None = None,
+                         name: str = "projector") -> ProjectorShadowMap:
     """The perspective shadow map of the occluding triangles (world vertices (V, 3), faces (F, 3))
     seen from ``projector``; ``shadow_px`` pixels across the slide's larger side.
 
     facing (F,) int8, optional: -1 for the faces of closed, outward-wound meshes, whose faces
     turned away from the projector are then not drawn (``rasterise_depth``); 0 otherwise.
+    scratch, name: keep the map's pixels in these buffers under this name (``softshadow.scratch``).
     """
     world = np.ascontiguousarray(vertices, np.float64).reshape(-1, 3)
     faces = np.ascontiguousarray(faces, np.int64).reshape(-1, 3)
@@ -377,7 +380,9 @@ def projector_shadow_map(projector: Projector, vertices, faces, *, facing=None) 
     if not len(faces):
         return ProjectorShadowMap(projector, None, pixel_tan, scale)
     uv = np.column_stack([ab[:, 0], -ab[:, 1]])
-    smap = shadow_map(grid, uv, -1.0 / np.maximum(z, NEAR_M), faces, facing=facing)  # originals behind: unused
+    out = (scratch_array(scratch, f"{name}.zbuf", (height, width)),
+           scratch_array(scratch, f"{name}.face_id", (height, width), np.int32))
+    smap = shadow_map(grid, uv, -1.0 / np.maximum(z, NEAR_M), faces, facing=facing, out=out)  # originals behind: unused
     # The bias's slope term in metric terms: tan of the angle between each face's normal and the
     # ray from the projector to its centroid.
     slope = np.empty(len(faces))

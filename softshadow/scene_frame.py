@@ -26,6 +26,7 @@ import dataclasses
 import functools
 import time
 from collections.abc import Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
 
@@ -34,14 +35,17 @@ from .dense_plan import DensePlan, plan_dense_points
 from .evaluate import plan_alpha_jit
 from .params import Pose, Sun
 from .plan import grid_bucket_size
+from .posed import PosedOccluder
 from .projector import Projector
 from .render import SoftShadowModel
+from .scratch import Scratch, scratch_array
 from .scene_render import SceneLights, _object_surface, projector_light
 from .visibility import Surface, VisibleSurfaces, visible_surfaces
 
-__all__ = ["FRAME_STEPS", "SceneFrame", "band_alpha", "render_frame"]
+__all__ = ["FRAME_STEPS", "FrameRenderer", "SceneFrame", "band_alpha", "render_frame"]
 
-#: The steps ``SceneFrame.milliseconds`` times, in order.
+#: The steps ``SceneFrame.milliseconds`` times (wall time; with a second thread "projectors" is
+#: the wait for it after the sun's steps).
 FRAME_STEPS = ("visibility", "projectors", "sun_plan", "sun_band", "shading")
 
 
@@ -61,11 +65,16 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
                  lights: SceneLights | None = None, sun: Sun | None = None,
                  projectors: Sequence[Projector] = (), receivers: Sequence[Surface] = (),
                  object_albedo=0.8, ground_albedo=0.8, range_k_max: float | None = None,
-                 background=0.0) -> SceneFrame:
+                 background=0.0, *, scratch: Scratch | None = None,
+                 pool: ThreadPoolExecutor | None = None) -> SceneFrame:
     """The scene's image (H, W, 3), linear radiance: ``render_scene``'s, forward only and fast.
 
     Arguments as ``render_scene``'s (flat shading, one sample per pixel); range_k_max: the k the
-    sun's penumbra bands are sized for, default the lights' k.
+    sun's penumbra bands are sized for, default the lights' k. scratch: keep the per-frame
+    arrays in these buffers (the frame's arrays are then overwritten by the next frame made
+    with them; ``FrameRenderer`` does this); pool: a thread to run the projectors on while this
+    one makes the sun's plan (and to pose the occluder while this one finds what each pixel
+    sees).
     """
     pose = Pose() if pose is None else pose
     lights = SceneLights() if lights is None else lights
@@ -74,19 +83,28 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
     ms = {}
     t = time.perf_counter()
     surfaces = [_object_surface(model, pose, object_albedo), *receivers]
-    vis = visible_surfaces(camera, surfaces, ground_albedo)
+    posed = None
+    if sun is not None:
+        posed = _submit(pool, PosedOccluder.make, model.occluder, pose, sun)
+    vis = visible_surfaces(camera, surfaces, ground_albedo, scratch=scratch)
     t = _lap(ms, "visibility", t)
-    light = projector_light(vis, surfaces, projectors)
-    t = _lap(ms, "projectors", t)
+    light = _submit(pool, projector_light, vis, surfaces, projectors, scratch=scratch)
+    if pool is None:
+        t = _lap(ms, "projectors", t)
     plan, alpha_band = None, np.zeros(0)
     if sun is not None and len(vis.pixel):
+        surface = vis.surface.reshape(-1)[vis.pixel]
+        on_object = np.where(surface == 0, vis.face.reshape(-1)[vis.pixel], -1)
         plan = plan_dense_points(model.occluder, pose, sun, vis.points, range_k_max, vis.normals,
-                                 rule=model.rule)
+                                 rule=model.rule, posed=_result(posed), faces=on_object, scratch=scratch)
         t = _lap(ms, "sun_plan", t)
         alpha_band = band_alpha(plan, vis.points, model, pose, sun, k)
         t = _lap(ms, "sun_band", t)
+    if pool is not None:  # the wait for the projectors' thread, if it is still running
+        light = _result(light)
+        t = _lap(ms, "projectors", t)
     h, w = vis.shape
-    image = np.empty((h * w, 3))
+    image = scratch_array(scratch, "frame.image", (h * w, 3))
     image[:] = np.broadcast_to(np.asarray(background, np.float64), (3,))
     sun_dir = np.zeros(3) if sun is None else -np.asarray(sun.light_np, np.float64)
     hard = plan.hard if plan is not None else np.zeros(0)
@@ -96,6 +114,38 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
                     image)
     _lap(ms, "shading", t)
     return SceneFrame(image.reshape(h, w, 3), vis, plan, ms)
+
+
+class FrameRenderer:
+    """``render_frame`` for a stream of frames: the per-frame arrays are kept between frames
+    (``softshadow.scratch``: fresh memory costs a fifth of a frame in page faults) and a second
+    thread runs the projectors while the first makes the sun's plan.
+
+    ``render(...)`` takes ``render_frame``'s arguments. A frame's arrays (image, visible, plan)
+    are overwritten by the next frame: copy what you keep. Not for use from two threads at once.
+    """
+
+    def __init__(self, threads: int = 2):
+        if threads not in (1, 2):
+            raise ValueError(f"FrameRenderer threads must be 1 or 2, got {threads!r}")
+        self.scratch = Scratch()
+        self.pool = ThreadPoolExecutor(1, thread_name_prefix="softshadow-frame") if threads == 2 else None
+
+    def render(self, *args, **kwargs) -> SceneFrame:
+        return render_frame(*args, **kwargs, scratch=self.scratch, pool=self.pool)
+
+    def close(self) -> None:
+        if self.pool is not None:
+            self.pool.shutdown()
+
+
+def _submit(pool: ThreadPoolExecutor | None, fn, *args, **kwargs):
+    """fn(...) on the pool's thread (a Future), or here and now without a pool."""
+    return fn(*args, **kwargs) if pool is None else pool.submit(fn, *args, **kwargs)
+
+
+def _result(value):
+    return value.result() if isinstance(value, Future) else value
 
 
 def band_alpha(plan: DensePlan, points: np.ndarray, model: SoftShadowModel, pose: Pose, sun: Sun,

@@ -43,6 +43,7 @@ from .plan import PointPlan
 from .posed import posed_vertices
 from .projector import Projector, projector_shadow_map
 from .render import SoftShadowModel
+from .scratch import Scratch, scratch_array
 from .visibility import Surface, VisibleSurfaces, visible_surfaces
 
 __all__ = ["SceneLights", "SceneSetup", "SceneRender", "prepare_scene", "projector_light", "shade_scene",
@@ -128,15 +129,17 @@ def prepare_scene(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, po
     light = projector_light(visible, surfaces, projectors)
     plan = None
     if sun is not None and len(visible.pixel):
-        plan = model.plan_points(sun, pose, visible.points, float(range_k_max), normals=visible.normals)
+        plan = model.plan_points(sun, pose, visible.points, float(range_k_max), normals=visible.normals,
+                                 backend="light")
     return SceneSetup(visible, light, plan, float(range_k_max))
 
 
 def projector_light(visible: VisibleSurfaces, surfaces: Sequence[Surface],
-                    projectors: Sequence[Projector]) -> np.ndarray:
+                    projectors: Sequence[Projector], *, scratch: Scratch | None = None) -> np.ndarray:
     """The projectors' irradiance (N, 3) at the visible points, each through its shadow map of
-    the surfaces that cast shadows (NumPy)."""
-    light = np.zeros((len(visible.pixel), 3))
+    the surfaces that cast shadows (NumPy); scratch: buffers for the maps and the result."""
+    light = scratch_array(scratch, "projectors.light", (len(visible.pixel), 3))
+    light.fill(0.0)
     if not projectors:
         return light
     casters = [s for s in surfaces if s.casts_shadows]
@@ -148,8 +151,9 @@ def projector_light(visible: VisibleSurfaces, surfaces: Sequence[Surface],
     else:
         verts, faces, facing = np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int8)
     points = np.ascontiguousarray(visible.points, np.float64)
-    for proj in projectors:
-        proj.add_irradiance(points, visible.normals, projector_shadow_map(proj, verts, faces, facing=facing), light)
+    for j, proj in enumerate(projectors):
+        smap = projector_shadow_map(proj, verts, faces, facing=facing, scratch=scratch, name=f"projector{j}")
+        proj.add_irradiance(points, visible.normals, smap, light)
     return light
 
 

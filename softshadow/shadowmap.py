@@ -131,7 +131,8 @@ def _facing_kernel():
 
 
 def rasterise_depth(xy: np.ndarray, depth: np.ndarray, faces: np.ndarray,
-                    shape: tuple[int, int], *, facing: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                    shape: tuple[int, int], *, facing: np.ndarray | None = None,
+                    out: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Nearest-face depth buffer of triangles, generic over the projection.
 
     xy (V, 2) pixel coordinates (col, row; pixel centres at integers); depth (V,) any
@@ -143,15 +144,22 @@ def rasterise_depth(xy: np.ndarray, depth: np.ndarray, faces: np.ndarray,
     facing (F,) int8, optional: back-face culling. A face with facing s != 0 is drawn only
     where its signed area in pixel coordinates, (p1 - p0) x (p2 - p0), has the sign of s
     (a closed mesh's faces turned away from the viewer are never the nearest: skipping them
-    halves the work and changes no pixel); 0 draws the face either way.
+    halves the work and changes no pixel); 0 draws the face either way. out: the (H, W) depth
+    (float64, or float32 for float32 depths) and face_id (int32) arrays to fill and return.
 
     Scanline: each face's rows, each row's span of columns from the face's edges, then the
     depth from the face's plane at those pixel centres; O(covered pixels + face rows).
     """
     h, w = shape
     dtype = np.result_type(depth.dtype, np.float32)
-    zbuf = np.full(h * w, np.inf, dtype)
-    fid = np.full(h * w, -1, np.int32)
+    if out is None:
+        zbuf, fid = np.empty(h * w, dtype), np.empty(h * w, np.int32)
+    else:
+        zbuf, fid = out[0].reshape(-1), out[1].reshape(-1)
+        if zbuf.dtype != dtype or fid.dtype != np.int32 or zbuf.size != h * w or fid.size != h * w:
+            raise ValueError(f"rasterise_depth out needs ({h}, {w}) arrays of {dtype} and int32")
+    zbuf.fill(np.inf)
+    fid.fill(-1)
     if len(faces):
         cull = (np.zeros(len(faces), np.int8) if facing is None
                 else np.ascontiguousarray(facing, np.int8).reshape(len(faces)))
@@ -164,60 +172,70 @@ def rasterise_depth(xy: np.ndarray, depth: np.ndarray, faces: np.ndarray,
 def _zbuffer_kernel():
     """The compiled loop of ``rasterise_depth`` (numba, compiled on first use and cached on
     disk): as array operations its many short spans cost several times the ground back end's
-    whole render."""
+    whole render.
+
+    Per face, its bounding box's pixel centres are tested against its three edges (edge
+    functions, stepped along each row): a centre within 1e-9 pixel of an edge, or on it, is
+    inside, so a centre on a shared edge belongs to both faces."""
     import numba
 
     @numba.njit(cache=True, nogil=True)
     def kernel(xy, depth, faces, facing, zbuf, fid, h, w, single):
-        tri = np.empty((3, 2))
-        tz = np.empty(3)
         for i in range(faces.shape[0]):
-            ok = True
-            for k in range(3):
-                tri[k, 0], tri[k, 1], tz[k] = xy[faces[i, k], 0], xy[faces[i, k], 1], depth[faces[i, k]]
-                ok &= np.isfinite(tri[k, 0]) and np.isfinite(tri[k, 1]) and np.isfinite(tz[k])
-            x0, y0 = tri[0, 0], tri[0, 1]
-            e1x, e1y = tri[1, 0] - x0, tri[1, 1] - y0
-            e2x, e2y = tri[2, 0] - x0, tri[2, 1] - y0
+            a, b, c = faces[i, 0], faces[i, 1], faces[i, 2]
+            x0, y0, z0 = xy[a, 0], xy[a, 1], depth[a]
+            x1, y1, z1 = xy[b, 0], xy[b, 1], depth[b]
+            x2, y2, z2 = xy[c, 0], xy[c, 1], depth[c]
+            if not (np.isfinite(x0) and np.isfinite(y0) and np.isfinite(z0) and np.isfinite(x1)
+                    and np.isfinite(y1) and np.isfinite(z1) and np.isfinite(x2) and np.isfinite(y2)
+                    and np.isfinite(z2)):
+                continue
+            e1x, e1y = x1 - x0, y1 - y0
+            e2x, e2y = x2 - x0, y2 - y0
             area = e1x * e2y - e1y * e2x
-            if not ok or abs(area) <= 1e-12 or area * facing[i] < 0:
+            if abs(area) <= 1e-12 or area * facing[i] < 0:
                 continue
-            if max(tri[0, 0], tri[1, 0], tri[2, 0]) < -0.5 or min(tri[0, 0], tri[1, 0], tri[2, 0]) > w - 0.5:
+            xmin, xmax = min(x0, x1, x2), max(x0, x1, x2)
+            ymin, ymax = min(y0, y1, y2), max(y0, y1, y2)
+            if xmax < -0.5 or xmin > w - 0.5 or ymax < -0.5 or ymin > h - 0.5:
                 continue
-            r0 = int(min(max(np.ceil(min(tri[0, 1], tri[1, 1], tri[2, 1]) - 1e-9), 0.0), h))
-            r1 = int(min(max(np.floor(max(tri[0, 1], tri[1, 1], tri[2, 1]) + 1e-9), -1.0), h - 1))
+            c0 = int(min(max(np.ceil(xmin - 1e-9), 0.0), w))  # clipped as floats: no overflow
+            c1 = int(min(max(np.floor(xmax + 1e-9), -1.0), w - 1))
+            r0 = int(min(max(np.ceil(ymin - 1e-9), 0.0), h))
+            r1 = int(min(max(np.floor(ymax + 1e-9), -1.0), h - 1))
             # Depth plane in pixel coordinates: z = z0 + gx (x - x0) + gy (y - y0).
-            dz1, dz2 = tz[1] - tz[0], tz[2] - tz[0]
+            dz1, dz2 = z1 - z0, z2 - z0
             gx = (dz1 * e2y - dz2 * e1y) / area
             gy = (dz2 * e1x - dz1 * e2x) / area
+            # Edge functions, positive inside whatever the winding: E(x, y) = A x + B y + C for
+            # the edges (0, 1), (1, 2), (2, 0); tolerances of 1e-9 pixel times each edge's length.
+            sgn = 1.0 if area > 0 else -1.0
+            ax, bx, cx = -(y1 - y0) * sgn, (x1 - x0) * sgn, 0.0
+            ay, by = -(y2 - y1) * sgn, (x2 - x1) * sgn
+            az, bz = -(y0 - y2) * sgn, (x0 - x2) * sgn
+            cx = -(ax * x0 + bx * y0)
+            cy = -(ay * x1 + by * y1)
+            cz = -(az * x2 + bz * y2)
+            tx = -1e-9 * (abs(ax) + abs(bx))
+            ty = -1e-9 * (abs(ay) + abs(by))
+            tz = -1e-9 * (abs(az) + abs(bz))
             for row in range(r0, r1 + 1):
-                # The row's span: where its line crosses the face's three edges (both ends of an
-                # edge lying on the row).
-                lo, hi = np.inf, -np.inf
-                for a in range(3):
-                    b = (a + 1) % 3
-                    xa, ya, xb, yb = tri[a, 0], tri[a, 1], tri[b, 0], tri[b, 1]
-                    if row < min(ya, yb) - 1e-9 or row > max(ya, yb) + 1e-9:
-                        continue
-                    dy = yb - ya
-                    if abs(dy) <= 1e-12:
-                        lo = min(lo, min(xa, xb))
-                        hi = max(hi, max(xa, xb))
-                    else:
-                        xc = xa + min(max((row - ya) / dy, 0.0), 1.0) * (xb - xa)
-                        lo = min(lo, xc)
-                        hi = max(hi, xc)
-                c0 = int(min(max(np.ceil(lo - 1e-9), 0.0), w))  # clipped as floats: no overflow
-                c1 = int(min(max(np.floor(hi + 1e-9), -1.0), w - 1))
+                fx = ax * c0 + bx * row + cx
+                fy = ay * c0 + by * row + cy
+                fz = az * c0 + bz * row + cz
                 base = row * w
-                z_row = tz[0] + gy * (row - y0)
+                z_row = z0 + gy * (row - y0)
                 for col in range(c0, c1 + 1):
-                    z = z_row + gx * (col - x0)
-                    if single:  # round as the buffer's float type would
-                        z = np.float64(np.float32(z))
-                    if z < zbuf[base + col]:
-                        zbuf[base + col] = z
-                        fid[base + col] = i
+                    if fx >= tx and fy >= ty and fz >= tz:
+                        z = z_row + gx * (col - x0)
+                        if single:  # round as the buffer's float type would
+                            z = np.float64(np.float32(z))
+                        if z < zbuf[base + col]:
+                            zbuf[base + col] = z
+                            fid[base + col] = i
+                    fx += ax
+                    fy += ay
+                    fz += az
 
     return kernel
 
@@ -384,16 +402,18 @@ def _planes_kernel():
 
 
 def shadow_map(grid: GroundGrid, uv: np.ndarray, depth: np.ndarray, faces: np.ndarray,
-               dtype=np.float64, *, facing: np.ndarray | None = None) -> ShadowMap:
+               dtype=np.float64, *, facing: np.ndarray | None = None,
+               out: tuple[np.ndarray, np.ndarray] | None = None) -> ShadowMap:
     """The shadow map of faces (F, 3) with light-space vertices uv (V, 2) and depths (V,) on grid.
 
     dtype: the float type of the depth buffer and the planes (float32 to measure precision);
-    facing: back-face culling per face (``rasterise_depth``).
+    facing: back-face culling per face, out: the depth and face-id arrays to fill
+    (``rasterise_depth``).
     """
     uv = np.asarray(uv, dtype)
     depth = np.asarray(depth, dtype)
     zbuf, fid = rasterise_depth(grid.to_pixel(uv).astype(dtype), depth, faces,
-                                (grid.height, grid.width), facing=facing)
+                                (grid.height, grid.width), facing=facing, out=out)
     uvd = np.column_stack([uv, depth])
     plane, slope = _face_planes(uvd, faces)
     scale = float(np.abs(uvd).max(initial=1.0))

@@ -27,6 +27,7 @@ import trimesh
 from .camera import GroundGrid, PinholeCamera
 from .clip import clip_near
 from .posed import pose_matrix
+from .scratch import Scratch, scratch_array
 from .shadowmap import rasterise_depth
 
 __all__ = ["GROUND", "NOTHING", "Surface", "VisibleSurfaces", "visible_surfaces"]
@@ -125,20 +126,25 @@ class VisibleSurfaces:
 
 
 def visible_surfaces(camera: PinholeCamera | GroundGrid, surfaces=(), ground_albedo=None,
-                     smooth: bool = False) -> VisibleSurfaces:
+                     smooth: bool = False, *, scratch: Scratch | None = None) -> VisibleSurfaces:
     """The nearest surface at every pixel of ``camera`` (see the module docstring).
 
     surfaces: a sequence of ``Surface``; ground_albedo: the ground plane z = 0's albedo (one or
     three numbers), None for no ground; smooth: normals interpolated from the vertex normals
-    (Gouraud/Phong-like, barycentric at the point) instead of the faces' own (flat, the default).
+    (Gouraud/Phong-like, barycentric at the point) instead of the faces' own (flat, the default);
+    scratch: keep the per-pixel arrays in these buffers (``softshadow.scratch``; the result is
+    then overwritten by the next call with the same scratch).
     """
     h, w = camera.height, camera.width
     surfaces = list(surfaces)
     offsets = np.cumsum([0] + [len(s.faces) for s in surfaces])
-    verts = np.vstack([s.vertices for s in surfaces]) if surfaces else np.zeros((0, 3))
-    vstart = np.cumsum([0] + [len(s.vertices) for s in surfaces])
-    faces = (np.vstack([s.faces + vstart[i] for i, s in enumerate(surfaces)]) if surfaces
-             else np.zeros((0, 3), np.int64))
+    if len(surfaces) == 1:
+        verts, faces = surfaces[0].vertices, surfaces[0].faces
+    else:
+        verts = np.vstack([s.vertices for s in surfaces]) if surfaces else np.zeros((0, 3))
+        vstart = np.cumsum([0] + [len(s.vertices) for s in surfaces])
+        faces = (np.vstack([s.faces + vstart[i] for i, s in enumerate(surfaces)]) if surfaces
+                 else np.zeros((0, 3), np.int64))
     # Closed, outward-wound surfaces: their faces turned away from the camera are never the
     # nearest, so the z-buffer skips them (in pixel coordinates, rows down, a face seen from
     # its front winds with a negative signed area).
@@ -146,14 +152,14 @@ def visible_surfaces(camera: PinholeCamera | GroundGrid, surfaces=(), ground_alb
         if surfaces else np.zeros(0, np.int8)
     top = float(max(verts[:, 2].max(initial=0.0), 0.0)) + 1.0
     directions = np.zeros((0, 3))
+    lookup = np.zeros(0, np.int64)  # the identity
     if isinstance(camera, GroundGrid):
         xy, depth = camera.to_pixel(verts), -verts[:, 2]
-        drawn, source = faces, np.arange(len(faces))
-        lookup = np.arange(h * w)
+        drawn, source = faces, np.zeros(0, np.int64)
     else:
         z_cam = verts @ camera.R[2] + camera.t[2]
         if len(verts) and z_cam.min() > NEAR_M:  # nothing to cut
-            cut, drawn, source = verts, faces, np.arange(len(faces))
+            cut, drawn, source = verts, faces, np.zeros(0, np.int64)
         else:
             # Faces cut at the near plane (a floor passing under and behind the camera stays whole
             # in view); a closed surface cut open shows its inside, so nothing is culled then.
@@ -165,7 +171,6 @@ def visible_surfaces(camera: PinholeCamera | GroundGrid, surfaces=(), ground_alb
         a, b = pc[:, 0] / zs, pc[:, 1] / zs
         xy = np.column_stack([K[0, 0] * a + K[0, 1] * b + K[0, 2], K[1, 1] * b + K[1, 2]])
         depth = -1.0 / zs
-        lookup = np.arange(h * w)
         if camera.dist is not None and np.any(camera.dist):
             import cv2
             rows, cols = np.mgrid[0:h, 0:w]
@@ -175,57 +180,56 @@ def visible_surfaces(camera: PinholeCamera | GroundGrid, surfaces=(), ground_alb
             inside = (c >= 0) & (c < w) & (r >= 0) & (r < h)
             lookup = np.where(inside, np.clip(r, 0, h - 1) * w + np.clip(c, 0, w - 1), -1)
             directions = camera.pixel_rays(cols, rows)
-    f_img = np.full(h * w, -1, np.int32)
-    if len(drawn):
-        f_img = rasterise_depth(xy, depth, drawn, (h, w), facing=facing)[1].ravel()
-    all_normals = (np.vstack([s.face_normals for s in surfaces]) if surfaces else np.zeros((0, 3)))
+    zbuf = scratch_array(scratch, "visible.zbuf", (h, w), np.float64)
+    f_img = scratch_array(scratch, "visible.face_id", (h, w), np.int32)
+    rasterise_depth(xy, depth, drawn, (h, w), facing=facing, out=(zbuf, f_img))
+    all_normals = surfaces[0].face_normals if len(surfaces) == 1 else (
+        np.vstack([s.face_normals for s in surfaces]) if surfaces else np.zeros((0, 3)))
     face_surface = np.repeat(np.arange(len(surfaces)), np.diff(offsets)) if surfaces else np.zeros(0, np.int64)
     albedos = np.array([s.albedo for s in surfaces], np.float64).reshape(-1, 3)
     ground = _albedo(ground_albedo) if ground_albedo is not None else np.zeros(3)
     if isinstance(camera, GroundGrid):
         view = np.array([0.0, camera.origin_m[0], camera.origin_m[1], camera.pixel_m, top])
-        rays = np.zeros((3, 3))
+        rays = np.zeros((6, 3))
     else:
         view = np.array([1.0, *camera.centre])
         Kinv = np.linalg.inv(camera.K)
-        rays = np.stack([Kinv[0], Kinv[1], np.zeros(3)])
-        rays = np.vstack([rays, camera.R])  # rows 0-1: K^-1's, rows 3-5: R
-    surface = np.full(h * w, NOTHING, np.int64)
-    face = np.full(h * w, -1, np.int64)
-    t_best = np.empty(h * w)
-    n = _visible_kernel()(f_img, np.ascontiguousarray(lookup, np.int64), np.ascontiguousarray(source, np.int64),
-                          verts, np.ascontiguousarray(faces, np.int64), all_normals, face_surface,
-                          np.ascontiguousarray(offsets, np.int64), view, rays, directions,
-                          ground_albedo is not None, h, w, surface, face, t_best)
-    pixel = np.empty(n, np.int64)
-    points = np.empty((n, 3))
-    normals = np.empty((n, 3))
-    albedo = np.empty((n, 3))
-    _fill_kernel()(surface, face, t_best, verts, np.ascontiguousarray(faces, np.int64), all_normals,
-                   np.ascontiguousarray(offsets, np.int64), albedos, ground, view, rays, directions, w,
-                   pixel, points, normals, albedo)
-    on_mesh = surface.ravel()[pixel] >= 0
-    if smooth and on_mesh.any():
-        # Turned as the face is (by the face's side, not the interpolated normal's: near an outline
-        # that one may lean away from the camera while the face does not).
-        vn = np.vstack([s.vertex_normals for s in surfaces])
-        fid = face[pixel[on_mesh]] + offsets[surface[pixel[on_mesh]]]
-        f = faces[fid]
-        sign = np.where(np.einsum("ij,ij->i", normals[on_mesh], all_normals[fid]) < 0, -1.0, 1.0)[:, None]
-        normals[on_mesh] = sign * _interpolate(points[on_mesh], verts[f], vn[f])
-    return VisibleSurfaces((h, w), pixel, points, normals, albedo, surface.reshape(h, w), face.reshape(h, w))
+        rays = np.vstack([Kinv[0], Kinv[1], np.zeros(3), camera.R])  # rows 0-1: K^-1's, rows 3-5: R
+    surface = scratch_array(scratch, "visible.surface", (h, w), np.int64)
+    face = scratch_array(scratch, "visible.face", (h, w), np.int64)
+    pixel = scratch_array(scratch, "visible.pixel", h * w, np.int64)
+    points = scratch_array(scratch, "visible.points", (h * w, 3))
+    normals = scratch_array(scratch, "visible.normals", (h * w, 3))
+    albedo = scratch_array(scratch, "visible.albedo", (h * w, 3))
+    n = _visible_kernel()(f_img.reshape(-1), lookup, source, verts, np.ascontiguousarray(faces, np.int64),
+                          np.ascontiguousarray(all_normals), face_surface, np.ascontiguousarray(offsets, np.int64),
+                          albedos, ground, ground_albedo is not None, view, rays, directions, h, w,
+                          surface.reshape(-1), face.reshape(-1), pixel, points, normals, albedo)
+    pixel, points, normals, albedo = pixel[:n], points[:n], normals[:n], albedo[:n]
+    if smooth:
+        on_mesh = surface.reshape(-1)[pixel] >= 0
+        if on_mesh.any():
+            # Turned as the face is (by the face's side, not the interpolated normal's: near an
+            # outline that one may lean away from the camera while the face does not).
+            vn = np.vstack([s.vertex_normals for s in surfaces])
+            fid = face.reshape(-1)[pixel[on_mesh]] + offsets[surface.reshape(-1)[pixel[on_mesh]]]
+            f = faces[fid]
+            sign = np.where(np.einsum("ij,ij->i", normals[on_mesh], all_normals[fid]) < 0, -1.0, 1.0)[:, None]
+            normals[on_mesh] = sign * _interpolate(points[on_mesh], verts[f], vn[f])
+    return VisibleSurfaces((h, w), pixel, points, normals, albedo, surface, face)
 
 
 @functools.cache
 def _visible_kernel():
-    """The compiled first pass of ``visible_surfaces`` (numba): per pixel, the ray's distance to
-    its z-buffer face's plane (exact) and to the ground, the nearer kept; returns how many
-    pixels see something. ``surface``/``face`` get the winner (NOTHING, GROUND or a mesh's)."""
+    """The compiled pass of ``visible_surfaces`` (numba): per pixel, the ray's distance to its
+    z-buffer face's plane (exact) and to the ground, the nearer kept; the pixels that see
+    something get their point, normal (turned towards the camera) and albedo, in pixel order.
+    Returns how many do. ``surface``/``face`` get NOTHING, GROUND or a mesh's index and face."""
     import numba
 
     @numba.njit(cache=True, nogil=True)
-    def kernel(f_img, lookup, source, verts, faces, normals, face_surface, offsets, view, rays, directions,
-               has_ground, h, w, surface, face, t_best):
+    def kernel(f_img, lookup, source, verts, faces, normals, face_surface, offsets, albedos, ground, has_ground,
+               view, rays, directions, h, w, surface, face, pixel, points, out_normals, albedo):
         n = 0
         for p in range(h * w):
             row, col = p // w, p % w
@@ -247,9 +251,9 @@ def _visible_kernel():
                 dz = nx * rays[3, 2] + ny * rays[4, 2] + rays[5, 2]
             t_mesh = np.inf
             fid = -1
-            q = lookup[p]
+            q = p if lookup.shape[0] == 0 else lookup[p]
             if q >= 0 and f_img[q] >= 0:
-                fid = source[f_img[q]]
+                fid = f_img[q] if source.shape[0] == 0 else source[f_img[q]]
                 nx, ny, nz = normals[fid, 0], normals[fid, 1], normals[fid, 2]
                 v0 = faces[fid, 0]
                 denom = nx * dx + ny * dy + nz * dz
@@ -262,68 +266,31 @@ def _visible_kernel():
                 t = -oz / dz
                 if t > 0:
                     t_ground = t
-            if t_mesh <= t_ground and np.isfinite(t_mesh):
+            if t_mesh <= t_ground and t_mesh < np.inf:
                 s = face_surface[fid]
                 surface[p] = s
                 face[p] = fid - offsets[s]
-                t_best[p] = t_mesh
-                n += 1
-            elif np.isfinite(t_ground):
-                surface[p] = GROUND
-                t_best[p] = t_ground
-                n += 1
-        return n
-
-    return kernel
-
-
-@functools.cache
-def _fill_kernel():
-    """The compiled second pass of ``visible_surfaces`` (numba): the points, normals (turned
-    towards the camera) and albedos of the pixels that see something, in pixel order."""
-    import numba
-
-    @numba.njit(cache=True, nogil=True)
-    def kernel(surface, face, t_best, verts, faces, normals, offsets, albedos, ground, view, rays, directions,
-               w, pixel, points, out_normals, albedo):
-        i = 0
-        for p in range(surface.shape[0]):
-            s = surface[p]
-            if s == NOTHING:
-                continue
-            row, col = p // w, p % w
-            # The pixel's ray: a top-down map's (origin, pixel size, height in view[1:5]) or a
-            # pinhole camera's (centre in view[1:4]; K^-1's first two rows and R in rays;
-            # precomputed directions for a camera with lens distortion).
-            if view[0] == 0.0:
-                ox, oy, oz = view[1] + col * view[3], view[2] - row * view[3], view[4]
-                dx, dy, dz = 0.0, 0.0, -1.0
-            elif directions.shape[0]:
-                ox, oy, oz = view[1], view[2], view[3]
-                dx, dy, dz = directions[p, 0], directions[p, 1], directions[p, 2]
-            else:
-                ox, oy, oz = view[1], view[2], view[3]
-                nx = rays[0, 0] * col + rays[0, 1] * row + rays[0, 2]
-                ny = rays[1, 0] * col + rays[1, 1] * row + rays[1, 2]
-                dx = nx * rays[3, 0] + ny * rays[4, 0] + rays[5, 0]
-                dy = nx * rays[3, 1] + ny * rays[4, 1] + rays[5, 1]
-                dz = nx * rays[3, 2] + ny * rays[4, 2] + rays[5, 2]
-            t = t_best[p]
-            pixel[i] = p
-            points[i, 0], points[i, 1], points[i, 2] = ox + t * dx, oy + t * dy, oz + t * dz
-            if s >= 0:
-                fid = face[p] + offsets[s]
+                t = t_mesh
                 nx, ny, nz = normals[fid, 0], normals[fid, 1], normals[fid, 2]
-                for c in range(3):
-                    albedo[i, c] = albedos[s, c]
-            else:
+                a0, a1, a2 = albedos[s, 0], albedos[s, 1], albedos[s, 2]
+            elif t_ground < np.inf:
+                surface[p] = GROUND
+                face[p] = -1
+                t = t_ground
                 nx, ny, nz = 0.0, 0.0, 1.0
-                for c in range(3):
-                    albedo[i, c] = ground[c]
+                a0, a1, a2 = ground[0], ground[1], ground[2]
+            else:
+                surface[p] = NOTHING
+                face[p] = -1
+                continue
+            pixel[n] = p
+            points[n, 0], points[n, 1], points[n, 2] = ox + t * dx, oy + t * dy, oz + t * dz
             if nx * dx + ny * dy + nz * dz > 0:  # towards the camera: the side it sees is lit
                 nx, ny, nz = -nx, -ny, -nz
-            out_normals[i, 0], out_normals[i, 1], out_normals[i, 2] = nx, ny, nz
-            i += 1
+            out_normals[n, 0], out_normals[n, 1], out_normals[n, 2] = nx, ny, nz
+            albedo[n, 0], albedo[n, 1], albedo[n, 2] = a0, a1, a2
+            n += 1
+        return n
 
     return kernel
 
