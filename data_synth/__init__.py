@@ -1,7 +1,7 @@
 """data_synth: synthetic photo folders with known truth, rendered by physics or by the model.
 
 ``synthesize(out_dir, preset="table2", ...)`` writes a photo folder in the
-CONVENTIONS format (images, scene.toml, truth.json). The default renderer casts
+format of docs/formats.md (images, scene.toml, truth.json). The default renderer casts
 rays against the mesh for a sun disk of finite angular radius plus a uniform
 sky (``data_synth.physical``), independent of the project's shadow model; the
 ``model`` renderer uses softshadow.render.SoftShadowModel. See docs/data_synth.md.

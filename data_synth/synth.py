@@ -1,6 +1,6 @@
 """``synthesize``: render a preset into a photo folder (images, scene.toml, truth.json).
 
-Folder format per CONVENTIONS ("Photo folders", "scene.toml",
+Folder format as in docs/formats.md ("Photo folders", "scene.toml",
 "softshadow synth"). truth.json holds, per group, the physical truth of the
 light (range_k = tan(sun radius), rho = E_sky / (E_sun_h + E_sky) on open
 ground), the group's sun, and its photos; plus per-photo details (exact time
@@ -20,8 +20,9 @@ import numpy as np
 import trimesh
 
 from scene import CameraSpec, ObjectSpec, PhotoSpec, ReceiverSpec, SceneSpec, SiteSpec, dump_scene
-from softshadow import (GroundGrid, PinholeCamera, brightness_to_paper, builtin_mesh, load_mesh, one_blas_thread,
-                        pose_matrix)
+from softshadow import GroundGrid, PinholeCamera, brightness_to_paper, builtin_mesh, load_mesh
+from softshadow import one_blas_thread
+from softshadow.internal import pose_matrix
 
 from .camera_pipeline import camera_pipeline, fit_handheld_camera, topdown_grid
 from .image_io import EXTENSIONS, FORMATS, PhotoMetadata, write_corrupt_jpeg, write_photo

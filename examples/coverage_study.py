@@ -15,7 +15,7 @@ default options and compared with its truth:
   identifiable (range_k is an upper bound) when k_true <= range_k;
 - rho is covered when |rho - rho_true| <= 2 rho_stderr.
 
-``--calibrate`` fits the systematic floor (``fitting.uncertainty.SystematicFloor``) to
+``--calibrate`` fits the systematic floor (``fitting.solve.uncertainty.SystematicFloor``) to
 the records: the smallest floor (on a grid) that covers at least ``--target`` of the
 k and rho values within 2 sigma. Calibrate on seeds that the coverage study does not
 use (the defaults: calibration 1000-1011, coverage 0-29). ``--from-records`` recomputes
@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from fitting import FitOptions, FolderError, fit_folder
-from fitting.uncertainty import CALIBRATED_FLOOR, SystematicFloor, systematic_errors
+from fitting.solve.uncertainty import CALIBRATED_FLOOR, SystematicFloor, systematic_errors
 
 PRESET_CYCLE = ("table2", "pillar", "ball", "dragon")
 SIZE_CYCLE = ((640, 480), (800, 600), (1024, 768))

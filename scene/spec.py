@@ -1,4 +1,4 @@
-"""``scene.toml``: reading and writing the photo-folder scene description (CONVENTIONS).
+"""``scene.toml``: reading and writing the photo-folder scene description (docs/formats.md).
 
 Plain dataclasses, validated on load with messages that name the file and
 key. Unknown tables and keys are refused by name (with the nearest known
@@ -15,7 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from softshadow import FALLOFFS, GroundGrid, PinholeCamera, Projector, slide_from_text
+from softshadow import GroundGrid, PinholeCamera, Projector, slide_from_text
+from softshadow.internal import FALLOFFS
 
 __all__ = ["NO_GEOMETRY", "TABLES", "SceneError", "SiteSpec", "ObjectSpec", "ReceiverSpec", "CameraSpec", "PhotoSpec",
            "ProjectorSpec", "SceneSpec",

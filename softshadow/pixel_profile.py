@@ -19,7 +19,7 @@ of 0.5-0.9 px, where it read the blur low and k 20-33 % high (docs/fitting.md).
 
 The renderer's own images average the profile over the pixel's exact footprint (a box in
 each of the pixel's two directions, ``penumbra.footprint_profile_alpha``) and add no camera
-blur; this Gaussian is the model of a photographed pixel, the fitter's (``fitting.model``).
+blur; this Gaussian is the model of a photographed pixel, the fitter's (``fitting.solve.model``).
 """
 
 from __future__ import annotations

@@ -127,7 +127,7 @@ def object_mask(occ: Occluder, pose: Pose, camera: PinholeCamera | GroundGrid) -
 class SoftShadowModel:
     """The expanded-shadow-volume soft shadow of one occluder.
 
-    rule: "edge" (default, CONVENTIONS) or "paper" (the seed's vertex normals).
+    rule: "edge" (default, docs/formats.md) or "paper" (the seed's vertex normals).
     profile: "linear" (the seed's ramp) or "disk" (occluded fraction of a disk).
     footprint: images (``ground_map``) average alpha over each pixel's footprint, in
     penumbra units (``footprint_profile_alpha``), instead of sampling pixel centres

@@ -1,11 +1,31 @@
-"""The ``softshadow`` command: render, fit, synth, demo, bench (the layer above all packages)."""
+"""The ``softshadow`` command: render, fit, synth, demo, board, bench."""
 
 from __future__ import annotations
 
 import argparse
 import sys
 
-__all__ = ["main"]
+__all__ = ["build_parser", "main"]
+
+DESCRIPTION = """Measure outdoor soft shadows from photographs: the range k and the brightness rho of the
+expanded-shadow-volume soft shadow (Shoji, Murayama and Konno), per time of day."""
+EPILOG = """Start with `softshadow demo`; fit your own photos with `softshadow fit PHOTO_DIR --out OUT`.
+Each command has its own --help. Documentation: the docs/ folder of the source (mkdocs serve)."""
+
+
+class _HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Help with each option's default, where it has one and the help does not already say it."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if ("default" in text or action.default in (None, False, argparse.SUPPRESS)
+                or action.option_strings == [] or isinstance(action.default, bool)):
+            return text
+        return f"{text} (default: %(default)s)"
+
+
+def _parser(sub, name: str, **kwargs):
+    return sub.add_parser(name, formatter_class=_HelpFormatter, **kwargs)
 
 
 def _use_compilation_cache() -> None:
@@ -21,7 +41,7 @@ def _fail(command: str, message: str, code: int = 1) -> int:
 
 # -- render -----------------------------------------------------------------------------------
 def _add_render(sub):
-    p = sub.add_parser("render", help="render the model's soft shadow for a scene.toml to a PNG",
+    p = _parser(sub, "render", help="render the model's soft shadow for a scene.toml to a PNG",
                        description="Render the expanded-shadow-volume soft shadow of a scene.")
     p.add_argument("--scene", required=True, help="scene.toml (object, camera, sun or time + site)")
     p.add_argument("--out", required=True, help="output PNG (8-bit sRGB)")
@@ -32,8 +52,12 @@ def _add_render(sub):
     p.add_argument("--rho", type=float, help="brightness as rho (overrides --brightness); default 0.3")
     p.add_argument("--sun-azimuth", type=float, help="degrees clockwise from north")
     p.add_argument("--sun-elevation", type=float, help="degrees above the horizon")
-    p.add_argument("--rule", default="edge", choices=("edge", "paper"))
-    p.add_argument("--profile", default="linear", choices=("linear", "disk"))
+    p.add_argument("--rule", default="edge", choices=("edge", "paper"),
+                   help="how the silhouette expands: edge (each edge along its outward normal, so k is a "
+                        "property of the light) or paper (the paper's vertex normals N1 + N2)")
+    p.add_argument("--profile", default="linear", choices=("linear", "disk"),
+                   help="the penumbra's profile: linear (the paper's ramp) or disk (the sun's disk behind a "
+                        "straight edge)")
     p.add_argument("--size", help="image size WxH (default: 512x512 for a top-down map, the principal "
                                    "point's image for an explicit camera)")
     p.add_argument("--pixel-m", type=float, help="metres per pixel for a default top-down map")
@@ -88,7 +112,7 @@ def _run_render(args) -> int:
 
 # -- fit ----------------------------------------------------------------------------------------
 def _add_fit(sub):
-    p = sub.add_parser("fit", help="fit range and brightness per time of day from a photo folder",
+    p = _parser(sub, "fit", help="fit range and brightness per time of day from a photo folder",
                        description="Fit the soft shadow's range k and brightness rho per time of day.")
     p.add_argument("photo_dir", metavar="PHOTO_DIR", help="a photo folder (with --recursive: ROOT, a folder of them)")
     p.add_argument("--out", required=True, metavar="OUT_DIR", help="results.json, table2.md/.csv, plots/")
@@ -102,14 +126,17 @@ def _add_fit(sub):
                    help="with --recursive and --scheduler local: worker processes (default: one per core)")
     p.add_argument("--force", action="store_true", help="overwrite existing results and refit all groups")
     p.add_argument("--jobs", type=int, default=1, help="groups fitted at once (threads; default 1)")
-    p.add_argument("--verbose", action="store_true", help="print solver details")
+    p.add_argument("--verbose", action="store_true", help="print solver details, and the traceback of an unexpected error")
     p.add_argument("--profile", default="disk", choices=("auto", "linear", "disk"),
                    help="penumbra profile: disk (the sun's, default: k reads tan(sun radius)), "
                         "linear (the paper's ramp), or auto (chosen by BIC)")
-    p.add_argument("--rule", default="edge", choices=("edge", "paper"))
+    p.add_argument("--rule", default="edge", choices=("edge", "paper"),
+                   help="how the silhouette expands: edge (each edge along its outward normal) or paper "
+                        "(the paper's vertex normals)")
     p.add_argument("--range-k-max", type=float, default=0.03, help="largest k searched (default 0.03)")
     p.add_argument("--half-size", action="store_true", help="decode RAW at half size (faster)")
-    p.add_argument("--no-plots", dest="plots", action="store_false")
+    p.add_argument("--no-plots", dest="plots", action="store_false",
+                   help="write results.json and the tables only (no plots, no index.html figures)")
     p.add_argument("--overlays", default="first", choices=("first", "all"),
                    help="overlay plots of the fitted shadow for the first photo of each group "
                         "(default) or for every photo")
@@ -143,7 +170,7 @@ def _run_fit(args) -> int:
 
 # -- synth / demo / bench -----------------------------------------------------------------------
 def _add_synth(sub, with_arguments: bool):
-    p = sub.add_parser("synth", help="write a synthetic photo folder with known truth",
+    p = _parser(sub, "synth", help="write a synthetic photo folder with known truth",
                        description="Synthesise a photo folder (images, scene.toml, truth.json).")
     from .synth_command import add_arguments, run
     if with_arguments:  # their choices come from data_synth, which loads trimesh and JAX (seconds)
@@ -152,11 +179,11 @@ def _add_synth(sub, with_arguments: bool):
 
 
 def _add_demo(sub):
-    p = sub.add_parser("demo", help="synthesise the paper's scene, fit it, print the table",
+    p = _parser(sub, "demo", help="synthesise the paper's scene, fit it, print the table",
                        description="Synthesise the table2 preset (physical renderer), fit it and print "
                                    "the fitted table beside the truth and the paper's hand-set values.")
     p.add_argument("--out", default="softshadow-demo", help="where to write the photos and results")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="random seed of the synthetic photos (noise, texture)")
     p.add_argument("--size", default="800x600", help="photo size (default 800x600)")
     p.set_defaults(func=_run_demo)
 
@@ -166,10 +193,19 @@ def _run_demo(args) -> int:
     return run_demo(args)
 
 
+def _add_board(sub):
+    p = _parser(sub, "board", help="write the printable ChArUco board that registers your photos",
+                description="Write a ChArUco board to print (PDF or PNG at its true size), and print the "
+                            "scene.toml [camera] entry that registers photos of it.")
+    from .board_command import add_arguments, run_board
+    add_arguments(p)
+    p.set_defaults(func=run_board)
+
+
 def _add_bench(sub):
-    p = sub.add_parser(
-        "bench", help="time the renderers against a known truth; print JSON",
-        description="Benchmarks: speed against error, as JSON. Without --what (overview, a minute or two on "
+    p = _parser(
+        sub, "bench", help="time the renderers and the fitter against a known truth (tables; JSON with --json)",
+        description="Benchmarks (from a source checkout): speed against error, as tables (the JSON with --json). Without --what (overview, a minute or two on "
                     "2 cores): the pillar, the ball and the real dragon at 128x128, each rendered by this "
                     "renderer (keys pillar, ball, dragon), the Shoji paper's algorithm, hard and soft (paper), "
                     "the naive every-pixel-against-every-edge renderer (naive) and Mitsuba 3 at 4/16/64 spp "
@@ -177,7 +213,8 @@ def _add_bench(sub):
                     "map and the penumbra band) against a converged physical render, cached on disk; "
                     "'summary' lists them with times as multiples of this renderer's. The full report: "
                     "--what sweep --json docs/speed_vs_error.json --report docs/speed_vs_error.md.")
-    p.add_argument("--json", dest="json_path", help="also write the JSON here")
+    p.add_argument("--json", dest="json_path", metavar="FILE",
+                   help="write the JSON document here (- : print it instead of the tables)")
     p.add_argument("--quick", action="store_true", help="fewer repeats and sizes")
     p.add_argument("--what", default="overview",
                    choices=("overview", "render", "fit", "all", "sweep", "receiver", "precision", "lod",
@@ -200,21 +237,34 @@ def _add_bench(sub):
 
 
 def _run_bench(args) -> int:
-    from .bench import run_bench
-    return run_bench(args)
+    from .checkout import import_benchmarks
+    benchmarks = import_benchmarks()
+    if benchmarks is None:
+        return _fail("bench", "the benchmarks live in a source checkout, not in the installed package: "
+                              "git clone the repository, pip install -e . there, and run softshadow bench from it", 2)
+    return benchmarks.run_bench(args)
 
 
-def main(argv=None) -> int:
-    argv = sys.argv[1:] if argv is None else list(argv)
-    parser = argparse.ArgumentParser(prog="softshadow", description=__doc__)
+def build_parser(with_synth_arguments: bool = True) -> argparse.ArgumentParser:
+    """The ``softshadow`` command's parser. The synth command's options come from data_synth, which
+    loads trimesh and JAX (seconds): ``with_synth_arguments=False`` leaves them out."""
+    parser = argparse.ArgumentParser(prog="softshadow", description=DESCRIPTION, epilog=EPILOG,
+                                     formatter_class=_HelpFormatter)
     from softshadow import __version__
     parser.add_argument("--version", action="version", version=f"softshadow {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     _add_render(sub)
     _add_fit(sub)
-    _add_synth(sub, with_arguments="synth" in argv)
+    _add_synth(sub, with_arguments=with_synth_arguments)
     _add_demo(sub)
+    _add_board(sub)
     _add_bench(sub)
+    return parser
+
+
+def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(with_synth_arguments="synth" in argv)
     args = parser.parse_args(argv)
     try:
         _use_compilation_cache()

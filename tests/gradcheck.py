@@ -15,7 +15,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from softshadow import Pose, ShadowParams, Sun, concatenate_plans
+from softshadow import Pose, ShadowParams, Sun
+from softshadow.internal import concatenate_plans
 
 PARAM_NAMES = ("range_k", "rho", "azimuth", "elevation", "x", "y", "z", "rot_x", "rot_y", "rot_z")
 # Central-difference steps: small against the scales (k >= 0.01, penumbra widths >= ~5 mm).

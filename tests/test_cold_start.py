@@ -121,8 +121,8 @@ def test_no_plots_asks_the_fit_for_no_overlay(monkeypatch):
     # of the fitted shadow, 0.4-0.5 s a group): under --no-plots none is drawn.
     import types
 
-    import fitting.api as api
-    import fitting.solve as solve
+    import fitting.folder.checked as checked
+    import fitting.solve.group as solve
     from fitting import FitOptions, GroupResult, PhotoGroup
     asked = []
 
@@ -132,5 +132,5 @@ def test_no_plots_asks_the_fit_for_no_overlay(monkeypatch):
     monkeypatch.setattr(solve, "fit_group", fit_group)
     views = [types.SimpleNamespace(name="a.jpg", sun_source="scene")]
     for plots in (False, True):
-        api._fit_checked(None, None, views, PhotoGroup("10:30", "10:30", ["a.jpg"]), FitOptions(plots=plots))
+        checked.fit_checked(None, None, views, PhotoGroup("10:30", "10:30", ["a.jpg"]), FitOptions(plots=plots))
     assert asked == [(True, "none"), (True, "first")]

@@ -1,4 +1,4 @@
-"""The dark side of a cast shadow is one connected region (fitting.shadow_cues.dark_side_regions,
+"""The dark side of a cast shadow is one connected region (fitting.edges.cues.dark_side_regions,
 scattered_dark_sides), on tiny synthetic log images, and end to end on one synthetic shadow."""
 
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-from fitting.shadow_cues import dark_side_regions, scattered_dark_sides
+from fitting.edges.cues import dark_side_regions, scattered_dark_sides
 
 H, W = 64, 80
 LIT, UMBRA = np.log(0.5), np.log(0.5 * 0.3)
@@ -72,7 +72,7 @@ def test_a_few_profiles_in_the_main_shadow_and_some_strays_are_not_flagged():
 
 
 def test_a_measured_shadow_is_not_warned_about_scattered_dark_sides(monkeypatch):
-    import fitting.edge_measure as edge_measure
+    import fitting.edges.measure as edge_measure
 
     seen = []
     def spy(labels):

@@ -1,4 +1,4 @@
-"""The fit's steps one by one (``fitting.solve``): parameter layout, covariance, the k/rho
+"""The fit's steps one by one (``fitting.solve.group``): parameter layout, covariance, the k/rho
 transform, penumbra widths, identifiability and the robust scale."""
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from fitting.model import FitParams, Prediction, k_from_raw, rho_from_raw
-from fitting.solve import (MAX_K_REL_STDERR, MIN_PENUMBRA_PX, MIN_PENUMBRA_SAMPLES, NARROW_PENUMBRA_PX, MIN_UMBRA_SAMPLES, UMBRA_ALPHA,
+from fitting.solve.model import FitParams, Prediction, k_from_raw, rho_from_raw
+from fitting.solve.group import (MAX_K_REL_STDERR, MIN_PENUMBRA_PX, MIN_PENUMBRA_SAMPLES, NARROW_PENUMBRA_PX, MIN_UMBRA_SAMPLES, UMBRA_ALPHA,
                            SampleCounts, covariance, identifiability, k_rho_with_errors, penumbra_width_px,
                            robust_delta, no_ramp_bound, sample_counts, umbra_warning)
 

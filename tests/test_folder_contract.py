@@ -167,7 +167,7 @@ def test_half_a_sun_and_an_unreadable_time_are_one_line_each(bad_photos):
 
 
 def test_judge_rules():
-    from fitting.photo_check import PhotoAgreement, judge
+    from fitting.verdict.photo_check import PhotoAgreement, judge
     ok = [PhotoAgreement(f"{i}.jpg", 0.02 + 0.002 * i, 0.8, 0.8) for i in range(3)]
     assert judge(ok).leave_out == [] and judge(ok).warnings == [] and judge(ok).no_shadow is None
     lens_cap = ok[:2] + [PhotoAgreement("cap.jpg", 0.05, 0.01, 0.7)]
@@ -188,7 +188,7 @@ def test_fit_quality_rules():
     the texture also makes k a bound. A clean photo (the demo's residuals) passes."""
     import dataclasses
 
-    from fitting.photo_check import TEXTURE_DEPTH_RATIO, PhotoAgreement, fit_quality, judge
+    from fitting.verdict.photo_check import TEXTURE_DEPTH_RATIO, PhotoAgreement, fit_quality, judge
     clean = PhotoAgreement("a.jpg", 0.02, 0.84, 0.84, 536, 312, 0.017, 0.004)
     assert fit_quality([clean]) == ([], None) and judge([clean]).warnings == []
     # An umbra that holds two levels (part of a sheet normalised as ground): 8 times the lit residual.
@@ -234,7 +234,7 @@ def test_k_beyond_range_k_max_is_not_trusted(one_group):
 
 def test_resume_key_covers_photos_scene_options_and_software(one_group, tmp_path):
     from fitting import FitOptions, fit_folder
-    from fitting.resume import group_key
+    from fitting.folder.resume import group_key
     folder, out = _copy(one_group, tmp_path / "f"), tmp_path / "out"
     options = FitOptions(plots=False)
     calls = []
@@ -292,7 +292,7 @@ def test_ctrl_c_prints_one_line_and_resumes(one_group, tmp_path):
         # A child inherits an ignored SIGINT from its parent (the test runner may run with one),
         # and Python then never raises KeyboardInterrupt: start as a shell would start it.
         "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
-        "import fitting.solve as solve\n"
+        "import fitting.solve.group as solve\n"
         "fit_group = solve.fit_group\n"
         "def waiting_fit_group(*args, **kwargs):\n"
         "    print('test: fitting a group', file=sys.stderr, flush=True)\n"
@@ -460,7 +460,7 @@ def test_resume_key_covers_the_files_the_scene_names(tmp_path):
     the photo) changes the key; the file's name alone would not."""
     from scene import scene_from_dict
     from fitting import FitOptions
-    from fitting.resume import group_key, photo_digest
+    from fitting.folder.resume import group_key, photo_digest
 
     photo = tmp_path / "a.jpg"
     photo.write_bytes(b"photo")

@@ -7,7 +7,7 @@ from zoneinfo import ZoneInfo
 
 import pytest
 
-from fitting.grouping import NO_TIME_REASON, PhotoGroup, group_photos, photo_time
+from fitting.photos.grouping import NO_TIME_REASON, PhotoGroup, group_photos, photo_time
 from scene import SceneError, scene_from_dict
 
 JST = dt.timezone(dt.timedelta(hours=9))

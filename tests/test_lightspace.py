@@ -26,8 +26,8 @@ from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 from skimage.measure import find_contours
 
-from softshadow import (GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun, object_mask, plan_points,
-                        project_to_ground)
+from softshadow import GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun
+from softshadow.internal import object_mask, plan_points, project_to_ground
 from softshadow.meshes import builtin_mesh
 from softshadow.shadowmap import BIAS_PX, LightFrame, depth_bias, faces_away, rasterise_depth
 from test_render_gradients import check_point_gradients, pillar_shadow_samples, scene, theta_of, unpack

@@ -1,5 +1,5 @@
 """Levels of detail: the decimated series (softshadow.lod) and the fitter's automatic choice
-(fitting.lod) on a small mesh."""
+(fitting.solve.lod) on a small mesh."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from softshadow import PAPER_FACE_COUNTS, decimate, lod_series
 
 @pytest.fixture(scope="module")
 def dragon():
-    from softshadow_cli.bench.meshes import mit_dragon
+    from benchmarks.meshes import mit_dragon
     return mit_dragon(full=True)
 
 
@@ -41,7 +41,7 @@ def test_series_drops_levels_the_mesh_cannot_fill():
 
 
 def test_fitter_counts_halve_down_to_the_coarsest():
-    from fitting.lod import fitter_face_counts
+    from fitting.solve.lod import fitter_face_counts
     assert fitter_face_counts(5120) == [5120, 2560, 1280, 640, 300]
     assert fitter_face_counts(41384)[:3] == [41384, 20692, 10346] and fitter_face_counts(41384)[-1] == 300
     assert fitter_face_counts(500) == [500, 300]
@@ -83,7 +83,7 @@ def test_automatic_choice_follows_the_tolerance(ball_folder):
     assert abs(fixed.lod_faces - 1000) <= 10
     # The coarsest level really changes the fit, so the strict choice kept the detail for a reason.
     # (Against the statistical error, the one lod's tolerance is measured in: the stated error adds
-    # the systematic floor of fitting.uncertainty.)
+    # the systematic floor of fitting.solve.uncertainty.)
     assert abs(loose.range_k - off.range_k) > off.range_stderr_stat
     doc = off.to_json()
     assert doc["lod_faces"] == 5120 and doc["mesh_faces"] == 5120
@@ -94,9 +94,9 @@ def test_noise_lets_a_coarser_level_through(ball_folder, tmp_path):
     import jax
 
     from data_synth import model_topdown_folder
-    from fitting.lod import LevelsOfDetail, ShadowReference, choice_samples
+    from fitting.solve.lod import LevelsOfDetail, ShadowReference, choice_samples
     from softshadow import Pose, SoftShadowModel, Sun
-    from fitting.views import PhotoView
+    from fitting.photos.views import PhotoView
     import cv2
 
     ball = _ball()
@@ -129,7 +129,7 @@ def test_noise_lets_a_coarser_level_through(ball_folder, tmp_path):
 
 
 def test_levels_are_kept_per_mesh_between_fits():
-    from fitting.lod import levels_of_detail
+    from fitting.solve.lod import levels_of_detail
     ball = _ball()
     lods = levels_of_detail(ball)
     faces, level = lods.level(1000)
@@ -144,7 +144,7 @@ def test_levels_are_kept_per_mesh_between_fits():
 def test_stable_pick_keeps_the_same_pixels_when_the_band_moves():
     """Common random numbers: a band one row wider keeps almost every pixel the narrower band's
     draw kept, where a fresh random draw would keep about half of them."""
-    from fitting.samples import stable_pick
+    from fitting.samples.photo_samples import stable_pick
     rows, cols = np.nonzero(np.ones((100, 200), bool))
     wide_rows, wide_cols = np.nonzero(np.ones((101, 200), bool))
     a = stable_pick(rows, cols, (120, 200), 5000, seed=3)
@@ -170,7 +170,7 @@ def test_cli_reports_the_level_in_results_and_table(ball_folder, tmp_path):
 
 
 def test_masking_report_marks_the_levels_a_slide_hides():
-    from softshadow_cli.bench.lod_grid import masking_report
+    from benchmarks.lod_grid import masking_report
     result = {"faces": [41384, 5000, 300], "slides": [{"amplitude": 1.0, "frequency": 0.0},
                                                     {"amplitude": 1.0, "frequency": 15.0}],
               "ssim": [[1.0, 0.80, 0.40], [1.0, 0.97, 0.70]], "hidden_threshold": 0.95,
@@ -185,7 +185,7 @@ def test_masking_report_marks_the_levels_a_slide_hides():
 def test_bench_ceiling_is_the_fastest_levels_saving():
     """The LOD benchmark's ceiling: the fastest decimated level against the full mesh (off and
     auto never count), and the mesh's share of the full mesh's warm fit."""
-    from softshadow_cli.bench.lod import _ceiling
+    from benchmarks.lod import _ceiling
     rows = [{"lod": "off", "faces": 41384, "seconds": 2.0}, {"lod": "auto", "faces": 41384, "seconds": 0.5},
             {"lod": 20692, "faces": 20692, "seconds": 1.6}, {"lod": 1000, "faces": 1000, "seconds": 1.25},
             {"lod": 300, "faces": 300, "seconds": 1.3}]
@@ -195,7 +195,7 @@ def test_bench_ceiling_is_the_fastest_levels_saving():
 def test_bench_shifts_are_in_the_full_meshs_errors():
     """The LOD benchmark's shifts: a level's k and rho minus the full mesh's, over the full mesh's
     stated and statistical errors, and its warm speed-up."""
-    from softshadow_cli.bench.lod import _shifts
+    from benchmarks.lod import _shifts
     full = {"error": None, "range_k": 0.010, "rho": 0.25, "range_stderr": 0.001, "rho_stderr": 0.002,
             "range_stderr_stat": 0.0005, "rho_stderr_stat": 0.001, "seconds": 2.0}
     row = dict(full, range_k=0.0095, rho=0.254, seconds=0.5)

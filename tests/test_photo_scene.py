@@ -15,11 +15,11 @@ import pytest
 from PIL import Image
 from scipy import ndimage
 
-from fitting.edge_measure import measure_shadow_edges
-from fitting.ground_region import ground_region
-from fitting.ignore_masks import IgnoreMaskError, ignore_mask_path, is_auxiliary, read_ignore_mask
-from fitting.photos import list_photos
-from fitting.shadow_cues import bluer_umbrae, log_rho_modes, mode_of_log_rho, reliability
+from fitting.edges.measure import measure_shadow_edges
+from fitting.edges.ground_region import ground_region
+from fitting.photos.ignore_masks import IgnoreMaskError, ignore_mask_path, is_auxiliary, read_ignore_mask
+from fitting.photos.read import list_photos
+from fitting.edges.cues import bluer_umbrae, log_rho_modes, mode_of_log_rho, reliability
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 SUN = np.array([1.0, 0.97, 0.9])
@@ -177,7 +177,7 @@ def test_separate_outlines_with_different_steps_make_the_measurement_unreliable(
 
 def test_an_outline_whose_texture_changes_across_it_is_two_materials():
     """Per profile the texture ratio is noisy (a kerb's ranged 1.7-7); the outline's median decides."""
-    from fitting.shadow_cues import textured_outlines
+    from fitting.edges.cues import textured_outlines
 
     labels = np.array([1] * 6 + [2] * 6 + [3] * 2 + [4] * 3)
     ratios = np.array([3.1, 1.7, 6.9, 2.4, 4.0, np.nan,       # a kerb: median 3.1, x sqrt(0.27) = 1.6
@@ -225,8 +225,8 @@ def test_ignore_mask_reading_sizes_and_errors(tmp_path):
 
 def test_an_ignore_mask_beside_the_photo_removes_a_decoy_shadow(tmp_path):
     """Two shadows of different depth: the mask over the darker one leaves the other's rho."""
-    from fitting.api import fit_folder
-    from fitting.photos import linear_to_srgb
+    from fitting.folder.api import fit_folder
+    from fitting.photos.read import linear_to_srgb
     rng = np.random.default_rng(2)
     h, w = 160, 220
     yy, xx = np.mgrid[0:h, 0:w]

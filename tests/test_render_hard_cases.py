@@ -20,7 +20,8 @@ import pytest
 import trimesh
 
 from gradcheck import PARAM_NAMES, STEPS, check_point_gradients
-from softshadow import GroundGrid, Pose, PosedOccluder, ShadowParams, SoftShadowModel, Sun
+from softshadow import GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun
+from softshadow.internal import PosedOccluder
 from softshadow.meshes import builtin_mesh
 
 

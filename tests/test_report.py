@@ -1,7 +1,7 @@
 """The report writer: results.json, Table 2 (Markdown, CSV, terminal) and plots.
 
 FitResults are built by hand (no fitting here), so these tests are fast and check
-only the writing: exact CONVENTIONS keys and units, uncertainty propagation,
+only the writing: exact results.json keys and units, uncertainty propagation,
 column order, upper-bound marks, CSV round trip, PNG validity, atomic writes.
 """
 
@@ -15,12 +15,13 @@ import matplotlib.image as mpimg
 import numpy as np
 import pytest
 
-from fitting import plots, report
-from fitting.report import (PAPER_TABLE2, brightness_stderr, format_table, nearest_paper_time,
+from fitting.report import plots
+from fitting.report import write as report
+from fitting.report.write import (PAPER_TABLE2, brightness_stderr, format_table, nearest_paper_time,
                             software_versions, write_report, write_results_json, write_table2)
-from fitting.results import FitResults, GroupResult, OverlayPlotData, ProfilePlotData
+from fitting.report.results import FitResults, GroupResult, OverlayPlotData, ProfilePlotData
 
-CONVENTIONS_GROUP_KEYS = {
+CONTRACT_GROUP_KEYS = {
     "label", "time", "photos", "range", "range_k", "range_stderr", "brightness", "rho",
     "rho_stderr", "sun_azimuth_deg", "sun_elevation_deg", "rmse", "n_profiles", "converged",
     "identifiable", "seconds"}
@@ -84,7 +85,7 @@ def test_results_json_has_conventions_keys_and_paper_units(tmp_path):
     assert doc["software"]["numpy"] == np.__version__
     by_label = {g["label"]: g for g in doc["groups"]}
     for g in doc["groups"]:
-        assert CONVENTIONS_GROUP_KEYS <= set(g), CONVENTIONS_GROUP_KEYS - set(g)
+        assert CONTRACT_GROUP_KEYS <= set(g), CONTRACT_GROUP_KEYS - set(g)
     m = by_label["09:20"]
     assert m["range"] == pytest.approx(100 * 0.0052, rel=1e-12)
     assert m["brightness"] == pytest.approx(255 * 0.157 ** (1 / 2.2), rel=1e-12)
@@ -191,8 +192,8 @@ def test_table2_reference_and_truth_rows(tmp_path):
     results.groups[3].time = "09:41"  # 21 minutes from the paper's 09:20: still matched
     md_path, _ = write_table2(results, tmp_path, reference=PAPER_TABLE2, truth=TRUTH)
     rows = {r[0]: r[1:] for r in _md_table(md_path.read_text())[2:]}
-    assert rows["Reference: range"] == ["6.0", "5.0", "8.0", "—"]
-    assert rows["Reference: brightness"] == ["110.0", "120.0", "180.0", "—"]
+    assert rows["Paper, set by hand: range (its own units)"] == ["6.0", "5.0", "8.0", "—"]
+    assert rows["Paper, set by hand: brightness"] == ["110.0", "120.0", "180.0", "—"]
     assert rows["Truth: range"][:2] == ["0.47", "0.47"]  # matched by photos, not label
     assert rows["Truth: brightness"][0] == f"{255 * 0.16 ** (1 / 2.2):.1f}"
     assert rows["Truth: ρ"][1] == "0.210"
@@ -242,7 +243,7 @@ def test_format_table_shows_fit_truth_and_paper():
     text = format_table(_results(), reference=PAPER_TABLE2, truth=TRUTH)
     lines = text.splitlines()
     assert lines[0].split() == ["Time", "of", "day", "09:20", "13:21", "16:21", "IMG_7.jpg"]
-    assert any(line.startswith("Reference: brightness") and "110.0" in line and "180.0" in line
+    assert any(line.startswith("Paper, set by hand: brightness") and "110.0" in line and "180.0" in line
                for line in lines)
     assert any(line.startswith("Truth: range") and "0.47" in line for line in lines)
     assert "≤ 0.10" in text and "no shadow in view" in text
@@ -337,12 +338,12 @@ def test_safe_name():
 
 def test_write_report_writes_everything(tmp_path):
     written = write_report(_results(with_plots=True), tmp_path, reference=PAPER_TABLE2, truth=TRUTH)
-    assert set(written) == {"results.json", "table2.md", "table2.csv", "plots/09-20_profiles.png",
+    assert set(written) == {"results.json", "table2.md", "table2.csv", "index.html", "plots/09-20_profiles.png",
                             "plots/09-20_overlay_a.png", "plots/09-20_overlay_b.png",
                             "plots/range_vs_time.png"}
     for rel, path in written.items():
         assert path == tmp_path / rel and path.stat().st_size > 0
-    assert "Reference: range" in (tmp_path / "table2.md").read_text()
+    assert "Paper, set by hand: range" in (tmp_path / "table2.md").read_text()
 
 
 def test_write_report_survives_a_failing_plot(tmp_path, monkeypatch, caplog):
@@ -358,7 +359,7 @@ def test_write_report_survives_a_failing_plot(tmp_path, monkeypatch, caplog):
 
 def test_write_report_without_plots(tmp_path):
     written = write_report(_results(with_plots=True), tmp_path, plots=False)
-    assert set(written) == {"results.json", "table2.md", "table2.csv"}
+    assert set(written) == {"results.json", "table2.md", "table2.csv", "index.html"}
     assert not (tmp_path / "plots").exists()
 
 

@@ -18,8 +18,9 @@ import numpy as np
 import pytest
 
 import softshadow as ss
-from softshadow import (GroundGrid, Pose, Projector, SceneLights, SoftShadowModel, Sun, Surface, builtin_mesh,
-                        look_at_camera, plan_dense_points, render_frame, render_scene, sine_slide, visible_surfaces)
+from softshadow import (GroundGrid, Pose, Projector, SceneLights, SoftShadowModel, Sun, look_at_camera, render_frame,
+                        render_scene, sine_slide)
+from softshadow.internal import FRAME_STEPS, Surface, plan_dense_points, visible_surfaces
 from softshadow.scene_render import _object_surface
 
 
@@ -83,7 +84,7 @@ def test_render_frame_equals_render_scene(mesh, with_sun, receiver):
     assert ref_image.max() > 0.5 and np.ptp(ref_image) > 0.3
     np.testing.assert_allclose(frame.image, ref_image, rtol=0, atol=1e-12)
     np.testing.assert_array_equal(frame.visible.surface, ref.setup.visible.surface)
-    assert set(frame.milliseconds) <= set(ss.FRAME_STEPS)
+    assert set(frame.milliseconds) <= set(FRAME_STEPS)
 
 
 def test_render_frame_top_down_map():
