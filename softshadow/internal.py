@@ -11,7 +11,7 @@ __getattr__, __dir__, __all__ = _lazy.attach("softshadow", submod_attrs={
     "compilation_cache": ["SAVED_PROGRAMS_ENV", "default_cache_dir"],
     "dense_plan": ["DensePlan", "plan_dense_points"],
     "evaluate": ["plan_alpha", "plan_alpha_jit", "plan_coordinate", "plan_coordinate_light"],
-    "masking": ["comparison_region"],
+    "masking": ["comparison_region", "render_level_image"],
     "occluder": ["Occluder", "Silhouette"],
     "params": ["rotation_matrix_xyz"],
     "penumbra": ["PROFILES", "RULES", "footprint_profile_alpha", "penumbra_coordinate", "profile_integral",
