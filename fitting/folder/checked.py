@@ -16,11 +16,13 @@ from ..verdict.photo_check import judge, photo_agreement
 __all__ = ["fit_checked"]
 
 
-def _fit_group_with_sun(model, pose, views, group: PhotoGroup, options: FitOptions, sky_model=None) -> GroupResult:
-    """Fit a group; when the sun is unknown, search for it coarsely, then fit and re-plan."""
+def _fit_group_with_sun(model, pose, views, group: PhotoGroup, options: FitOptions, sky_model=None,
+                        samples=None) -> GroupResult:
+    """Fit a group; when the sun is unknown, search for it coarsely, then fit and re-plan.
+    samples: the group's samples already drawn for these views (``fit_group``)."""
     from ..solve.group import fit_group  # with JAX (see groups.fit_groups)
     if all(v.sun_source != "fitted" for v in views):
-        return fit_group(model, pose, views, group.label, group.time, options, sky_model)
+        return fit_group(model, pose, views, group.label, group.time, options, sky_model, samples)
     from ..photos.sun_search import search_sun
     az, el, _ = search_sun(model, pose, views[0])
     for v in views:
@@ -40,11 +42,12 @@ def _fit_group_with_sun(model, pose, views, group: PhotoGroup, options: FitOptio
 
 
 def fit_checked(model, pose, views: list[PhotoView], group: PhotoGroup,
-                 options: FitOptions, sky_model=None) -> tuple[GroupResult, list[dict]]:
+                 options: FitOptions, sky_model=None, samples=None) -> tuple[GroupResult, list[dict]]:
     """Fit a group, then check each photo against the fit (``photo_check``): a photo that does not
     fit is left out (a ``skipped`` entry naming the group and why) and the group refitted without
     it; a group where no photo shows a shadow gets "no shadow in view" and no values; a doubt that
-    cannot be resolved makes the group unreliable, with a warning."""
+    cannot be resolved makes the group unreliable, with a warning. samples: the samples already
+    drawn for these views (``fitting.solve.lod``), used by the first fit."""
     start = _time.perf_counter()
     # The check reads the fit's profile data, which the fit builds only when plots are wanted; it
     # does not read the overlays, which are drawn only when plots are (0.4-0.5 s a group).
@@ -52,7 +55,8 @@ def fit_checked(model, pose, views: list[PhotoView], group: PhotoGroup,
     left_out: list[dict] = []
     while True:
         result = _fit_group_with_sun(model, pose, views, PhotoGroup(group.label, group.time,
-                                                                    [v.name for v in views]), checked, sky_model)
+                                                                    [v.name for v in views]), checked, sky_model,
+                                     samples if not left_out else None)
         if not result.fitted:
             break
         verdict = judge(photo_agreement(result))

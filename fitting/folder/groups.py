@@ -99,15 +99,15 @@ def fit_groups(photos, scene, options, half_size, progress, store, on_group, job
             lod_start = _time.perf_counter()
             try:
                 with lod_lock:
-                    group_model, faces = lods.for_group(pose, views, options)
-                    sky_model = lods.sky_level(faces) if options.lod == "auto" else None
+                    level = lods.for_group(pose, views, options)
+                group_model, faces, sky_model, prepared = level.model, level.faces, level.sky_model, level.samples
                 lod_note = None
             except Exception as exc:  # a failed choice costs the saving, never the group
-                group_model, faces, sky_model = model, lods.full_faces, None
+                group_model, faces, sky_model, prepared = model, lods.full_faces, None, None
                 lod_note = f"level of detail not chosen ({type(exc).__name__}: {exc}); the full mesh is used"
             lod_seconds = _time.perf_counter() - lod_start
             try:
-                result, left_out = fit_checked(group_model, pose, views, group, options, sky_model)
+                result, left_out = fit_checked(group_model, pose, views, group, options, sky_model, prepared)
                 result.seconds += lod_seconds
                 result.lod_faces, result.mesh_faces = faces, lods.full_faces
                 if lod_note:

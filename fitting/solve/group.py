@@ -487,14 +487,20 @@ def _overlay(model: SoftShadowModel, pose: Pose, view: PhotoView, params: FitPar
 
 def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label: str,
               time_label: str | None, options: FitOptions | None = None,
-              sky_model: SoftShadowModel | None = None) -> GroupResult:
+              sky_model: SoftShadowModel | None = None, samples: tuple | None = None) -> GroupResult:
     """Fit k and rho shared by ``views`` (one time of day). Never raises for bad data:
     failures come back as a GroupResult with ``error`` set. sky_model: the mesh the hidden sky
-    is cast from (a coarse level of detail, ``fitting.solve.lod``; default ``model``)."""
+    is cast from (a coarse level of detail, ``fitting.solve.lod``; default ``model``); samples:
+    (view names, then ``sample_views``' samples, views and warnings) drawn already with this
+    model, options and sky model (the level-of-detail choice draws them); used when the names
+    are those of ``views``, else the samples are drawn here."""
     options = options or FitOptions()
     start = _time.perf_counter()
     result = GroupResult(label=label, time=time_label, photos=[v.name for v in views])
-    samples, used, result.warnings = sample_views(model, pose, views, options, sky_model)
+    if samples is not None and tuple(samples[0]) == tuple(v.name for v in views):
+        samples, used, result.warnings = samples[1], samples[2], list(samples[3])
+    else:
+        samples, used, result.warnings = sample_views(model, pose, views, options, sky_model)
     if not samples:
         result.error = "no shadow in view: " + "; ".join(result.warnings)
         result.seconds = _time.perf_counter() - start
