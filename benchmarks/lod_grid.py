@@ -19,8 +19,8 @@ shows its facets. Images 640 x 480 with 2 x 2 samples per pixel (``render_frame`
    the coarsest level that is).
 4. With the sun (``--report`` only): the table again at three penumbra widths (k 0.003, 0.01,
    0.03), checked at k 0.006 and 0.02 (between them) under the paper's slides, and an animation
-   (``docs/img/lod_animation.gif``): the slide's frequency and amplitude and the sun's k
-   changing, each frame drawn with the level the table chooses.
+   (``docs/img/lod_animation.gif``): the slide's frequency and amplitude changing, without and
+   then with the sun (its k changing too), each frame drawn with the level its table chooses.
 """
 
 from __future__ import annotations
@@ -108,11 +108,10 @@ def lod_grid(quick: bool = False, report_path=None, progress=None) -> dict:
         report = Path(report_path)
         report.parent.mkdir(parents=True, exist_ok=True)
         img = report.parent / "img" / "lod_grid.png"
-        paper_columns = [j for j, lv in enumerate(levels) if lv.faces in (faces[0], 5000, 1000, 300)]
-        _draw_grid(grid_images[:, paper_columns], result, paper_columns, img)
+        _draw_grid(grid_images, result, list(range(len(levels))), img)
         gif = report.parent / "img" / "lod_animation.gif"
         with one_blas_thread():
-            result["animation"] = _animation(sunny, models, sun_table, gif, progress)
+            result["animation"] = _animation([(scene, table), (sunny, sun_table)], models, gif, progress)
         report.write_text(masking_report(result, environment(), f"img/{img.name}", f"img/{gif.name}"))
         result["report"], result["image"], result["animation"]["path"] = str(report), str(img), str(gif)
     return result
@@ -147,46 +146,48 @@ def _check(table, amplitude, frequency, range_k, measured: np.ndarray) -> dict:
             "coarsest_hidden_faces": table.faces[coarsest], "coarsest": choice == coarsest}
 
 
-def _animation(scene, models, table, path: Path, progress=None, frames: int = 48) -> dict:
-    """A GIF of ``frames`` frames: the slide's frequency rising 0 -> 30 and back, its amplitude
-    and the sun's k swinging, each frame drawn (``FrameRenderer``, one sample per pixel) with the
-    level the table chooses, its face count and the lights printed on it."""
+def _animation(parts, models, path: Path, progress=None, frames: int = 32) -> dict:
+    """A GIF: for each (scene, table) of ``parts``, ``frames`` frames with the slide's frequency
+    rising 0 -> 30 and back and its amplitude swinging (and, with a sun, its k), each frame drawn
+    (``FrameRenderer``, one sample per pixel) with the level the table chooses, its face count and
+    the lights printed on it."""
     import imageio.v2 as imageio
     from PIL import Image, ImageDraw
 
     from softshadow import FrameRenderer, Pose, linear_to_srgb
     renderer = FrameRenderer()
     by_faces = dict(models)
-    shown, milliseconds = [], []
-    images = []
+    shown, milliseconds, images = [], [], []
     try:
-        for i in range(frames):
-            phase = i / frames
-            frequency = 30.0 * (0.5 - 0.5 * np.cos(2 * np.pi * phase))
-            amplitude = 0.55 + 0.45 * np.cos(2 * np.pi * 2 * phase)
-            range_k = float(np.exp(np.log(0.003) + (np.log(0.03) - np.log(0.003)) * (0.5 - 0.5 * np.cos(
-                2 * np.pi * 3 * phase))))
-            faces = table.faces[table.choose(amplitude, frequency, range_k)]
-            if progress:
-                progress(f"bench lod-grid: animation frame {i + 1}/{frames}")
-            t = time.perf_counter()
-            frame = renderer.render(scene.camera(), by_faces[faces], Pose(), scene.lights(range_k), scene.sun_at(),
-                                    [scene.projector(amplitude, frequency)], object_albedo=scene.albedo,
-                                    ground_albedo=scene.albedo)
-            milliseconds.append(1e3 * (time.perf_counter() - t))
-            rgb = (np.asarray(linear_to_srgb(np.clip(frame.image * _EXPOSURE, 0, 1))) * 255).astype(np.uint8)
-            picture = Image.fromarray(rgb)
-            draw = ImageDraw.Draw(picture)
-            draw.text((8, 8), f"{faces:,} faces", fill=(255, 255, 0))
-            draw.text((8, 22), f"slide: amplitude {amplitude:.2f}, frequency {frequency:.1f}", fill=(255, 255, 0))
-            draw.text((8, 36), f"sun: k {range_k:.4f}", fill=(255, 255, 0))
-            images.append(np.asarray(picture.resize((scene.width // 2, scene.height // 2))))
-            shown.append(faces)
+        for scene, table in parts:
+            sun = scene.sun_at()
+            for i in range(frames):
+                phase = i / frames
+                frequency = 30.0 * (0.5 - 0.5 * np.cos(2 * np.pi * phase))
+                amplitude = 0.6 + 0.4 * np.cos(2 * np.pi * 2 * phase)
+                range_k = float(np.exp(np.log(0.003) + (np.log(0.03) - np.log(0.003)) * (0.5 - 0.5 * np.cos(
+                    2 * np.pi * 3 * phase)))) if sun is not None else None
+                if progress:
+                    progress(f"bench lod-grid: animation frame {len(images) + 1}/{frames * len(parts)}")
+                t = time.perf_counter()
+                faces = table.faces[table.choose(amplitude, frequency, range_k)]
+                frame = renderer.render(scene.camera(), by_faces[faces], Pose(), scene.lights(range_k or 0.01), sun,
+                                        [scene.projector(amplitude, frequency)], object_albedo=scene.albedo,
+                                        ground_albedo=scene.albedo)
+                milliseconds.append(1e3 * (time.perf_counter() - t))
+                rgb = (np.asarray(linear_to_srgb(np.clip(frame.image * _EXPOSURE, 0, 1))) * 255).astype(np.uint8)
+                picture = Image.fromarray(rgb)
+                draw = ImageDraw.Draw(picture)
+                draw.text((8, 8), f"{faces:,} faces", fill=(255, 255, 0))
+                draw.text((8, 22), f"slide: amplitude {amplitude:.2f}, frequency {frequency:.1f}", fill=(255, 255, 0))
+                draw.text((8, 36), "no sun" if sun is None else f"sun: k {range_k:.4f}", fill=(255, 255, 0))
+                images.append(np.asarray(picture.resize((scene.width // 2, scene.height // 2))))
+                shown.append(faces)
     finally:
         renderer.close()
     path.parent.mkdir(parents=True, exist_ok=True)
     imageio.mimsave(path, images, duration=0.15, loop=0)
-    return {"frames": frames, "faces_shown": shown, "levels_used": sorted(set(shown), reverse=True),
+    return {"frames": len(images), "faces_shown": shown, "levels_used": sorted(set(shown), reverse=True),
             "frame_ms_median": round(float(np.median(milliseconds)), 1)}
 
 
@@ -295,8 +296,9 @@ def masking_report(result: dict, env: dict, image: str, animation: str | None = 
     if animation and "animation" in result:
         an = result["animation"]
         lines += ["", "## The level changing with the lights", "", f"![animation]({animation})", "",
-                  f"{an['frames']} frames (`FrameRenderer`, 640 x 480, one sample per pixel, shown at half size): the "
-                  "slide's frequency, its amplitude and the sun's k change, and each frame is drawn with the "
-                  f"level the sun's table chooses; levels used: {', '.join(f'{f:,}' for f in an['levels_used'])} "
-                  f"faces; {an['frame_ms_median']:.0f} ms per frame (median, the choice included)."]
+                  f"{an['frames']} frames (`FrameRenderer`, 640 x 480, one sample per pixel, shown at half size): "
+                  "the paper's scene, then the same with the sun; the slide's frequency and amplitude change (and "
+                  "the sun's k), and each frame is drawn with the level its table chooses; levels used: "
+                  f"{', '.join(f'{f:,}' for f in an['levels_used'])} faces; {an['frame_ms_median']:.0f} ms per "
+                  "frame (median, the choice included)."]
     return "\n".join(lines) + "\n"

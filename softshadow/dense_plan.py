@@ -22,7 +22,7 @@ from .camera import GroundGrid
 from .occluder import Occluder
 from .params import Pose, Sun
 from .plan import (BAND_FRACTION, CANDIDATE_RADII_PX, CANDIDATE_REACH_PX, MAX_RASTER_SIDE, N_CANDIDATES, EdgeSet,
-                   PointPlan, _clean_outline, _pack_edges, bucket_size, light_band_widths)
+                   PointPlan, _pack_edges, bucket_size, light_band_widths)
 from .posed import PosedOccluder
 from .raster import candidate_labels, rasterise_shadow
 from .scratch import Scratch, scratch_array
@@ -154,51 +154,61 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
     height = int(np.ceil((hi[1] - lo[1]) / pixel_m)) + 1
     grid = GroundGrid(pixel_m, (float(lo[0]), float(hi[1])), width, height)
     raster = rasterise_shadow(grid, world, light, sil, uv_v)
-    in_view = np.empty(len(cand), np.uint8)
-    label = np.empty(len(cand), np.int32)
-    dist = np.empty(len(cand), np.float32)  # as ShadowRaster.lookup's: float32 pixels times the pixel size
-    _lookup_kernel()(uv_p, grid.origin_m[0], grid.origin_m[1], pixel_m, raster.hard, raster.edge_label,
-                     raster.boundary_dist_px, in_view, label, dist)
-    near = np.flatnonzero((dist <= 2.0 * pixel_m) & ~att)
-    if len(near):
+    m = len(cand)
+    in_view = scratch_array(scratch, "sun.in_view", m, np.uint8)
+    label = scratch_array(scratch, "sun.label", m, np.int32)
+    dist = scratch_array(scratch, "sun.dist", m, np.float32)  # as ShadowRaster.lookup's: float32 pixels x size
+    index = scratch_array(scratch, "sun.index", m, np.int64)
+    # The raster at each point (``ShadowRaster.lookup``), and the points near the outline, where a
+    # raster pixel is too coarse for the side: tested exactly.
+    n_near = _lookup_kernel()(uv_p, grid.origin_m[0], grid.origin_m[1], pixel_m, raster.hard, raster.edge_label,
+                              raster.boundary_dist_px, 2.0 * pixel_m, att, in_view, label, dist, index)
+    if n_near:
+        near = index[:n_near].copy()
         in_view[near] = posed.hard_shadow_at(uv_p[near], projected=uv_v)
     lit_ids = np.flatnonzero(sil.lit) if occ.watertight else np.arange(len(occ.faces))
-    behind = np.zeros(len(cand), bool)
-    test = np.flatnonzero((in_view > 0) & ~att)
-    far = d_p[test] > d_v[occ.faces[lit_ids]].max(initial=-np.inf) + 0.5 * map_pixel_m
-    behind[test[far]] = True
-    test = test[~far]
-    if len(test):
-        uv_t = uv_p[test]
-        m_lo = np.array([uv_t[:, 0].min(), uv_t[:, 1].min()]) - 3 * map_pixel_m
-        m_hi = np.array([uv_t[:, 0].max(), uv_t[:, 1].max()]) + 3 * map_pixel_m
+    lit_faces = occ.faces[lit_ids]
+    # Farther from the sun than the whole occluder: behind it wherever it is in the way (most of a
+    # cast shadow). The others in its view go to the shadow map.
+    behind = scratch_array(scratch, "sun.behind", m, np.bool_)
+    box = np.empty(4)
+    n_test = _test_kernel()(in_view, att, d_p, uv_p, float(d_v[lit_faces].max(initial=-np.inf)) + 0.5 * map_pixel_m,
+                            behind, index, box)
+    if n_test:
+        test = index[:n_test]
+        m_lo = box[:2] - 3 * map_pixel_m
+        m_hi = box[2:] + 3 * map_pixel_m
         map_grid = GroundGrid(map_pixel_m, (float(m_lo[0]), float(m_hi[1])),
                               int(np.ceil((m_hi[0] - m_lo[0]) / map_pixel_m)) + 1,
                               int(np.ceil((m_hi[1] - m_lo[1]) / map_pixel_m)) + 1)
-        smap = shadow_map(map_grid, uv_v, d_v, occ.faces[lit_ids])
+        shape = (map_grid.height, map_grid.width)
+        smap = shadow_map(map_grid, uv_v, d_v, lit_faces, out=(scratch_array(scratch, "sun.map_depth", shape),
+                                                               scratch_array(scratch, "sun.map_face", shape, np.int32)))
         # ``ShadowMap.occluder_depth`` and ``depth_bias`` per point (their rules), the receiver's
         # slope from its normal, in one pass.
         scale = max(smap.scale, float(np.abs(world).max()))
         g = map_grid
-        _depth_test_kernel()(cand[test], uv_t, d_p[test], points, np.zeros((0, 3)) if normals is None else normals,
+        _depth_test_kernel()(cand, test, uv_p, d_p, points, np.zeros((0, 3)) if normals is None else normals,
                              np.full(0, -1, np.int64) if faces is None else np.asarray(faces, np.int64),
                              lit_ids, light, g.origin_m[0], g.origin_m[1], map_pixel_m, smap.face_id,
-                             np.ascontiguousarray(smap.triangle), smap.plane, smap.slope, scale, behind, test)
-    hard[cand] = behind | att
-    act = np.empty(len(cand), bool)
-    near_b = np.empty(len(cand), bool)
-    clean = _clean_outline(raster, label)
-    widths = light_band_widths(d_p - edge_depth[np.maximum(label, 0)], range_k_max)
-    _band_kernel()(widths, label, dist, att, clean, BAND_FRACTION, margin_px * pixel_m, 1.5 * pixel_m, act, near_b)
-    sel = np.flatnonzero(act)
+                             np.ascontiguousarray(smap.triangle), smap.plane, smap.slope, scale, behind)
+    # The hard shadow of every point, and the band: its width from the wedge at the point's depth
+    # behind its edge (``light_band_widths``, linear in that depth).
+    frac = raster.edge_outline_fraction
+    frac = np.zeros(1) if frac is None else np.asarray(frac, np.float64)
+    near_b = scratch_array(scratch, "sun.near_boundary", m, np.bool_)
+    n_band = _band_kernel()(cand, d_p, label, dist, att, behind, edge_depth, float(light_band_widths(np.float64(1.0),
+                            range_k_max)), frac, raster.edge_outline_fraction is not None, BAND_FRACTION,
+                            margin_px * pixel_m, 1.5 * pixel_m, hard, index, near_b)
+    sel = index[:n_band].copy()
     band = cand[sel]
     edge_id = np.zeros((len(sel), N_CANDIDATES), np.int32)
     if len(sel):
         cr = np.clip(np.rint(grid.to_pixel(uv_p[sel])).astype(np.int64), 0, [width - 1, height - 1])
         edge_id[:] = np.maximum(candidate_labels(raster.edge_label, cr[:, 1], cr[:, 0], radii=CANDIDATE_RADII_PX,
                                                  max_candidates=N_CANDIDATES, neighbours=raster.edge_neighbours), 0)
-    return DensePlan(_pack_edges(occ, sil, raster=raster), hard, band, edge_id,
-                     near_b[sel].astype(np.float64))
+    near_b = near_b[:n_band]
+    return DensePlan(_pack_edges(occ, sil, raster=raster), hard, band, edge_id, near_b.astype(np.float64))
 
 
 def _spacing(uv: np.ndarray, cell_m: float) -> float:
@@ -276,24 +286,25 @@ def _reach_kernel():
 
 @functools.cache
 def _depth_test_kernel():
-    """The sun's depth test at the points ``test`` (indices into the candidates; cand[test]
-    into the points): ``ShadowMap.occluder_depth`` (the exact face among the point's map pixel
+    """The sun's depth test at the candidates ``test`` (cand[test] into the points):
+    ``ShadowMap.occluder_depth`` (the exact face among the point's map pixel
     and its 8 neighbours, else the nearest covered pixel's within 2, extrapolated) against
     the point's depth plus ``depth_bias`` (the receiver's slope from its normal), into
     behind[test]. A point on the occluder whose own face is the nearest at its pixel is lit."""
     import numba
 
     @numba.njit(cache=True, nogil=True)
-    def kernel(index, uv, depth, points, normals, faces, lit_ids, light, ox, oy, pixel_m, face_id, triangle, plane,
-               face_slope, scale, behind, test):
+    def kernel(cand, test, uv, depth, points, normals, faces, lit_ids, light, ox, oy, pixel_m, face_id, triangle,
+               plane, face_slope, scale, behind):
         h, w = face_id.shape
-        for j in range(index.shape[0]):
-            p = index[j]
+        for j in range(test.shape[0]):
+            p = cand[test[j]]
             scale = max(scale, abs(points[p, 0]), abs(points[p, 1]), abs(points[p, 2]))
         rounding = PRECISION_ULPS * np.finfo(np.float64).eps * scale
-        for j in range(index.shape[0]):
-            p = index[j]
-            u, v = uv[j, 0], uv[j, 1]
+        for j in range(test.shape[0]):
+            q = test[j]
+            p = cand[q]
+            u, v = uv[q, 0], uv[q, 1]
             col = int(np.rint((u - ox) / pixel_m))
             row = int(np.rint((oy - v) / pixel_m))
             if faces.shape[0] and faces[p] >= 0 and 0 <= row < h and 0 <= col < w and face_id[row, col] >= 0 \
@@ -336,7 +347,7 @@ def _depth_test_kernel():
                     cos = abs(normals[p, 0] * light[0] + normals[p, 1] * light[1] + normals[p, 2] * light[2])
                     recv = np.sqrt(max(1.0 - cos * cos, 0.0)) / max(cos, 1e-12)
                 bias += SLOPE_PX * pixel_m * (min(fs, TAN_MAX) + min(recv, TAN_MAX))
-            behind[test[j]] = depth[j] > best + bias
+            behind[q] = depth[q] > best + bias
 
     return kernel
 
@@ -344,12 +355,15 @@ def _depth_test_kernel():
 @functools.cache
 def _lookup_kernel():
     """``ShadowRaster.lookup`` at light-space points (the nearest pixel): hard, label and the
-    distance in metres (0, -1, +inf outside the raster)."""
+    distance in metres (0, -1, +inf outside the raster); the points not in attached shadow within
+    ``near_m`` of the outline listed in ``near``. Returns their count."""
     import numba
 
     @numba.njit(cache=True, nogil=True)
-    def kernel(uv, ox, oy, pixel_m, hard, edge_label, dist_px, in_view, label, dist):
+    def kernel(uv, ox, oy, pixel_m, hard, edge_label, dist_px, near_m, att, in_view, label, dist, near):
         h, w = hard.shape
+        pm = np.float32(pixel_m)
+        n = 0
         for i in range(uv.shape[0]):
             c = np.rint((uv[i, 0] - ox) / pixel_m)
             r = np.rint((oy - uv[i, 1]) / pixel_m)
@@ -357,25 +371,68 @@ def _lookup_kernel():
                 ci, ri = int(c), int(r)
                 in_view[i] = hard[ri, ci]
                 label[i] = edge_label[ri, ci]
-                dist[i] = dist_px[ri, ci] * np.float32(pixel_m)
+                dist[i] = dist_px[ri, ci] * pm
             else:
                 in_view[i], label[i], dist[i] = 0, -1, np.inf
+            # The comparison in float32, as the array version's (a float32 array against a float).
+            if dist[i] <= np.float32(near_m) and not att[i]:
+                near[n] = i
+                n += 1
+        return n
+
+    return kernel
+
+
+@functools.cache
+def _test_kernel():
+    """The points in the occluder's view (and not in attached shadow): those deeper than
+    ``d_far`` are behind it; the others listed in ``test``, their light-space bounding box in
+    box (lo u, lo v, hi u, hi v). Returns their count."""
+    import numba
+
+    @numba.njit(cache=True, nogil=True)
+    def kernel(in_view, att, d, uv, d_far, behind, test, box):
+        n = 0
+        box[0], box[1], box[2], box[3] = np.inf, np.inf, -np.inf, -np.inf
+        for i in range(in_view.shape[0]):
+            behind[i] = False
+            if in_view[i] == 0 or att[i]:
+                continue
+            if d[i] > d_far:
+                behind[i] = True
+                continue
+            test[n] = i
+            n += 1
+            box[0], box[1] = min(box[0], uv[i, 0]), min(box[1], uv[i, 1])
+            box[2], box[3] = max(box[2], uv[i, 0]), max(box[3], uv[i, 1])
+        return n
 
     return kernel
 
 
 @functools.cache
 def _band_kernel():
-    """The band and boundary flags of ``plan_points``' light back end, per point from the
-    width of its wedge: the band BAND_FRACTION of it plus the margin, near the boundary within
-    a quarter of it plus 1.5 pixels on a clean outline edge."""
+    """Per point: its hard shadow into hard[cand] (behind the occluder or attached), and the band
+    and boundary flags of ``plan_points``' light back end from the width of its wedge (per_m
+    times its depth behind its edge): the band BAND_FRACTION of it plus the margin, near the
+    boundary within a quarter of it plus 1.5 pixels on a clean outline edge (all of its length
+    on the outline). The band's points listed in ``band``; returns their count."""
     import numba
 
     @numba.njit(cache=True, nogil=True)
-    def kernel(widths, label, dist, att, clean, fraction, margin_m, near_m, act, near_b):
-        for i in range(widths.shape[0]):
-            a = label[i] >= 0 and dist[i] <= fraction * widths[i] + margin_m and not att[i]
-            act[i] = a
-            near_b[i] = a and dist[i] <= 0.25 * widths[i] + near_m and clean[i]
+    def kernel(cand, d, label, dist, att, behind, edge_depth, per_m, frac, has_frac, fraction, margin_m, near_m,
+               hard, band, near_b):
+        n = 0
+        for i in range(d.shape[0]):
+            hard[cand[i]] = 1.0 if (behind[i] or att[i]) else 0.0
+            lab = label[i]
+            width = per_m * max(d[i] - edge_depth[max(lab, 0)], 0.0)
+            a = lab >= 0 and dist[i] <= fraction * width + margin_m and not att[i]
+            clean = has_frac and lab >= 0 and frac[lab] >= 0.99
+            near_b[n] = a and dist[i] <= 0.25 * width + near_m and clean
+            if a:
+                band[n] = i
+                n += 1
+        return n
 
     return kernel
