@@ -86,14 +86,16 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
     posed = None
     if sun is not None:
         posed = _submit(pool, PosedOccluder.make, model.occluder, pose, sun)
-    vis = visible_surfaces(camera, surfaces, ground_albedo, scratch=scratch)
+    vis = visible_surfaces(camera, surfaces, ground_albedo, scratch=scratch, albedo=False)
+    # Each point's surface (GROUND -1, the object 0, receivers 1...), and its albedo by that.
+    surface = vis.surface.reshape(-1)[vis.pixel]
+    albedos = np.vstack([_albedo_of(ground_albedo), *[s.albedo for s in surfaces]])
     t = _lap(ms, "visibility", t)
     light = _submit(pool, projector_light, vis, surfaces, projectors, scratch=scratch)
     if pool is None:
         t = _lap(ms, "projectors", t)
     plan, alpha_band = None, np.zeros(0)
     if sun is not None and len(vis.pixel):
-        surface = vis.surface.reshape(-1)[vis.pixel]
         on_object = np.where(surface == 0, vis.face.reshape(-1)[vis.pixel], -1)
         plan = plan_dense_points(model.occluder, pose, sun, vis.points, range_k_max, vis.normals,
                                  rule=model.rule, posed=_result(posed), faces=on_object, scratch=scratch)
@@ -109,7 +111,7 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
     sun_dir = np.zeros(3) if sun is None else -np.asarray(sun.light_np, np.float64)
     hard = plan.hard if plan is not None else np.zeros(0)
     band = plan.band if plan is not None else np.zeros(0, np.int64)
-    _shade_kernel()(vis.pixel, vis.normals, vis.albedo, light, float(lights.ambient),
+    _shade_kernel()(vis.pixel, vis.normals, surface, albedos, light, float(lights.ambient),
                     float(lights.sun_irradiance) if sun is not None else 0.0, sun_dir, hard, band, alpha_band,
                     image)
     _lap(ms, "shading", t)
@@ -171,13 +173,15 @@ def _lap(ms: dict, step: str, start: float) -> float:
 
 @functools.cache
 def _shade_kernel():
-    """The compiled shading pass (numba): per visible point, albedo times ambient plus the
+    """The compiled shading pass (numba): per visible point, its surface's albedo (albedos' row
+    surface + 1: the ground's first) times ambient plus the
     projectors' light plus the sun's, E max(0, n . s) (1 - alpha), alpha the plan's hard shadow or
     (band points, ascending in ``band``) the penumbra formula's; into the flat image."""
     import numba
 
     @numba.njit(cache=True, nogil=True)
-    def kernel(pixel, normals, albedo, light, ambient, sun_irradiance, sun_dir, hard, band, alpha_band, image):
+    def kernel(pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, hard, band, alpha_band,
+               image):
         j = 0
         has_sun = hard.shape[0] > 0
         for i in range(pixel.shape[0]):
@@ -190,7 +194,13 @@ def _shade_kernel():
                 cos = normals[i, 0] * sun_dir[0] + normals[i, 1] * sun_dir[1] + normals[i, 2] * sun_dir[2]
                 sun = sun_irradiance * max(cos, 0.0) * (1.0 - alpha)
             p = pixel[i]
+            s = surface[i] + 1  # the ground (-1) first
             for c in range(3):
-                image[p, c] = albedo[i, c] * (ambient + light[i, c] + sun)
+                image[p, c] = albedos[s, c] * (ambient + light[i, c] + sun)
 
     return kernel
+
+
+def _albedo_of(value) -> np.ndarray:
+    """The ground's albedo (3,) (0 without a ground: no pixel has it then)."""
+    return np.zeros(3) if value is None else np.broadcast_to(np.asarray(value, np.float64).reshape(-1), (3,))

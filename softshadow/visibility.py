@@ -111,7 +111,8 @@ class VisibleSurfaces:
     """The surface each pixel sees.
 
     shape (H, W); pixel (N,) flat indices of the pixels that see something; points (N, 3)
-    world metres; normals (N, 3) unit, on the camera's side of their face; albedo (N, 3); surface (H, W)
+    world metres; normals (N, 3) unit, on the camera's side of their face; albedo (N, 3) (None
+    when not asked for); surface (H, W)
     int: index into the surfaces, ``GROUND`` or ``NOTHING``; face (H, W) int: the face
     within its surface (-1 for the ground and nothing).
     """
@@ -120,20 +121,21 @@ class VisibleSurfaces:
     pixel: np.ndarray
     points: np.ndarray
     normals: np.ndarray
-    albedo: np.ndarray
+    albedo: np.ndarray | None
     surface: np.ndarray
     face: np.ndarray
 
 
 def visible_surfaces(camera: PinholeCamera | GroundGrid, surfaces=(), ground_albedo=None,
-                     smooth: bool = False, *, scratch: Scratch | None = None) -> VisibleSurfaces:
+                     smooth: bool = False, *, scratch: Scratch | None = None, albedo: bool = True) -> VisibleSurfaces:
     """The nearest surface at every pixel of ``camera`` (see the module docstring).
 
     surfaces: a sequence of ``Surface``; ground_albedo: the ground plane z = 0's albedo (one or
     three numbers), None for no ground; smooth: normals interpolated from the vertex normals
     (Gouraud/Phong-like, barycentric at the point) instead of the faces' own (flat, the default);
     scratch: keep the per-pixel arrays in these buffers (``softshadow.scratch``; the result is
-    then overwritten by the next call with the same scratch).
+    then overwritten by the next call with the same scratch); albedo: False leaves the points'
+    albedos out (``albedo`` None: a caller that has the surfaces' albedos by ``surface``).
     """
     h, w = camera.height, camera.width
     surfaces = list(surfaces)
@@ -200,12 +202,13 @@ def visible_surfaces(camera: PinholeCamera | GroundGrid, surfaces=(), ground_alb
     pixel = scratch_array(scratch, "visible.pixel", h * w, np.int64)
     points = scratch_array(scratch, "visible.points", (h * w, 3))
     normals = scratch_array(scratch, "visible.normals", (h * w, 3))
-    albedo = scratch_array(scratch, "visible.albedo", (h * w, 3))
+    with_albedo = albedo
+    albedo = scratch_array(scratch, "visible.albedo", (h * w if with_albedo else 0, 3))
     n = _visible_kernel()(f_img.reshape(-1), lookup, source, verts, np.ascontiguousarray(faces, np.int64),
                           np.ascontiguousarray(all_normals), face_surface, np.ascontiguousarray(offsets, np.int64),
                           albedos, ground, ground_albedo is not None, view, rays, directions, h, w,
                           surface.reshape(-1), face.reshape(-1), pixel, points, normals, albedo)
-    pixel, points, normals, albedo = pixel[:n], points[:n], normals[:n], albedo[:n]
+    pixel, points, normals, albedo = pixel[:n], points[:n], normals[:n], albedo[:n] if with_albedo else None
     if smooth:
         on_mesh = surface.reshape(-1)[pixel] >= 0
         if on_mesh.any():
@@ -231,8 +234,11 @@ def _visible_kernel():
     def kernel(f_img, lookup, source, verts, faces, normals, face_surface, offsets, albedos, ground, has_ground,
                view, rays, directions, h, w, surface, face, pixel, points, out_normals, albedo):
         n = 0
+        row, col = 0, -1
         for p in range(h * w):
-            row, col = p // w, p % w
+            col += 1  # row order, without a division per pixel
+            if col == w:
+                row, col = row + 1, 0
             # The pixel's ray: a top-down map's (origin, pixel size, height in view[1:5]) or a
             # pinhole camera's (centre in view[1:4]; K^-1's first two rows and R in rays;
             # precomputed directions for a camera with lens distortion).
@@ -288,7 +294,8 @@ def _visible_kernel():
             if nx * dx + ny * dy + nz * dz > 0:  # towards the camera: the side it sees is lit
                 nx, ny, nz = -nx, -ny, -nz
             out_normals[n, 0], out_normals[n, 1], out_normals[n, 2] = nx, ny, nz
-            albedo[n, 0], albedo[n, 1], albedo[n, 2] = a0, a1, a2
+            if albedo.shape[0]:
+                albedo[n, 0], albedo[n, 1], albedo[n, 2] = a0, a1, a2
             n += 1
         return n
 
