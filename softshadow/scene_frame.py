@@ -95,16 +95,19 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
     if pool is None:
         t = _lap(ms, "projectors", t)
     plan, alpha_band = None, np.zeros(0)
-    if sun is not None and len(vis.pixel):
-        on_object = np.where(surface == 0, vis.face.reshape(-1)[vis.pixel], -1)
-        plan = plan_dense_points(model.occluder, pose, sun, vis.points, range_k_max, vis.normals,
-                                 rule=model.rule, posed=_result(posed), faces=on_object, scratch=scratch)
-        t = _lap(ms, "sun_plan", t)
-        alpha_band = band_alpha(plan, vis.points, model, pose, sun, k)
-        t = _lap(ms, "sun_band", t)
-    if pool is not None:  # the wait for the projectors' thread, if it is still running
-        light = _result(light)
-        t = _lap(ms, "projectors", t)
+    try:
+        if sun is not None and len(vis.pixel):
+            on_object = np.where(surface == 0, vis.face.reshape(-1)[vis.pixel], -1)
+            plan = plan_dense_points(model.occluder, pose, sun, vis.points, range_k_max, vis.normals,
+                                     rule=model.rule, posed=_result(posed), faces=on_object, scratch=scratch)
+            t = _lap(ms, "sun_plan", t)
+            alpha_band = band_alpha(plan, vis.points, model, pose, sun, k)
+            t = _lap(ms, "sun_band", t)
+    finally:
+        # The projectors' thread finished before anything else uses the buffers (also on an error).
+        if pool is not None:
+            light = _result(light)
+            t = _lap(ms, "projectors", t)
     h, w = vis.shape
     image = scratch_array(scratch, "frame.image", (h * w, 3))
     image[:] = np.broadcast_to(np.asarray(background, np.float64), (3,))
