@@ -297,3 +297,47 @@ def test_bench_shifts_are_in_the_full_meshs_errors():
     assert row["k_shift_se"] == pytest.approx(-0.5) and row["rho_shift_se"] == pytest.approx(2.0)
     assert row["k_shift_se_stat"] == pytest.approx(-1.0) and row["rho_shift_se_stat"] == pytest.approx(4.0)
     assert row["speedup_warm"] == pytest.approx(4.0)
+
+
+def test_auto_hands_its_samples_to_the_fit_when_it_keeps_the_full_mesh(ball_folder, monkeypatch):
+    """The choice draws the fit's own samples; when it keeps the full mesh the fit uses them
+    instead of drawing them again (one draw per group, as with --lod off)."""
+    import fitting.solve.group as group
+    calls = []
+    draw = group.sample_views
+
+    def counted(*args, **kwargs):
+        calls.append(args[0])
+        return draw(*args, **kwargs)
+
+    monkeypatch.setattr(group, "sample_views", counted)
+    strict = _fit(ball_folder, lod="auto", lod_tolerance=0.0)
+    assert strict.lod_faces == 5120 and len(calls) == 1
+    calls.clear()
+    _fit(ball_folder, lod="off")
+    assert len(calls) == 1
+    calls.clear()
+    loose = _fit(ball_folder, lod="auto", lod_tolerance=1e9)  # a level chosen: the fit draws on it
+    assert loose.lod_faces == 300 and len(calls) == 2 and len(calls[1].occluder.faces) == 300
+
+
+def test_levels_are_kept_on_disk(tmp_path, monkeypatch):
+    """A level decimated once is read back by the next process (here: after the in-memory levels
+    are gone), not decimated again."""
+    import fitting.solve.lod as lod
+    monkeypatch.setenv("SOFTSHADOW_JAX_CACHE", str(tmp_path / "cache"))
+    ball = _ball()
+    first = lod.level_store(ball, 1000)
+    assert list((tmp_path / "cache" / "levels").glob("*.npz"))
+
+    def no_decimation(*args, **kwargs):
+        raise AssertionError("decimated again")
+
+    monkeypatch.setattr(lod, "decimate", no_decimation)
+    again = lod.level_store(ball, 1000)
+    np.testing.assert_array_equal(again.faces, first.faces)
+    np.testing.assert_allclose(again.vertices, first.vertices)
+    assert lod.level_store(ball, 10_000) is ball  # no fewer faces: the mesh itself
+    monkeypatch.setenv("SOFTSHADOW_JAX_CACHE", "off")
+    monkeypatch.setattr(lod, "decimate", lambda mesh, faces: first)
+    assert lod.level_store(ball, 999) is first  # no store: decimated
