@@ -110,7 +110,7 @@ class Projector:
         if not (int(self.shadow_px) >= 16):
             raise ValueError(f"projector shadow_px must be at least 16, got {self.shadow_px!r}")
 
-    @property
+    @functools.cached_property
     def camera(self) -> PinholeCamera:
         """The projector as a pinhole camera whose image is the slide (W x H pixels)."""
         h, w = self.slide.shape[:2]
@@ -135,7 +135,8 @@ class Projector:
         onto the slide, 0 outside it and behind the projector (projective texture mapping)."""
         p = np.ascontiguousarray(points, np.float64).reshape(-1, 3)
         out = np.zeros((len(p), 3))
-        _light_kernel()(p, np.zeros((0, 3)), *self._kernel_args(), *_NO_MAP, 0, out, np.empty(0))
+        _light_kernel()(p, np.zeros((0, 3)), *self._kernel_args(), *_NO_MAP, np.zeros(0, np.int64), 0, out,
+                        np.empty(0))
         return out
 
     def irradiance(self, points, normals=None, shadow: "ProjectorShadowMap | None" = None) -> np.ndarray:
@@ -147,11 +148,18 @@ class Projector:
         return out
 
     def add_irradiance(self, points: np.ndarray, normals, shadow: "ProjectorShadowMap | None",
-                       out: np.ndarray) -> None:
-        """``irradiance`` added to ``out`` (N, 3) in place (points (N, 3) float64, C order)."""
+                       out: np.ndarray, faces: np.ndarray | None = None) -> None:
+        """``irradiance`` added to ``out`` (N, 3) in place (points (N, 3) float64, C order).
+
+        faces (N,) int, optional: the face of the shadow map's triangles each point lies on (-1:
+        none), as a camera's z-buffer knows it; a point whose face is the map's nearest at its
+        pixel is lit without the lookup (it would find that face and the point on it).
+        """
         n = np.zeros((0, 3)) if normals is None else np.ascontiguousarray(normals, np.float64).reshape(-1, 3)
+        own = (np.zeros(0, np.int64) if faces is None or shadow is None or not shadow.faces_as_given
+               else np.ascontiguousarray(faces, np.int64))
         _light_kernel()(points, n, *self._kernel_args(), *(_NO_MAP if shadow is None else shadow._kernel_args()),
-                        1, out, np.empty(0))
+                        own, 1, out, np.empty(0))
 
     def _kernel_args(self) -> tuple:
         cam = self.camera
@@ -168,13 +176,15 @@ class ProjectorShadowMap:
     projector; smap: the ``ShadowMap`` in (a, -b) coordinates with depth -1/z, its slopes
     replaced by each face's tan against the ray from the projector (for the bias);
     pixel_tan: the map's pixel in normalised image units; scale: the coordinates' magnitude
-    (metres) for the rounding allowance.
+    (metres) for the rounding allowance; faces_as_given: the map's face ids are the indices of
+    the faces it was made from (no face was cut at the near plane).
     """
 
     projector: Projector
     smap: ShadowMap | None
     pixel_tan: float
     scale: float
+    faces_as_given: bool = False
 
     def occluded(self, points, normals=None) -> np.ndarray:
         """Whether an occluder lies between the projector and each point (N,) bool, or (given unit
@@ -187,7 +197,8 @@ class ProjectorShadowMap:
         p = np.ascontiguousarray(points, np.float64).reshape(-1, 3)
         n = np.zeros((0, 3)) if normals is None else np.ascontiguousarray(normals, np.float64).reshape(-1, 3)
         lit = np.empty(len(p))
-        _light_kernel()(p, n, *self.projector._kernel_args(), *self._kernel_args(), 2, np.zeros((0, 3)), lit)
+        _light_kernel()(p, n, *self.projector._kernel_args(), *self._kernel_args(), np.zeros(0, np.int64), 2,
+                        np.zeros((0, 3)), lit)
         return lit
 
     @functools.cached_property
@@ -226,7 +237,7 @@ def _light_kernel():
 
     @numba.njit(cache=True, nogil=True)
     def kernel(points, normals, frame, slide, intensity, falloff, reference, has_map, face_id, near_cover, triangle,
-               plane, face_slope, geometry, mode, out, lit):
+               plane, face_slope, geometry, own_face, mode, out, lit):
         n_pts = points.shape[0]
         has_normals = normals.shape[0] > 0
         sh, sw = slide.shape[0], slide.shape[1]
@@ -246,7 +257,7 @@ def _light_kernel():
             z = frame[2, 0] * p0 + frame[2, 1] * p1 + frame[2, 2] * p2 + frame[3, 2]
             if mode == 2:
                 lit[i] = 1.0
-            u, v = 0.0, 0.0
+            u, v, inv_z = 0.0, 0.0, 1.0
             if mode != 2:
                 # On the slide or no light at all: nothing else to do.
                 inv_z = 1.0 / z if z > 0 else 1.0
@@ -259,6 +270,7 @@ def _light_kernel():
             if mode != 0:
                 lx, ly, lz = px - p0, py - p1, pz - p2
                 d = np.sqrt(lx * lx + ly * ly + lz * lz)
+                inv_d = 1.0 / max(d, 1e-12)
                 if has_normals:
                     dot = normals[i, 0] * lx + normals[i, 1] * ly + normals[i, 2] * lz
                     # Attached shadow: the normal against the ray from the projector.
@@ -267,23 +279,26 @@ def _light_kernel():
                         if mode == 2:
                             lit[i] = 0.0
                         continue
-                    scalar = max(dot / max(d, 1e-12), 0.0)
+                    scalar = max(dot * inv_d, 0.0)
                 if mode == 1:
                     fall = 1.0
                     if falloff > 0.0:
-                        q = reference / max(d, 1e-12)
+                        q = reference * inv_d
                         fall = q * q
                     scalar = intensity * scalar * fall
                     if scalar == 0.0:
                         continue
             if mode != 0 and has_map and z > NEAR_M:
-                a, b = x / z, -(y / z)
+                inv = 1.0 / z if mode == 2 else inv_z
+                a, b = x * inv, -(y * inv)
                 col, row = (a - ox) * inv_pt, (oy - b) * inv_pt
                 if -0.5 <= col <= mw - 0.5 and -0.5 <= row <= mh - 0.5:
                     r = int(min(max(np.rint(row), 0.0), mh - 1.0))
                     c = int(min(max(np.rint(col), 0.0), mw - 1.0))
-                    # Only points with a covered pixel among their 3 x 3 can be occluded.
-                    if near_cover[r, c]:
+                    # Only points with a covered pixel among their 3 x 3 can be occluded; a point on
+                    # the face nearest the projector at its pixel is not.
+                    if near_cover[r, c] and not (own_face.shape[0] and own_face[i] >= 0
+                                                 and face_id[r, c] == own_face[i]):
                         # The face's plane at the point: exact from the first of the 9 pixels whose
                         # face contains it, else extrapolated from the nearest covered pixel's
                         # within 2.
@@ -361,9 +376,10 @@ def projector_shadow_map(projector: Projector, vertices, faces, *, facing=None, 
     # Faces cut at the near plane: the part of a face in front of the projector still casts. A
     # closed mesh cut open shows its inside, so nothing is culled then.
     _, z_world = projector.image_coordinates(world)
+    as_given = True
     if len(world) and z_world.min() <= NEAR_M:
         world, faces, _ = clip_near(world, z_world, faces, NEAR_M)
-        facing = None
+        facing, as_given = None, False
     ab, z = projector.image_coordinates(world)
     h, w = projector.slide.shape[:2]
     K = projector.camera.K
@@ -387,7 +403,7 @@ def projector_shadow_map(projector: Projector, vertices, faces, *, facing=None, 
     # ray from the projector to its centroid.
     slope = np.empty(len(faces))
     _slope_kernel()(world, faces, projector.position, slope)
-    return ProjectorShadowMap(projector, dataclasses.replace(smap, slope=slope), pixel_tan, scale)
+    return ProjectorShadowMap(projector, dataclasses.replace(smap, slope=slope), pixel_tan, scale, as_given)
 
 
 @functools.cache

@@ -137,7 +137,8 @@ def prepare_scene(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, po
 def projector_light(visible: VisibleSurfaces, surfaces: Sequence[Surface],
                     projectors: Sequence[Projector], *, scratch: Scratch | None = None) -> np.ndarray:
     """The projectors' irradiance (N, 3) at the visible points, each through its shadow map of
-    the surfaces that cast shadows (NumPy); scratch: buffers for the maps and the result."""
+    the surfaces that cast shadows (NumPy); scratch: buffers for the maps and the result. The
+    points' own faces (from ``visible``) spare the lookups of points on the nearest face."""
     light = scratch_array(scratch, "projectors.light", (len(visible.pixel), 3))
     light.fill(0.0)
     if not projectors:
@@ -151,9 +152,19 @@ def projector_light(visible: VisibleSurfaces, surfaces: Sequence[Surface],
     else:
         verts, faces, facing = np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int8)
     points = np.ascontiguousarray(visible.points, np.float64)
+    # Each point's face among the casters' faces (-1: the ground, a surface that casts nothing).
+    offset = np.full(len(surfaces) + 1, -1, np.int64)
+    start = 0
+    for i, s in enumerate(surfaces):
+        if s.casts_shadows:
+            offset[i] = start
+            start += len(s.faces)
+    surface = visible.surface.reshape(-1)[visible.pixel]
+    own = offset[surface]  # surface -1 (the ground) takes the last entry, -1
+    own = np.where(own >= 0, own + visible.face.reshape(-1)[visible.pixel], -1)
     for j, proj in enumerate(projectors):
         smap = projector_shadow_map(proj, verts, faces, facing=facing, scratch=scratch, name=f"projector{j}")
-        proj.add_irradiance(points, visible.normals, smap, light)
+        proj.add_irradiance(points, visible.normals, smap, light, faces=own)
     return light
 
 

@@ -174,9 +174,10 @@ def _zbuffer_kernel():
     disk): as array operations its many short spans cost several times the ground back end's
     whole render.
 
-    Per face, its bounding box's pixel centres are tested against its three edges (edge
-    functions, stepped along each row): a centre within 1e-9 pixel of an edge, or on it, is
-    inside, so a centre on a shared edge belongs to both faces."""
+    A small face's bounding box's pixel centres are tested against its three edges (edge
+    functions, stepped along each row); a large face's rows are spanned from where they cross
+    its edges. A centre within 1e-9 pixel of an edge, or on it, is inside, so a centre on a
+    shared edge belongs to both faces."""
     import numba
 
     @numba.njit(cache=True, nogil=True)
@@ -219,6 +220,38 @@ def _zbuffer_kernel():
             tx = -1e-9 * (abs(ax) + abs(bx))
             ty = -1e-9 * (abs(ay) + abs(by))
             tz = -1e-9 * (abs(az) + abs(bz))
+            if (c1 - c0 + 1) * (r1 - r0 + 1) > 64:
+                # A large face: each row's span from where the row crosses its edges (no pixel
+                # of the box outside the face is visited).
+                for row in range(r0, r1 + 1):
+                    lo, hi = np.inf, -np.inf
+                    for e in range(3):
+                        if e == 0:
+                            xa, ya, xb, yb = x0, y0, x1, y1
+                        elif e == 1:
+                            xa, ya, xb, yb = x1, y1, x2, y2
+                        else:
+                            xa, ya, xb, yb = x2, y2, x0, y0
+                        if row < min(ya, yb) - 1e-9 or row > max(ya, yb) + 1e-9:
+                            continue
+                        dy = yb - ya
+                        if abs(dy) <= 1e-12:
+                            lo, hi = min(lo, min(xa, xb)), max(hi, max(xa, xb))
+                        else:
+                            xc = xa + min(max((row - ya) / dy, 0.0), 1.0) * (xb - xa)
+                            lo, hi = min(lo, xc), max(hi, xc)
+                    s0 = int(min(max(np.ceil(lo - 1e-9), 0.0), w))
+                    s1 = int(min(max(np.floor(hi + 1e-9), -1.0), w - 1))
+                    base = row * w
+                    z_row = z0 + gy * (row - y0)
+                    for col in range(s0, s1 + 1):
+                        z = z_row + gx * (col - x0)
+                        if single:
+                            z = np.float64(np.float32(z))
+                        if z < zbuf[base + col]:
+                            zbuf[base + col] = z
+                            fid[base + col] = i
+                continue
             for row in range(r0, r1 + 1):
                 fx = ax * c0 + bx * row + cx
                 fy = ay * c0 + by * row + cy
