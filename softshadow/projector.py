@@ -165,8 +165,15 @@ class Projector:
         cam = self.camera
         falloff = 1.0 if self.falloff == "inverse-square" else 0.0
         frame = np.vstack([cam.R, cam.t, cam.K[:2], self.position])  # rows 0-2 R, 3 t, 4-5 K, 6 position
-        return (frame, np.ascontiguousarray(self.slide), float(self.intensity), falloff,
-                self.reference_distance_m)
+        return frame, self._texture, float(self.intensity), falloff, self.reference_distance_m
+
+    @functools.cached_property
+    def _texture(self) -> np.ndarray:
+        """The slide as the light kernel reads it: float32 (its values to 6e-8, and half the memory
+        to fetch from), one channel when the slide is grey (H, W, 1), else (H, W, 3)."""
+        grey = np.array_equal(self.slide[..., 0], self.slide[..., 1]) and np.array_equal(
+            self.slide[..., 0], self.slide[..., 2])
+        return np.ascontiguousarray(self.slide[..., :1] if grey else self.slide, np.float32)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -214,13 +221,25 @@ class ProjectorShadowMap:
             return _NO_MAP
         g = self.smap.grid
         geometry = np.array([g.origin_m[0], g.origin_m[1], g.pixel_m, self.pixel_tan, self.scale])
-        return (True, self.smap.face_id, self.near_cover, np.ascontiguousarray(self.smap.triangle),
-                np.ascontiguousarray(self.smap.plane), np.ascontiguousarray(self.smap.slope), geometry)
+        return (True, self.smap.face_id, self.near_cover, self._packed_faces, np.ascontiguousarray(self.smap.slope),
+                geometry)
+
+    @functools.cached_property
+    def _packed_faces(self) -> np.ndarray:
+        """Per face (F, 9), what a lookup reads, together: its first corner (u0, v0), the
+        barycentric coordinates' gradients (b1 = (u - u0) g1u + (v - v0) g1v, b2 alike) and its
+        depth plane (A, B, d0)."""
+        tri, plane = self.smap.triangle, self.smap.plane
+        e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+        area = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+        area = np.where(area == 0, 1.0, area)
+        return np.ascontiguousarray(np.column_stack([tri[:, 0], e2[:, 1] / area, -e2[:, 0] / area,
+                                                     -e1[:, 1] / area, e1[:, 0] / area, plane]))
 
 
 # A projector without a shadow map, as the light kernel takes it.
-_NO_MAP = (False, np.zeros((1, 1), np.int32), np.zeros((1, 1), np.uint8), np.zeros((1, 3, 2)), np.zeros((1, 3)),
-           np.zeros(1), np.array([0.0, 0.0, 1.0, 1.0, 0.0]))
+_NO_MAP = (False, np.zeros((1, 1), np.int32), np.zeros((1, 1), np.uint8), np.zeros((1, 9)), np.zeros(1),
+           np.array([0.0, 0.0, 1.0, 1.0, 0.0]))
 
 
 @functools.cache
@@ -236,11 +255,11 @@ def _light_kernel():
     import numba
 
     @numba.njit(cache=True, nogil=True)
-    def kernel(points, normals, frame, slide, intensity, falloff, reference, has_map, face_id, near_cover, triangle,
-               plane, face_slope, geometry, own_face, mode, out, lit):
+    def kernel(points, normals, frame, slide, intensity, falloff, reference, has_map, face_id, near_cover, packed,
+               face_slope, geometry, own_face, mode, out, lit):
         n_pts = points.shape[0]
         has_normals = normals.shape[0] > 0
-        sh, sw = slide.shape[0], slide.shape[1]
+        sh, sw, channels = slide.shape[0], slide.shape[1], slide.shape[2]
         px, py, pz = frame[6, 0], frame[6, 1], frame[6, 2]
         mh, mw = face_id.shape
         ox, oy, inv_pt, pixel_tan = geometry[0], geometry[1], 1.0 / geometry[2], geometry[3]
@@ -310,17 +329,11 @@ def _light_kernel():
                             f = face_id[rr, cc]
                             if f < 0:
                                 continue
-                            t0u, t0v = triangle[f, 0, 0], triangle[f, 0, 1]
-                            ex1, ey1 = triangle[f, 1, 0] - t0u, triangle[f, 1, 1] - t0v
-                            ex2, ey2 = triangle[f, 2, 0] - t0u, triangle[f, 2, 1] - t0v
-                            qx, qy = a - t0u, b - t0v
-                            area = ex1 * ey2 - ey1 * ex2
-                            if area == 0:
-                                area = 1.0
-                            b1 = (qx * ey2 - qy * ex2) / area
-                            b2 = (ex1 * qy - ey1 * qx) / area
+                            qx, qy = a - packed[f, 0], b - packed[f, 1]
+                            b1 = qx * packed[f, 2] + qy * packed[f, 3]
+                            b2 = qx * packed[f, 4] + qy * packed[f, 5]
                             if b1 >= -1e-7 and b2 >= -1e-7 and b1 + b2 <= 1.0 + 1e-7:
-                                best, exact = plane[f, 2] + plane[f, 0] * qx + plane[f, 1] * qy, True
+                                best, exact = packed[f, 8] + packed[f, 6] * qx + packed[f, 7] * qy, True
                                 break
                         if not exact:
                             for k in range(_NEAREST_OFFSETS.shape[0]):
@@ -329,8 +342,8 @@ def _light_kernel():
                                     continue
                                 f = face_id[rr, cc]
                                 if f >= 0:
-                                    best = plane[f, 2] + plane[f, 0] * (a - triangle[f, 0, 0]) + plane[f, 1] * (
-                                        b - triangle[f, 0, 1])
+                                    best = packed[f, 8] + packed[f, 6] * (a - packed[f, 0]) + packed[f, 7] * (
+                                        b - packed[f, 1])
                                     fs = face_slope[f]
                                     break
                         if np.isfinite(best) and best < 0 and (exact or face_id[r, c] >= 0):
@@ -348,15 +361,22 @@ def _light_kernel():
                                 continue
             if mode == 2:
                 continue
-            # Bilinear on the slide, its coordinates clamped to the edge pixels' centres.
+            # Bilinear on the slide, its coordinates clamped to the edge pixels' centres; a grey
+            # slide is one channel.
             vv, uu = min(max(v, 0.0), sh - 1.0), min(max(u, 0.0), sw - 1.0)
             r0, c0 = int(vv), int(uu)
             r1, c1 = min(r0 + 1, sh - 1), min(c0 + 1, sw - 1)
             fr, fc = vv - r0, uu - c0
-            for k in range(3):
+            for k in range(channels):
                 top = slide[r0, c0, k] * (1.0 - fc) + slide[r0, c1, k] * fc
                 bottom = slide[r1, c0, k] * (1.0 - fc) + slide[r1, c1, k] * fc
-                out[i, k] += scalar * (top * (1.0 - fr) + bottom * fr)
+                value = scalar * (top * (1.0 - fr) + bottom * fr)
+                if channels == 1:
+                    out[i, 0] += value
+                    out[i, 1] += value
+                    out[i, 2] += value
+                else:
+                    out[i, k] += value
 
     return kernel
 
