@@ -116,6 +116,13 @@ def _run_bench(args, progress) -> int:
                                   json_path=args.json_path, report_path=getattr(args, "report", None), progress=progress)
         _emit(result, "-" if args.json_path == "-" else None)
         return 0
+    if args.what == "scene":
+        from .environment import environment, load_average
+        from .scene import bench_scene
+        result = {"environment": environment(), **result, **bench_scene(quick=args.quick, progress=progress)}
+        result["environment"]["load_average_at_end"] = load_average()
+        _emit(result, args.json_path)
+        return 0
     if args.what in ("lod", "lod-grid"):
         from .environment import environment
         result = {"environment": environment(), **result}

@@ -57,30 +57,77 @@ def _fit_runs(folder: Path, lod, seed: int = 0, warm_runs: int = 2) -> dict:
             "rmse": g.rmse, "error": g.error}
 
 
-def _fresh_fit(folder: Path, lod: str, out: Path, cache: Path) -> float:
-    """Wall time (s) of ``softshadow fit`` in a new process, with the compilation cache ``cache``."""
+def _warm_alternated(folder: Path, pairs: int = 4) -> dict:
+    """``off`` and ``auto`` fitted alternately in this process (everything compiled and the levels
+    kept already): medians of the wall and the process's CPU times and their ratios auto / off."""
+    import numpy as np
+
+    from fitting import FitOptions, fit_folder
+    runs = {"off": [], "auto": []}
+    for i in range(pairs):
+        for lod in (("off", "auto") if i % 2 == 0 else ("auto", "off")):
+            t, c = time.perf_counter(), time.process_time()
+            fit_folder(folder, options=FitOptions(plots=False, lod=lod))
+            runs[lod].append((round(time.perf_counter() - t, 3), round(time.process_time() - c, 3)))
+    out = {lod: float(np.median([w for w, _ in r])) for lod, r in runs.items()}
+    out.update({f"{lod}_cpu": float(np.median([c for _, c in r])) for lod, r in runs.items()})
+    out["auto_over_off"] = round(out["auto"] / out["off"], 3)
+    out["auto_over_off_cpu"] = round(out["auto_cpu"] / out["off_cpu"], 3)
+    out["runs"] = runs
+    return out
+
+
+def _fresh_fit(folder: Path, lod: str, out: Path, cache: Path) -> tuple[float, float]:
+    """Wall time and CPU time (s, user and system, of the process and its threads) of
+    ``softshadow fit`` in a new process, with the compilation cache ``cache``."""
+    import resource
     env = dict(os.environ, SOFTSHADOW_JAX_CACHE=str(cache))
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t = time.perf_counter()
     subprocess.run([sys.executable, "-m", "softshadow_cli", "fit", str(folder), "--out", str(out), "--force",
                     "--no-plots", "--lod", lod], check=True, env=env, stdout=subprocess.DEVNULL,
                    stderr=subprocess.DEVNULL)
-    return round(time.perf_counter() - t, 2)
+    wall = time.perf_counter() - t
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return round(wall, 2), round(cpu, 2)
 
 
-def _fresh(folder: Path, tmp: Path, coarsest: int) -> dict:
-    """Fresh-process wall times: ``off`` with an empty compilation cache (compiles everything),
-    then ``off``, ``auto`` and the coarsest level twice each with the cache kept (the later run
-    of each counts: the first may compile a level's new shapes into the cache). The coarsest
-    level's speed-up is the most any level of detail can give a user's ``softshadow fit``."""
+def _fresh(folder: Path, tmp: Path, coarsest: int, pairs: int = 5) -> dict:
+    """Fresh-process times: ``off`` with an empty compilation cache (compiles everything), then
+    ``auto`` once (its own programs and levels into the caches), then ``pairs`` alternated runs
+    of ``off`` and ``auto`` with the caches kept (the order flips each pair, so that neither
+    always follows the other), and the coarsest level twice (the later counts). Medians of the
+    alternated runs' wall and CPU times, and their ratios auto / off; the coarsest level's
+    speed-up is the most any level of detail can give a user's ``softshadow fit``. The
+    results of the last ``off`` and ``auto`` runs are read back for k and rho."""
+    import numpy as np
     cache = tmp / "jax-cache"
-    out = tmp / "fresh-out"
-    cold = _fresh_fit(folder, "off", out, cache)
-    times = {"off_empty_cache": cold}
-    for lod in ("off", "auto", str(coarsest)):
-        _fresh_fit(folder, lod, out, cache)
-        times[lod] = _fresh_fit(folder, lod, out, cache)
-    times["speedup"] = round(times["off"] / times["auto"], 3)
-    times["speedup_ceiling"] = round(times["off"] / times[str(coarsest)], 3)
+    out = {lod: tmp / f"fresh-out-{lod}" for lod in ("off", "auto", str(coarsest))}
+    times = {"off_empty_cache": _fresh_fit(folder, "off", out["off"], cache)[0]}
+    _fresh_fit(folder, "auto", out["auto"], cache)
+    runs = {"off": [], "auto": []}
+    for i in range(pairs):
+        for lod in (("off", "auto") if i % 2 == 0 else ("auto", "off")):
+            runs[lod].append(_fresh_fit(folder, lod, out[lod], cache))
+    _fresh_fit(folder, str(coarsest), out[str(coarsest)], cache)
+    coarse = _fresh_fit(folder, str(coarsest), out[str(coarsest)], cache)
+    for lod, r in runs.items():
+        times[lod] = float(np.median([w for w, _ in r]))
+        times[f"{lod}_cpu"] = float(np.median([c for _, c in r]))
+        times[f"{lod}_runs"] = r
+    times[str(coarsest)] = coarse[0]
+    times["auto_over_off"] = round(times["auto"] / times["off"], 3)
+    times["auto_over_off_cpu"] = round(times["auto_cpu"] / times["off_cpu"], 3)
+    times["speedup_ceiling"] = round(times["off"] / coarse[0], 3)
+    for lod in ("off", "auto"):
+        (g,) = json.loads((out[lod] / "results.json").read_text())["groups"]
+        times[f"{lod}_fit"] = {key: g.get(key) for key in ("range_k", "range_stderr", "rho", "rho_stderr",
+                                                            "lod_faces")}
+    fo, fa = times["off_fit"], times["auto_fit"]
+    if fo["range_k"] is not None and fa["range_k"] is not None:
+        times["auto_k_shift_se"] = round((fa["range_k"] - fo["range_k"]) / fo["range_stderr"], 3)
+        times["auto_rho_shift_se"] = round((fa["rho"] - fo["rho"]) / fo["rho_stderr"], 3)
     return times
 
 
@@ -141,9 +188,11 @@ def bench_lod(quick: bool = False, seed: int = 0, progress=None, fresh: bool = T
                 r = _fit_runs(folder, "off", seed=s, warm_runs=0)
                 _shifts(r, full)
                 reseeded.append({key: r.get(key) for key in ("range_k", "rho", "k_shift_se", "rho_shift_se")})
+            if progress:
+                progress(f"bench lod: {name} off and auto alternated, warm")
             scene = {"size": list(size), "sun_radius_deg": radius or 0.2665, "truth_range_k": truth["range_k"],
                      "truth_rho": truth["rho"], "fits": rows, "full_mesh_other_seeds": reseeded,
-                     "ceiling": _ceiling(rows)}
+                     "ceiling": _ceiling(rows), "warm_alternated": _warm_alternated(folder)}
             if fresh and in_quick:
                 if progress:
                     progress(f"bench lod: {name} fresh processes")

@@ -10,6 +10,11 @@ from .lod import LodLevel as LodLevel
 from .lod import PAPER_FACE_COUNTS as PAPER_FACE_COUNTS
 from .lod import decimate as decimate
 from .lod import lod_series as lod_series
+from .masking import HIDDEN_SSIM as HIDDEN_SSIM
+from .masking import MaskingScene as MaskingScene
+from .masking import MaskingTable as MaskingTable
+from .masking import measure_masking_table as measure_masking_table
+from .masking import masked_ssim as masked_ssim
 from .meshes import BUILTIN_MESHES as BUILTIN_MESHES
 from .meshes import MeshError as MeshError
 from .meshes import builtin_mesh as builtin_mesh
@@ -23,6 +28,9 @@ from .pixel_profile import blurred_profile_alpha as blurred_profile_alpha
 from .projector import Projector as Projector
 from .render import CameraRender as CameraRender
 from .render import SoftShadowModel as SoftShadowModel
+from .scene_frame import FrameRenderer as FrameRenderer
+from .scene_frame import SceneFrame as SceneFrame
+from .scene_frame import render_frame as render_frame
 from .scene_render import SceneLights as SceneLights
 from .scene_render import SceneRender as SceneRender
 from .scene_render import SceneSetup as SceneSetup
@@ -46,4 +54,4 @@ from .units import range_to_paper as range_to_paper
 from . import internal as internal
 from ._version import __version__ as __version__
 
-__all__ = ["BUILTIN_MESHES", "CameraRender", "GroundGrid", "LodLevel", "MeshError", "PAPER_FACE_COUNTS", "PAPER_SLIDES", "PinholeCamera", "Pose", "Projector", "SceneLights", "SceneRender", "SceneSetup", "ShadowParams", "SlideError", "SoftShadowModel", "Sun", "SunBelowHorizonError", "blurred_profile_alpha", "brightness_to_paper", "builtin_mesh", "decimate", "light_direction", "linear_to_srgb", "load_mesh", "load_slide", "lod_series", "look_at_camera", "occluded_disk_fraction", "one_blas_thread", "paper_to_range_k", "paper_to_rho", "prepare_scene", "profile_alpha", "range_to_paper", "render_scene", "shade_scene", "sine_slide", "slide_from_text", "spot_slide", "srgb_to_linear", "sun_direction", "use_compilation_cache", "__version__"]
+__all__ = ["BUILTIN_MESHES", "CameraRender", "GroundGrid", "HIDDEN_SSIM", "LodLevel", "MaskingScene", "MaskingTable", "MeshError", "PAPER_FACE_COUNTS", "PAPER_SLIDES", "PinholeCamera", "Pose", "Projector", "FrameRenderer", "SceneFrame", "SceneLights", "SceneRender", "SceneSetup", "ShadowParams", "SlideError", "SoftShadowModel", "Sun", "SunBelowHorizonError", "blurred_profile_alpha", "brightness_to_paper", "builtin_mesh", "decimate", "light_direction", "linear_to_srgb", "load_mesh", "load_slide", "lod_series", "look_at_camera", "masked_ssim", "measure_masking_table", "occluded_disk_fraction", "one_blas_thread", "paper_to_range_k", "paper_to_rho", "prepare_scene", "profile_alpha", "range_to_paper", "render_frame", "render_scene", "shade_scene", "sine_slide", "slide_from_text", "spot_slide", "srgb_to_linear", "sun_direction", "use_compilation_cache", "__version__"]

@@ -9,7 +9,9 @@ import lazy_loader as _lazy
 
 __getattr__, __dir__, __all__ = _lazy.attach("softshadow", submod_attrs={
     "compilation_cache": ["SAVED_PROGRAMS_ENV", "default_cache_dir"],
+    "dense_plan": ["DensePlan", "plan_dense_points"],
     "evaluate": ["plan_alpha", "plan_alpha_jit", "plan_coordinate", "plan_coordinate_light"],
+    "masking": ["comparison_region", "render_level_image"],
     "occluder": ["Occluder", "Silhouette"],
     "params": ["rotation_matrix_xyz"],
     "penumbra": ["PROFILES", "RULES", "footprint_profile_alpha", "penumbra_coordinate", "profile_integral",
@@ -21,6 +23,9 @@ __getattr__, __dir__, __all__ = _lazy.attach("softshadow", submod_attrs={
     "projector": ["FALLOFFS", "ProjectorShadowMap", "projector_shadow_map"],
     "raster": ["project_to_ground"],
     "render": ["object_mask"],
+    "scene_frame": ["FRAME_STEPS", "band_alpha"],
+    "scene_render": ["projector_light"],
+    "scratch": ["Scratch"],
     "shadowmap": ["BIAS_PX", "LightFrame", "ShadowMap", "depth_bias", "faces_away", "rasterise_depth",
                   "shadow_map"],
     "sky": ["SkyNodes", "SkyPatch", "cosine_weighted_directions", "hidden_sky_fraction", "hidden_sky_map",

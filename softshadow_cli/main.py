@@ -224,7 +224,7 @@ def _add_bench(sub):
     p.add_argument("--quick", action="store_true", help="fewer repeats and sizes")
     p.add_argument("--what", default="overview",
                    choices=("overview", "render", "fit", "all", "sweep", "receiver", "precision", "lod",
-                            "lod-grid", "floor", "startup", "coverage"),
+                            "lod-grid", "scene", "floor", "startup", "coverage"),
                    help="overview (the default, above); the renderer's and fitter's micro benchmarks without "
                         "errors: render / fit, or both (all); the full speed-against-error sweep with its "
                         "image and parameter errors against a known truth (sweep); the light-space back "
@@ -232,6 +232,8 @@ def _add_bench(sub):
                         "the shadow map's depth in float32 against float64 (precision); the fit on the "
                         "real 41k-face dragon at each level of detail (lod); the Dowling paper's grid of "
                         "levels of detail under its slides with the SSIM masking table (lod-grid); the "
+                        "scene image at 640x480 (the dragon and its levels, sun, projector, ambient) per "
+                        "frame (scene); the "
                         "renderer's error floor against a physical render, before and after its pixel "
                         "footprint and hidden sky (floor); a fit in a fresh process through the command line "
                         "and through the Python API, alternated (startup); the randomized calibration study of "

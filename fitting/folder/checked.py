@@ -26,14 +26,16 @@ _SUN_CHECK_REPLANS = 4
 
 
 def _fit_group_with_sun(model, pose, views, group: PhotoGroup, options: FitOptions, sky_model=None,
-                        fit_sun: bool | None = None, replans: int = _SUN_REPLANS) -> tuple[GroupResult, float | None]:
+                        fit_sun: bool | None = None, replans: int = _SUN_REPLANS,
+                        samples=None) -> tuple[GroupResult, float | None]:
     """Fit a group; when its sun is fitted (unknown, or ``fit_sun``), re-plan the samples around the
     refined sun until it settles (an unknown sun is first searched for coarsely). ``views`` are
-    changed in place (their sun). Returns the result and, for a fitted sun, its last move
-    (degrees, azimuth plus elevation; None: the sun was not fitted)."""
+    changed in place (their sun). samples: the group's samples already drawn for these views
+    (``fit_group``; used when the sun is not fitted). Returns the result and, for a fitted sun,
+    its last move (degrees, azimuth plus elevation; None: the sun was not fitted)."""
     from ..solve.group import fit_group  # with JAX (see groups.fit_groups)
     if not fit_sun and all(v.sun_source != "fitted" for v in views):
-        return fit_group(model, pose, views, group.label, group.time, options, sky_model), None
+        return fit_group(model, pose, views, group.label, group.time, options, sky_model, samples=samples), None
     if any(v.sun_source == "fitted" for v in views):
         from ..photos.sun_search import search_sun
         az, el, _ = search_sun(model, pose, views[0])
@@ -79,20 +81,21 @@ def _sun_check(model, pose, views: list[PhotoView], group: PhotoGroup, options: 
 
 def fit_checked(model, pose, views: list[PhotoView], group: PhotoGroup, options: FitOptions, sky_model=None, *,
                 level_of_detail: LevelOfDetail | None = None,
-                sun_path: tuple[float, float] | None = None) -> tuple[GroupResult, list[dict]]:
+                sun_path: tuple[float, float] | None = None, samples=None) -> tuple[GroupResult, list[dict]]:
     """Fit a group and judge it (``fitting.verdict.rules``): a photo the rules find out of place is
     left out (a ``skipped`` entry naming the group and why) and the group refitted without it; a
     group that shows no shadow gets "no shadow in view" and no values; a misfit is traced to its
     likely cause with a refit with the sun free. level_of_detail: the mesh level fitted (evidence);
     sun_path: the sun's daily motion at the group's time, (d azimuth, d elevation) in degrees per
-    minute (None: not known)."""
+    minute (None: not known); samples: the samples already drawn for these views
+    (``fitting.solve.lod``), used by the first fit."""
     start = _time.perf_counter()
     level_of_detail = level_of_detail or LevelOfDetail()
     given, left_out = max(len(views), len(group.photos)), []
     while True:
         result, sun_moved = _fit_group_with_sun(model, pose, views, PhotoGroup(group.label, group.time,
                                                                                [v.name for v in views]), options,
-                                                sky_model)
+                                                sky_model, samples=samples if not left_out else None)
         if not result.fitted or result.evidence is None:
             break
         fit = result.evidence

@@ -115,19 +115,21 @@ def fit_groups(photos, scene, options, half_size, progress, store, on_group, job
             lod_start = _time.perf_counter()
             try:
                 with lod_lock:
-                    group_model, faces, check = lods.for_group(pose, views, options)
-                    sky_model = lods.sky_level(faces) if options.lod == "auto" else None
-                level = LevelOfDetail(faces, lods.full_faces, forced=options.lod not in ("auto", "off"),
-                                      shift_k_se=check.shift_k_se if check else math.nan,
-                                      shift_rho_se=check.shift_rho_se if check else math.nan)
+                    level = lods.for_group(pose, views, options)
+                group_model, sky_model, prepared = level.model, level.sky_model, level.samples
+                check = level.check
+                detail = LevelOfDetail(level.faces, lods.full_faces, forced=options.lod not in ("auto", "off"),
+                                       shift_k_se=check.shift_k_se if check else math.nan,
+                                       shift_rho_se=check.shift_rho_se if check else math.nan)
             except Exception as exc:  # a failed choice costs the saving, never the group
-                group_model, sky_model = model, None
+                group_model, sky_model, prepared = model, None, None
                 note = f"level of detail not chosen ({type(exc).__name__}: {exc}); the full mesh is used"
-                level = LevelOfDetail(lods.full_faces, lods.full_faces, note=note.splitlines()[0])
+                detail = LevelOfDetail(lods.full_faces, lods.full_faces, note=note.splitlines()[0])
             lod_seconds = _time.perf_counter() - lod_start
             try:
                 result, left_out = fit_checked(group_model, pose, views, group, options, sky_model,
-                                               level_of_detail=level, sun_path=_sun_path(scene, views))
+                                               level_of_detail=detail, sun_path=_sun_path(scene, views),
+                                               samples=prepared)
                 result = result.with_time(lod_seconds)
                 group_skipped += left_out
             except Exception as exc:  # a failed group must not lose the others

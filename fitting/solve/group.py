@@ -422,16 +422,23 @@ def _overlay(model: SoftShadowModel, pose: Pose, view: PhotoView, params: FitPar
 
 def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label: str,
               time_label: str | None, options: FitOptions | None = None,
-              sky_model: SoftShadowModel | None = None, *, fit_sun: bool | None = None) -> GroupResult:
+              sky_model: SoftShadowModel | None = None, *, fit_sun: bool | None = None,
+              samples: tuple | None = None) -> GroupResult:
     """Fit k and rho shared by ``views`` (one time of day), judged by the rule book
     (``fitting.verdict.rules``) on this fit alone. Never raises for bad data: failures come back as
     a GroupResult with ``error`` set. sky_model: the mesh the hidden sky is cast from (a coarse
     level of detail, ``fitting.solve.lod``; default ``model``). fit_sun: fit the sun's azimuth and
-    elevation with k and rho (default: when a view's sun is "fitted")."""
+    elevation with k and rho (default: when a view's sun is "fitted"). samples: (view names, then
+    ``sample_views``' samples, views and warnings) drawn already with this model, options and sky
+    model (the level-of-detail choice draws them); used when the names are those of ``views``,
+    else the samples are drawn here."""
     options = options or FitOptions()
     start = _time.perf_counter()
     names = [v.name for v in views]
-    samples, used, no_shadow = sample_views(model, pose, views, options, sky_model)
+    if samples is not None and tuple(samples[0]) == tuple(names):
+        samples, used, no_shadow = samples[1], samples[2], list(samples[3])
+    else:
+        samples, used, no_shadow = sample_views(model, pose, views, options, sky_model)
     if not samples:
         return GroupResult.failed(label, time_label, names, "no shadow in view: " + "; ".join(no_shadow),
                                   warnings=no_shadow,
