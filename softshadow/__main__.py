@@ -1,7 +1,5 @@
 """``python -m softshadow``: the ``softshadow`` command (the command line lives in ``softshadow_cli``)."""
 
-import sys
+from softshadow_cli.main import run
 
-from softshadow_cli.main import main
-
-sys.exit(main())
+run()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 __all__ = ["build_parser", "main"]
@@ -291,11 +292,25 @@ def _option_problem(args) -> str | None:
 
 
 def main(argv=None) -> int:
+    """Run the ``softshadow`` command on ``argv`` (default: the process's arguments) and return
+    its exit status (130 after Ctrl-C)."""
     code = _main(sys.argv[1:] if argv is None else list(argv))
     if code == 130:
         from .interrupts import quiet_after_interrupt
         quiet_after_interrupt()
     return code
+
+
+def run(argv=None) -> None:
+    """The ``softshadow`` executable: ``main``, then exit with its status. After Ctrl-C the process
+    ends at once, with the command's files closed and its output flushed: a native thread the
+    interruption left running (an XLA compilation) can crash the interpreter's shutdown."""
+    code = main(argv)
+    if code == 130:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(130)
+    sys.exit(code)
 
 
 def _main(argv: list[str]) -> int:
@@ -337,4 +352,4 @@ def _main(argv: list[str]) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run()

@@ -251,8 +251,8 @@ def test_ctrl_c_prints_one_line_and_resumes(one_group, tmp_path):
         "    time.sleep(120)\n"
         "    return fit_group(*args, **kwargs)\n"
         "solve.fit_group = waiting_fit_group\n"
-        "from softshadow_cli.main import main\n"
-        "sys.exit(main(sys.argv[1:]))\n")
+        "from softshadow_cli.main import run\n"
+        "run(sys.argv[1:])\n")
     cmd = [sys.executable, "-c", driver, "fit", str(one_group), "--out", str(out), "--no-plots"]
     env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
@@ -449,7 +449,7 @@ def test_a_failed_group_is_never_reliable_nor_identifiable(tmp_path):
 
     from fitting import FitResults, GroupResult, write_results_json
     from fitting.folder.many import folder_rows, write_summary
-    failed = GroupResult("13:21", "13:21", ["IMG_0004.jpg"], error="no shadow in view: ...")
+    failed = GroupResult.failed("13:21", "13:21", ["IMG_0004.jpg"], "no shadow in view: ...")
     write_results_json(FitResults([failed], [], {}), tmp_path)
     (doc,) = json.loads((tmp_path / "results.json").read_text())["groups"]
     assert doc["rho"] is None and doc["reliable"] is False and doc["identifiable"] is False
@@ -482,7 +482,10 @@ def test_closing_line_claims_only_the_plots_written(one_group, tmp_path, monkeyp
     line does not claim them; a run that drew no plot does not claim any either."""
     import fitting
     from fitting import FitResults, GroupResult
-    fitted = GroupResult("13:21", "13:21", ["IMG_0004.jpg"], range_k=0.005, rho=0.2, converged=True)
+    from fitting.report.results import FitDiagnostics
+    from fitting.verdict.outcome import Estimate, Verdict
+    fitted = GroupResult("13:21", "13:21", ["IMG_0004.jpg"], Verdict(True, True), Estimate(range_k=0.005, rho=0.2),
+                         diagnostics=FitDiagnostics(converged=True))
     seen = {}
 
     def fake(photo_dir, out_dir, options, **kwargs):  # a fit that draws no plot

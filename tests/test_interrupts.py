@@ -168,8 +168,8 @@ def marked(tag, fn):
     return compiling
 numba_dispatch.Dispatcher.compile = marked("numba", numba_dispatch.Dispatcher.compile)
 xla.backend_compile_and_load = marked("xla", xla.backend_compile_and_load)
-from softshadow_cli.main import main
-sys.exit(main(sys.argv[1:]))
+from softshadow_cli.main import run
+run(sys.argv[1:])
 """
 
 

@@ -214,8 +214,8 @@ class Marked(dask.distributed.LocalCluster):
         print("test: cluster started", file=sys.stderr, flush=True)
 
 dask.distributed.LocalCluster = Marked
-from softshadow_cli.main import main
-sys.exit(main(sys.argv[1:]))
+from softshadow_cli.main import run
+run(sys.argv[1:])
 """
 
 
