@@ -80,10 +80,31 @@ def synth_group(seed: int, index: int, root, prior=None, meshes=None, render_qua
     return folder, draw
 
 
+@contextlib.contextmanager
+def _verdict_inputs():
+    """Keep what the rule book judged: the (evidence, context) of each final ``judge_fit`` call,
+    by the evidence's id, so that a record can be judged again by changed rules without a refit
+    (``coverage_rejudge``)."""
+    from fitting.verdict import rules
+    seen: dict[int, tuple] = {}
+    judge = rules.judge_fit
+
+    def keeping(fit, context=None):
+        seen[id(fit)] = (fit, context)
+        return judge(fit, context)
+    rules.judge_fit = keeping
+    try:
+        yield seen
+    finally:
+        rules.judge_fit = judge
+
+
 def fit_group(folder, draw) -> dict:
     """Fit a group's folder with the default options (and the draw's forced level of detail):
     the result group that holds the truth's photos (its RESULT_FIELDS), the photos skipped,
-    and how many groups the fit found."""
+    how many groups the fit found, and what the rule book judged (``verdict_inputs``: the
+    evidence and context as JSON, None for a group with an error)."""
+    import dataclasses
     from fitting import FitOptions, FolderError, fit_folder
     options = FitOptions(plots=False)
     if draw.fit_lod is not None:
@@ -91,17 +112,24 @@ def fit_group(folder, draw) -> dict:
     truth = json.loads((Path(folder) / "truth.json").read_text())
     photos = set(truth["groups"][0]["photos"])
     try:
-        results = fit_folder(folder, options=options)
+        with _verdict_inputs() as seen:
+            results = fit_folder(folder, options=options)
     except FolderError as exc:
         return {"result": {"error": f"folder: {exc}", "reliable": False, "identifiable": False},
                 "skipped": [], "result_groups": 0}
-    groups = [g.to_json() for g in results.groups]
-    best = max(groups, key=lambda g: len(photos & set(g["photos"])), default=None)
-    if best is None or not photos & set(best["photos"]):
+    best = max(results.groups, key=lambda g: len(photos & set(g.photos)), default=None)
+    inputs = None
+    if best is None or not photos & set(best.photos):
         result = {"error": "no group holds the drawn photos", "reliable": False, "identifiable": False}
     else:
-        result = {k: best.get(k) for k in RESULT_FIELDS if k in best}
-    return {"result": result, "skipped": list(results.skipped), "result_groups": len(groups)}
+        as_json = best.to_json()
+        result = {k: as_json.get(k) for k in RESULT_FIELDS if k in as_json}
+        judged = seen.get(id(best.evidence)) if best.evidence is not None else None
+        if judged is not None:
+            inputs = {"evidence": dataclasses.asdict(judged[0]),
+                      "context": dataclasses.asdict(judged[1]) if judged[1] is not None else None}
+    return {"result": result, "skipped": list(results.skipped), "result_groups": len(results.groups),
+            "verdict_inputs": inputs}
 
 
 def _truth_fields(folder: Path) -> dict:
