@@ -128,16 +128,16 @@ def main(argv=None) -> int:
                if args.half == "all" or r["index"] % 2 == (0 if args.half == "even" else 1)]
     kept = [r for r in records if r.get("verdict_inputs")]
     print(f"{len(records)} records, {len(kept)} with the rule book's inputs")
-    print("as recorded:", *table(kept), sep="\n  ")
+    print("as recorded:", *table(records), sep="\n  ")
     floor = None
     if args.floor:
         from fitting.solve.uncertainty import SystematicFloor
         floor = SystematicFloor(*(float(x) for x in args.floor.split(",")))
-    after = rejudged(kept, floor)
+    after = rejudged(records, floor)
     print("re-judged:", *table(after), sep="\n  ")
     if args.json:
         from .coverage import assemble
-        args.json.write_text(json.dumps(assemble(after, kept[0]["seed"] if kept else 0), indent=1) + "\n")
+        args.json.write_text(json.dumps(assemble(after, records[0]["seed"] if records else 0), indent=1) + "\n")
     return 0
 
 

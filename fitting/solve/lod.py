@@ -54,7 +54,7 @@ from softshadow.internal import Occluder, bucket_size, concatenate_plans, defaul
 
 from ..samples.ground import select_samples
 from ..samples.photo_samples import PhotoSamples
-from .uncertainty import systematic_errors
+from .uncertainty import LOD_FLOOR, systematic_errors
 from ..photos.views import PhotoView
 
 __all__ = ["LOD_MIN_FACES", "LOD_COARSEST_FACES", "LOD_SKY_FACES", "GroupLevel", "LevelCheck", "LodChoice",
@@ -262,10 +262,10 @@ class ShadowReference:
         self.cov = np.linalg.pinv(self.jacobian.T @ self.jacobian)
         #: Statistical standard errors of (k, rho) predicted from the pixel noise.
         self.se_stat = np.sqrt(np.maximum(np.diag(self.cov)[:2], 1e-300))
-        # The stated errors (``fitting.solve.uncertainty.combine_errors``): the systematic floor at
-        # k_ref without its narrow-penumbra part (penumbra_px infinite), both smaller than what
-        # the fit will state, in quadrature with the statistical part.
-        self.se_sys = np.array(systematic_errors(self.k_ref, self.rho, float("inf")))
+        # The stated errors (``fitting.solve.uncertainty.combine_errors``): the systematic floor the
+        # tolerance was measured with (LOD_FLOOR) at k_ref without its narrow-penumbra part, both
+        # smaller than what the fit will state, in quadrature with the statistical part.
+        self.se_sys = np.array(systematic_errors(self.k_ref, self.rho, float("inf"), LOD_FLOOR))
         self.se = np.hypot(self.se_stat, self.se_sys)
 
     def check(self, faces: int, model: SoftShadowModel) -> LevelCheck:

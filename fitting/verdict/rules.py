@@ -152,8 +152,12 @@ MIN_PROFILES = 10
 #: Mitsuba renders, the demo at 400x300 and 800x600 and the pillar and ball presets; the table2 preset's
 #: 16:21 groups at 640x480 (a low sun, a narrow shadow) moved it 1.7-4.0 deg, but k and rho by 0.1 of
 #: their errors. A clock 7-12 minutes off moved it 1.0-2.3 deg and k or rho by 1.3-2.7 errors, an object
-#: written 4 cm off 0.43 deg and 1.0, a sun given 1.2 deg off 0.82 deg and 2.9.
-SUN_FREE_MAX_DEG, SUN_FREE_SHIFT = 0.3, 1.0
+#: written 4 cm off 0.43 deg and 1.0, a sun given 1.2 deg off 0.82 deg and 2.9. In the calibration study
+#: (docs/uncertainty_study.md; set on its even groups 0-66, checked on the odd ones) no well-described
+#: group moved a known sun by more than 0.10 deg; a ball over a bank described 9 % too large moved it
+#: 0.81 deg with k following by 0.9 errors and k read 5.7 errors high: following by half an error is
+#: enough once the sun moved that far.
+SUN_FREE_MAX_DEG, SUN_FREE_SHIFT = 0.3, 0.5
 #: A refit with the sun free explains a misfit when it brings the misfit under ``MISFIT_MAX`` or
 #: below this fraction of what it was.
 SUN_CHECK_GAIN = 0.5
