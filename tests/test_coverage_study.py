@@ -226,6 +226,47 @@ def test_tables_from_hand_made_records():
     assert not c["coverage_ok"] and {f["what"] for f in c["coverage_bins_failing"]} == {"k"}
 
 
+def test_a_record_is_judged_again_from_what_the_rule_book_saw():
+    """A record keeps the evidence and context the rule book judged (as JSON, NaN included):
+    ``coverage_rejudge`` rebuilds them and gives what ``judge_fit`` gives, and states the errors
+    with another systematic floor when asked."""
+    import dataclasses
+
+    from benchmarks.coverage_rejudge import context_from_json, evidence_from_json, rejudge
+    from fitting.solve.uncertainty import SystematicFloor, systematic_errors
+    from fitting.verdict.evidence import FitEvidence, GroupContext, LevelOfDetail, PhotoEvidence, SunCheck, SunFree
+    from fitting.verdict.rules import judge_fit
+
+    photos = tuple(PhotoEvidence(f"{i}.jpg", 1300, 700, 300, 80, 0.02, rms_lit=0.02, noise_lit=0.02,
+                                 misfit=0.9 + 0.1 * i, shadow_depth=0.8, predicted_depth=0.8, k=0.0057,
+                                 k_stderr=0.0002, rho=0.16, rho_stderr=0.001) for i in range(3))
+    fit = FitEvidence(k=0.0057, rho=0.159, k_stderr_stat=0.00015, rho_stderr_stat=0.0006, k_stderr_sys=0.0005,
+                      rho_stderr_sys=0.002, penumbra_px=2.3, blur_px=None, n_in_penumbra=260, n_in_umbra=900,
+                      n_profiles=300, converged=True, range_k_max=0.03, photos=photos,
+                      photos_without_shadow=(("d.jpg", "out of view"),),
+                      sun_free=SunFree(0.4, 0.9, 0.0064, 0.161, elevation_deg=40.0), receiver="depth")
+    context = GroupContext(4, (("e.jpg", "misfit"),), LevelOfDetail(1000, 26600, True, 0.2, float("nan")),
+                           SunCheck(0.5, 0.8, 1.1, 1.0, 0.006, 40.0, (0.2, -0.1)))
+    inputs = json.loads(json.dumps({"evidence": dataclasses.asdict(fit), "context": dataclasses.asdict(context)}))
+    # NaN is not equal to itself: compare the records as JSON.
+    assert json.dumps(dataclasses.asdict(evidence_from_json(inputs["evidence"]))) == json.dumps(dataclasses.asdict(fit))
+    assert json.dumps(dataclasses.asdict(context_from_json(inputs["context"]))) == json.dumps(dataclasses.asdict(context))
+    record = {"seed": 0, "index": 1, "verdict_inputs": inputs, "result": {"reliable": True, "warnings": []}}
+    estimate, verdict = judge_fit(fit, context)
+    again = rejudge(record)["result"]
+    assert (again["reliable"], again["identifiable"], again["warnings"]) == (
+        verdict.reliable, verdict.identifiable, list(verdict.warnings))
+    assert not again["reliable"]  # the sun moved 1 deg and k followed it
+    assert (again["range_k"], again["range_stderr"], again["rho_stderr"]) == (
+        estimate.range_k, estimate.range_stderr, estimate.rho_stderr)
+    wide = SystematicFloor(0.5, 0.0, 0.02, 0.0)
+    widened = rejudge(record, wide)["result"]
+    assert widened["range_stderr_sys"] == pytest.approx(systematic_errors(0.0057, 0.159, 2.3, wide)[0])
+    assert widened["rho_stderr"] > again["rho_stderr"]
+    failed = {"seed": 0, "index": 2, "result": {"error": "fit failed", "reliable": False}}
+    assert rejudge(failed) is failed
+
+
 def test_parse_indices():
     assert parse_indices("3,17,40-42") == [3, 17, 40, 41, 42]
     assert parse_indices(None) is None

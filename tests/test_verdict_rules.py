@@ -204,6 +204,21 @@ def test_shadows_that_fit_another_sun_flag_the_group_with_the_cause():
     assert "the shadows fit a sun 1.0 deg from the scene's, and k or rho follow it" in text and "likely the clock" in text
 
 
+def test_a_sun_moved_far_that_k_follows_by_half_an_error_flags_the_group():
+    """A ball over a bank described 9 % too large (calibration study, group 12): every photo fits
+    (misfit 0.84), the solve with the sun free moves the known sun 0.81 deg and k follows it by 0.9 of
+    its stated error: the shadows fit another sun. Following by less than half an error does not."""
+    errors = dict(k=0.0276, rho=0.7965, k_stderr_stat=0.0030, k_stderr_sys=0.0022, rho_stderr_stat=0.0039,
+                  penumbra_px=21.1, receiver="depth")
+    k_err = math.hypot(0.0030, 0.0022)
+    follows = _fit(**errors, sun_free=SunFree(-0.17, 0.80, 0.0276 - 0.9 * k_err, 0.7941, elevation_deg=56.6))
+    assert rules.sun_moves(follows) == pytest.approx(0.81, abs=0.01) and rules.wants_sun_check(follows)
+    assert not rules.judge_fit(follows, GroupContext(3))[1].reliable
+    assert rules.SUN_FREE_SHIFT == 0.5
+    barely = _fit(**errors, sun_free=SunFree(-0.17, 0.80, 0.0276 - 0.45 * k_err, 0.7955, elevation_deg=56.6))
+    assert rules.sun_moves(barely) is None and rules.judge_fit(barely, GroupContext(3))[1].reliable
+
+
 def test_a_refit_that_leaves_k_beyond_the_band_does_not_explain_it():
     """A penumbra under a pixel fitted far too wide (the hard-cases `subpixel` group): the refit with
     the sun free moves the sun but keeps k beyond the band, and the misfit was fine to begin with."""
