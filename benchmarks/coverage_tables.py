@@ -26,13 +26,15 @@ import math
 from collections.abc import Callable, Iterable
 
 __all__ = ["Judgement", "judge", "FACTORS", "factor_bin", "summarize", "bin_table", "criteria",
-           "COVERAGE_TARGET", "MIN_RELIABLE_PER_BIN", "MAX_CONFIDENT_MISSES", "MAX_FALSE_ALARMS"]
+           "COVERAGE_TARGET", "MIN_RELIABLE_PER_BIN", "MAX_CONFIDENT_MISSES", "MAX_FALSE_ALARMS", "MIN_GROUPS"]
 
 #: The study's targets (issue 24's "done when").
 COVERAGE_TARGET = 0.90
 MIN_RELIABLE_PER_BIN = 20
 MAX_CONFIDENT_MISSES = 0.01
 MAX_FALSE_ALARMS = 0.05
+#: The issue asks for a study of at least this many groups.
+MIN_GROUPS = 300
 
 
 @dataclasses.dataclass(frozen=True)
@@ -230,6 +232,10 @@ def criteria(records: Iterable[dict]) -> dict:
                             "reliable": total["reliable"]})
     misses_ok = (total["confident_miss_share"] or 0.0) <= MAX_CONFIDENT_MISSES
     alarms_ok = (total["false_alarm_rate"] or 0.0) <= MAX_FALSE_ALARMS
-    return {"coverage_bins_failing": failing, "coverage_ok": not failing,
-            "confident_misses_ok": misses_ok, "false_alarms_ok": alarms_ok,
-            "met": not failing and misses_ok and alarms_ok}
+    judged = ([{"factor": "all", "bin": "all"}] if total["reliable"] >= MIN_RELIABLE_PER_BIN else []) + [
+        {"factor": factor, "bin": row["bin"]} for factor in FACTORS for row in bin_table(records, factor)
+        if row["reliable"] >= MIN_RELIABLE_PER_BIN]
+    size_ok = total["groups"] >= MIN_GROUPS
+    return {"coverage_bins_failing": failing, "coverage_ok": not failing, "coverage_bins_judged": judged,
+            "confident_misses_ok": misses_ok, "false_alarms_ok": alarms_ok, "size_ok": size_ok,
+            "met": not failing and misses_ok and alarms_ok and size_ok}
