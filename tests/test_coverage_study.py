@@ -221,9 +221,11 @@ def test_tables_from_hand_made_records():
     c = criteria(recs)
     assert not c["confident_misses_ok"] and not c["false_alarms_ok"] and not c["met"]
     assert c["coverage_ok"]  # no bin holds 20 reliable groups
+    assert c["coverage_bins_judged"] == [] and not c["size_ok"]  # 9 groups, not the 300 asked for
     many = [_record(0.0051, 0.0005, 0.201, 0.002) for _ in range(19)] + [_record(0.0070, 0.0005, 0.2, 0.002)] * 3
     c = criteria(many)
     assert not c["coverage_ok"] and {f["what"] for f in c["coverage_bins_failing"]} == {"k"}
+    assert {"factor": "all", "bin": "all"} in c["coverage_bins_judged"]
 
 
 def test_a_record_is_judged_again_from_what_the_rule_book_saw():
