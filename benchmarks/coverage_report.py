@@ -209,6 +209,7 @@ def write_coverage_report(result: dict, md_path: Path, json_name: str | None = N
           _size_line(total, crit),
           f"- Coverage >= {COVERAGE_TARGET:.0%} for k and for rho in every bin with >= {MIN_RELIABLE_PER_BIN} "
           f"reliable groups: **{'met' if crit['coverage_ok'] else 'not met'}**"
+          + ("" if crit.get("size_ok", True) or not crit["coverage_ok"] else " in the bins judged, at this size")
           + ("" if crit["coverage_ok"] else " (" + "; ".join(
               f"{_where(f)}: {f['what']} {_pct(f['coverage'])} of {f['reliable']}"
               for f in crit["coverage_bins_failing"]) + ")"),
@@ -331,6 +332,7 @@ def summary_section(result: dict, study_page: str = "uncertainty_study.md") -> s
          _size_line(total, crit),
          f"- Coverage >= {COVERAGE_TARGET:.0%} for k and rho in every bin with >= {MIN_RELIABLE_PER_BIN} reliable "
          f"groups: {'met' if crit['coverage_ok'] else 'not met'}"
+         + ("" if crit.get("size_ok", True) or not crit["coverage_ok"] else " in the bins judged, at this size")
          + ("" if crit["coverage_ok"] else " (" + "; ".join(
              f"{_where(f)}: {f['what']} {_pct(f['coverage'])}" for f in crit["coverage_bins_failing"])
             + ")") + ".",
