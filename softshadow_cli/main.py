@@ -141,7 +141,7 @@ def _add_fit(sub):
                    help="how the silhouette expands: edge (each edge along its outward normal) or paper "
                         "(the paper's vertex normals)")
     p.add_argument("--range-k-max", type=float, default=0.03, help="largest k searched (default 0.03)")
-    p.add_argument("--half-size", action="store_true", help="decode RAW at half size (faster)")
+    p.add_argument("--half-size", action="store_true", help="read every photo at half its width and height (RAW decoded at half size, others shrunk): faster, for large photos")
     p.add_argument("--no-plots", dest="plots", action="store_false",
                    help="write results.json and the tables only (no plots, no index.html figures)")
     p.add_argument("--overlays", default=None, choices=("first", "all"),
