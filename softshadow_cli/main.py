@@ -241,9 +241,10 @@ def _add_bench(sub):
                         "the stated errors: groups drawn from a documented prior, rendered by the physical "
                         "renderer, fitted and compared with their truth, hours of CPU for 300 groups, resumable "
                         "(coverage)")
-    p.add_argument("--report", help="with overview, sweep, lod-grid or coverage: also write the Markdown report "
-                                    "here (and its images in img/ beside it), e.g. docs/benchmarks.md, "
-                                    "docs/speed_vs_error.md, docs/lod_masking.md, docs/uncertainty_study.md")
+    p.add_argument("--report", help="with overview, sweep, lod-grid, startup or coverage: also write the Markdown "
+                                    "report here (and its images in img/ beside it), e.g. docs/benchmarks.md, "
+                                    "docs/speed_vs_error.md, docs/lod_masking.md, docs/startup.md, "
+                                    "docs/uncertainty_study.md")
     p.add_argument("--groups", type=int, default=300, help="with coverage: how many groups to draw (default 300)")
     p.add_argument("--seed", type=int, default=0, help="with coverage: the study's seed (group i is drawn from "
                                                       "numpy's default_rng([seed, i]))")
