@@ -80,7 +80,7 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
     lights = SceneLights() if lights is None else lights
     k = float(lights.range_k)
     range_k_max = k if range_k_max is None else float(range_k_max)
-    ms = {}
+    ms: dict[str, float] = {}
     t = time.perf_counter()
     surfaces = [_object_surface(model, pose, object_albedo), *receivers]
     posed = None

@@ -20,8 +20,8 @@ class SunBelowHorizonError(ValueError):
     """The sun is at or below the horizon: there is no direct-sun shadow."""
 
 
-def sun_direction(azimuth_deg, elevation_deg, xp=jnp) -> Float[AnyArray, "3"]:
-    """Unit vector towards the sun, shape (3,), from angles in degrees.
+def sun_direction(azimuth_deg, elevation_deg, xp=jnp) -> Float[AnyArray, "3 ..."]:
+    """Unit vector towards the sun, shape (3, *batch) for angles of shape batch, in degrees.
 
     xp: the array module, ``jax.numpy`` (differentiable) or ``numpy`` (for the discrete
     steps, which must not dispatch eager JAX ops)."""
@@ -30,8 +30,8 @@ def sun_direction(azimuth_deg, elevation_deg, xp=jnp) -> Float[AnyArray, "3"]:
     return xp.stack([xp.sin(a) * xp.cos(e), xp.cos(a) * xp.cos(e), xp.sin(e)])
 
 
-def light_direction(azimuth_deg, elevation_deg, xp=jnp) -> Float[AnyArray, "3"]:
-    """Unit direction the sunlight travels, L = -s, shape (3,) (xp as in ``sun_direction``)."""
+def light_direction(azimuth_deg, elevation_deg, xp=jnp) -> Float[AnyArray, "3 ..."]:
+    """Unit direction the sunlight travels, L = -s, shape (3, *batch) (as ``sun_direction``)."""
     return -sun_direction(azimuth_deg, elevation_deg, xp)
 
 
