@@ -187,14 +187,19 @@ def _zbuffer_kernel():
             x0, y0, z0 = xy[a, 0], xy[a, 1], depth[a]
             x1, y1, z1 = xy[b, 0], xy[b, 1], depth[b]
             x2, y2, z2 = xy[c, 0], xy[c, 1], depth[c]
-            if not (np.isfinite(x0) and np.isfinite(y0) and np.isfinite(z0) and np.isfinite(x1)
-                    and np.isfinite(y1) and np.isfinite(z1) and np.isfinite(x2) and np.isfinite(y2)
-                    and np.isfinite(z2)):
-                continue
             e1x, e1y = x1 - x0, y1 - y0
             e2x, e2y = x2 - x0, y2 - y0
             area = e1x * e2y - e1y * e2x
-            if abs(area) <= 1e-12 or area * facing[i] < 0:
+            # Culled first (about half a closed mesh's faces); one test for the nine coordinates
+            # (a sum is finite only if they all are, but may overflow: then each is tested).
+            if area * facing[i] < 0:
+                continue
+            if not np.isfinite(x0 + y0 + z0 + x1 + y1 + z1 + x2 + y2 + z2) and not (
+                    np.isfinite(x0) and np.isfinite(y0) and np.isfinite(z0) and np.isfinite(x1)
+                    and np.isfinite(y1) and np.isfinite(z1) and np.isfinite(x2) and np.isfinite(y2)
+                    and np.isfinite(z2)):
+                continue
+            if abs(area) <= 1e-12:
                 continue
             xmin, xmax = min(x0, x1, x2), max(x0, x1, x2)
             ymin, ymax = min(y0, y1, y2), max(y0, y1, y2)
