@@ -41,6 +41,7 @@ import functools
 import numpy as np
 
 from .camera import GroundGrid
+from .scratch import Scratch, scratch_array
 
 __all__ = ["LightFrame", "ShadowMap", "rasterise_depth", "shadow_map", "depth_bias", "faces_away",
            "BIAS_PX", "SLOPE_PX", "TAN_MAX", "PRECISION_ULPS", "FACING_TOL"]
@@ -441,18 +442,55 @@ def _planes_kernel():
 
 def shadow_map(grid: GroundGrid, uv: np.ndarray, depth: np.ndarray, faces: np.ndarray,
                dtype=np.float64, *, facing: np.ndarray | None = None,
-               out: tuple[np.ndarray, np.ndarray] | None = None) -> ShadowMap:
+               out: tuple[np.ndarray, np.ndarray] | None = None, scratch: Scratch | None = None,
+               name: str = "shadow_map") -> ShadowMap:
     """The shadow map of faces (F, 3) with light-space vertices uv (V, 2) and depths (V,) on grid.
 
     dtype: the float type of the depth buffer and the planes (float32 to measure precision);
     facing: back-face culling per face, out: the depth and face-id arrays to fill
-    (``rasterise_depth``).
+    (``rasterise_depth``); scratch, name: keep the per-face arrays (triangles, planes, slopes)
+    in these buffers under this name (``softshadow.scratch``: the map is then overwritten by the
+    next one made with them).
     """
-    uv = np.asarray(uv, dtype)
-    depth = np.asarray(depth, dtype)
+    uv = np.ascontiguousarray(uv, dtype)
+    depth = np.ascontiguousarray(depth, dtype)
+    faces = np.ascontiguousarray(faces, np.int64)
     zbuf, fid = rasterise_depth(grid.to_pixel(uv).astype(dtype), depth, faces,
                                 (grid.height, grid.width), facing=facing, out=out)
-    uvd = np.column_stack([uv, depth])
-    plane, slope = _face_planes(uvd, faces)
-    scale = float(np.abs(uvd).max(initial=1.0))
-    return ShadowMap(grid, zbuf, fid, plane, slope, uv[faces], scale)
+    # Each face's light-space triangle, depth plane and slope (``_face_planes``) and the
+    # coordinates' magnitude, in one compiled pass.
+    f = len(faces)
+    triangle = scratch_array(scratch, f"{name}.triangle", (f, 3, 2), dtype)
+    plane = scratch_array(scratch, f"{name}.plane", (f, 3), dtype)
+    slope = scratch_array(scratch, f"{name}.slope", f, dtype)
+    scale = _map_faces_kernel()(uv, depth, faces, np.array([1e-300], dtype), triangle, plane, slope)
+    return ShadowMap(grid, zbuf, fid, plane, slope, triangle, float(scale))
+
+
+@functools.cache
+def _map_faces_kernel():
+    """``shadow_map``'s per-face pass (numba): uv[faces] into triangle, ``_face_planes``' planes
+    and slopes (its arithmetic, in uv's float type); returns the largest |u|, |v|, |depth| of
+    the vertices, at least 1."""
+    import numba
+
+    @numba.njit(cache=True, nogil=True, error_model="numpy")
+    def kernel(uv, depth, faces, tiny, triangle, plane, slope):
+        scale = 1.0  # in float64: float32 values convert exactly
+        for i in range(uv.shape[0]):
+            scale = max(scale, abs(np.float64(uv[i, 0])), abs(np.float64(uv[i, 1])), abs(np.float64(depth[i])))
+        for f in range(faces.shape[0]):
+            i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
+            triangle[f, 0, 0], triangle[f, 0, 1] = uv[i0, 0], uv[i0, 1]
+            triangle[f, 1, 0], triangle[f, 1, 1] = uv[i1, 0], uv[i1, 1]
+            triangle[f, 2, 0], triangle[f, 2, 1] = uv[i2, 0], uv[i2, 1]
+            ux, uy, uz = uv[i1, 0] - uv[i0, 0], uv[i1, 1] - uv[i0, 1], depth[i1] - depth[i0]
+            vx, vy, vz = uv[i2, 0] - uv[i0, 0], uv[i2, 1] - uv[i0, 1], depth[i2] - depth[i0]
+            nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+            nd = nz if abs(nz) > tiny[0] else tiny[0]
+            a, b = -nx / nd, -ny / nd
+            plane[f, 0], plane[f, 1], plane[f, 2] = a, b, depth[i0]
+            slope[f] = np.hypot(a, b)
+        return scale
+
+    return kernel
