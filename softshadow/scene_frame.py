@@ -45,7 +45,8 @@ from .visibility import Surface, VisibleSurfaces, visible_surfaces
 __all__ = ["FRAME_STEPS", "FrameRenderer", "SceneFrame", "band_alpha", "render_frame"]
 
 #: The steps ``SceneFrame.milliseconds`` times (wall time; with a second thread "projectors" is
-#: the wait for it after the sun's steps).
+#: the wait for it after the sun's steps; without one, "sun_plan" includes posing the occluder
+#: and "projectors" both the shadow maps and the light).
 FRAME_STEPS = ("visibility", "projectors", "sun_plan", "sun_band", "shading")
 
 
@@ -86,6 +87,8 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
     # Neither the posed occluder nor the projectors' shadow maps need what the camera sees: the
     # second thread makes them while this one finds it.
     posed = None if sun is None else _submit(pool, PosedOccluder.make, model.occluder, pose, sun)
+    if pool is None and sun is not None:
+        t = _lap(ms, "sun_plan", t)
     casters = _Casters.of(surfaces)
     maps = _submit(pool, _projector_maps, projectors, casters, scratch)
     if pool is None:
@@ -110,7 +113,7 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
         if sun is not None and n:
             plan = plan_dense_points(model.occluder, pose, sun, vis.points, range_k_max, vis.normals,
                                      rule=model.rule, posed=_result(posed), faces=on_object, scratch=scratch)
-            t = _lap(ms, "sun_plan", t)
+            t = _lap(ms, "sun_plan", t, add=pool is None)
             alpha_band = band_alpha(plan, vis.points, model, pose, sun, k)
             t = _lap(ms, "sun_band", t)
     finally:
