@@ -127,7 +127,8 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
         t = _lap(ms, "projectors", t)
     h, w = vis.shape
     image = scratch_array(scratch, "frame.image", (h * w, 3))
-    image[:] = np.broadcast_to(np.asarray(background, np.float64), (3,))
+    if n < h * w:  # the shading writes every pixel that sees something; the rest is background
+        image[:] = np.broadcast_to(np.asarray(background, np.float64), (3,))
     sun_dir = np.zeros(3) if sun is None else -np.asarray(sun.light_np, np.float64)
     hard = plan.hard if plan is not None else np.zeros(0)
     band = plan.band if plan is not None else np.zeros(0, np.int64)
