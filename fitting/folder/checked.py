@@ -7,8 +7,6 @@ from __future__ import annotations
 import dataclasses
 import time as _time
 
-from softshadow import SunBelowHorizonError
-
 from ..photos.grouping import PhotoGroup
 from ..photos.views import PhotoView
 from ..report.results import GroupResult
@@ -33,6 +31,8 @@ def _fit_group_with_sun(model, pose, views, group: PhotoGroup, options: FitOptio
     changed in place (their sun). samples: the group's samples already drawn for these views
     (``fit_group``; used when the sun is not fitted). Returns the result and, for a fitted sun,
     its last move (degrees, azimuth plus elevation; None: the sun was not fitted)."""
+    from softshadow import SunBelowHorizonError  # with JAX, as fit_group
+
     from ..solve.group import fit_group  # with JAX (see groups.fit_groups)
     if not fit_sun and all(v.sun_source != "fitted" for v in views):
         return fit_group(model, pose, views, group.label, group.time, options, sky_model, samples=samples), None
