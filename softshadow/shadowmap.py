@@ -210,6 +210,8 @@ def _zbuffer_kernel():
             c1 = int(min(max(np.floor(xmax + 1e-9), -1.0), w - 1))
             r0 = int(min(max(np.ceil(ymin - 1e-9), 0.0), h))
             r1 = int(min(max(np.floor(ymax + 1e-9), -1.0), h - 1))
+            if c0 > c1 or r0 > r1:  # no pixel centre in its box (a face smaller than a pixel)
+                continue
             # Depth plane in pixel coordinates: z = z0 + gx (x - x0) + gy (y - y0).
             dz1, dz2 = z1 - z0, z2 - z0
             gx = (dz1 * e2y - dz2 * e1y) / area
