@@ -5,7 +5,8 @@
 - ``render_frame`` draws ``render_scene``'s image (same lights and band k) to rounding: the sun,
   a projector, a receiver mesh, the ground; no sun; a top-down map.
 - ``FrameRenderer`` keeps its buffers between frames without mixing frames up (images equal to
-  fresh ``render_frame`` calls, across a change of image size).
+  fresh ``render_frame`` calls, across a change of image size), and the background where a
+  frame sees nothing.
 - Back-face culling of a closed mesh changes no pixel of the z-buffer.
 """
 
@@ -107,6 +108,27 @@ def test_frame_renderer_reuses_its_buffers_without_mixing_frames():
             args = (cam, model, Pose(), SceneLights(0.2, 0.8, k), Sun(azimuth, 40.0), [proj], [_step()])
             got = renderer.render(*args).image.copy()
             np.testing.assert_array_equal(got, render_frame(*args).image)
+    finally:
+        renderer.close()
+
+
+def test_frame_renderer_paints_the_background_where_a_frame_sees_nothing():
+    """A view with sky pixels after one that sees something everywhere (the buffers hold its
+    pixels): the sky is the background, the rest render_scene's image."""
+    model = model_of("ball")
+    lights = SceneLights(0.2, 0.8, 0.01)
+    down = look_at_camera((3.0, -3.0, 3.0), (0.0, 0.0, 0.5), 64, 48, 40.0)
+    horizon = look_at_camera((3.0, -3.0, 1.0), (-3.0, 3.0, 1.5), 64, 48, 60.0)
+    renderer = ss.FrameRenderer(threads=1)
+    try:
+        first = renderer.render(down, model, Pose(), lights, Sun(200.0, 40.0), background=0.5)
+        assert len(first.visible.pixel) == 64 * 48
+        frame = renderer.render(horizon, model, Pose(), lights, Sun(200.0, 40.0), background=0.3)
+        sky = frame.visible.surface == ss.internal.NOTHING
+        assert sky.any() and (~sky).any()
+        np.testing.assert_array_equal(frame.image[sky], 0.3)
+        ref = render_scene(horizon, model, Pose(), lights, Sun(200.0, 40.0), background=0.3, range_k_max=0.01)
+        np.testing.assert_allclose(frame.image, np.asarray(ref.image), rtol=0, atol=1e-12)
     finally:
         renderer.close()
 
