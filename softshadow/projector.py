@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from typing import Literal
 
 import numpy as np
 
@@ -59,7 +60,7 @@ def _vector(value, name: str) -> np.ndarray:
     return v
 
 
-@dataclasses.dataclass(frozen=True, eq=False)
+@dataclasses.dataclass(frozen=True, eq=False, kw_only=True)
 class Projector:
     """A slide projector (see the module docstring).
 
@@ -71,13 +72,13 @@ class Projector:
     shadow_px: the shadow map's pixels across the slide's larger side.
     """
 
-    position: np.ndarray
-    target: np.ndarray
-    slide: np.ndarray
+    position: np.ndarray = dataclasses.field(kw_only=False)
+    target: np.ndarray = dataclasses.field(kw_only=False)
+    slide: np.ndarray = dataclasses.field(kw_only=False)
     fov_deg: float = 30.0
     up: np.ndarray = (0.0, 0.0, 1.0)
     intensity: float = 1.0
-    falloff: str = "inverse-square"
+    falloff: Literal["inverse-square", "none"] = "inverse-square"
     reference_m: float | None = None
     shadow_px: int = 1024
 

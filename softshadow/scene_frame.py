@@ -64,9 +64,9 @@ class SceneFrame:
 
 def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pose: Pose | None = None,
                  lights: SceneLights | None = None, sun: Sun | None = None,
-                 projectors: Sequence[Projector] = (), receivers: Sequence[Surface] = (),
+                 projectors: Sequence[Projector] = (), *, receivers: Sequence[Surface] = (),
                  object_albedo=0.8, ground_albedo=0.8, range_k_max: float | None = None,
-                 background=0.0, *, scratch: Scratch | None = None,
+                 background=0.0, scratch: Scratch | None = None,
                  pool: ThreadPoolExecutor | None = None) -> SceneFrame:
     """The scene's image (H, W, 3), linear radiance: ``render_scene``'s, forward only and fast.
 

@@ -159,7 +159,7 @@ def _cli_projectors(args) -> list[Projector]:
     fovs = _per_projector(args.projector_fov, 30.0, "--projector-fov", n)
     slides = _per_projector(args.slide, "spot", "--slide", n)
     levels = _per_projector(args.projector_intensity, 1.0, "--projector-intensity", n)
-    return [Projector(_xyz(p, "--projector"), _xyz(t, "--projector-target"), slide_from_text(s), float(f),
+    return [Projector(_xyz(p, "--projector"), _xyz(t, "--projector-target"), slide_from_text(s), fov_deg=float(f),
                       intensity=float(i))
             for p, t, f, s, i in zip(positions, targets, fovs, slides, levels)]
 

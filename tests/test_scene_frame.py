@@ -78,9 +78,9 @@ def test_render_frame_equals_render_scene(mesh, with_sun, receiver):
     sun = Sun(230.0, 40.0) if with_sun else None
     lights = SceneLights(0.15, 0.9, 0.02)
     receivers = [_step()] if receiver else []
-    args = (cam, model, Pose(), lights, sun, [proj], receivers)
-    ref = render_scene(*args, object_albedo=0.85, ground_albedo=0.8, range_k_max=0.02)
-    frame = render_frame(*args, object_albedo=0.85, ground_albedo=0.8)
+    args = (cam, model, Pose(), lights, sun, [proj])
+    ref = render_scene(*args, receivers=receivers, object_albedo=0.85, ground_albedo=0.8, range_k_max=0.02)
+    frame = render_frame(*args, receivers=receivers, object_albedo=0.85, ground_albedo=0.8)
     ref_image = np.asarray(ref.image)
     assert ref_image.max() > 0.5 and np.ptp(ref_image) > 0.3
     np.testing.assert_allclose(frame.image, ref_image, rtol=0, atol=1e-12)
@@ -105,9 +105,9 @@ def test_frame_renderer_reuses_its_buffers_without_mixing_frames():
         for size, azimuth, k in (((120, 90), 200.0, 0.01), ((120, 90), 240.0, 0.03), ((80, 60), 210.0, 0.02),
                                  ((120, 90), 200.0, 0.01)):
             cam, proj = _scene(size)
-            args = (cam, model, Pose(), SceneLights(0.2, 0.8, k), Sun(azimuth, 40.0), [proj], [_step()])
-            got = renderer.render(*args).image.copy()
-            np.testing.assert_array_equal(got, render_frame(*args).image)
+            args = (cam, model, Pose(), SceneLights(0.2, 0.8, k), Sun(azimuth, 40.0), [proj])
+            got = renderer.render(*args, receivers=[_step()]).image.copy()
+            np.testing.assert_array_equal(got, render_frame(*args, receivers=[_step()]).image)
     finally:
         renderer.close()
 
