@@ -337,56 +337,65 @@ _NEAREST_OFFSETS = np.array(sorted(((dr, dc) for dr in range(-2, 3) for dc in ra
 
 
 @functools.cache
-def _depth_kernel():
-    """The compiled lookup of ``ShadowMap.occluder_depth`` (numba): per point, its pixel (the
-    nearest centre), then the first face among that pixel's and its 8 neighbours' whose
-    triangle contains it (its plane at the point, exact), else the face of the nearest covered
-    pixel within 2 (its plane extrapolated, with its slope), else +inf. Arithmetic on the
-    depths in the map's float type."""
+def face_depth_at():
+    """The compiled lookup of one point's occluder depth (numba), shared by ``ShadowMap``'s
+    lookup and the dense plan's depth test: ``(u, v, row, col, face_id, triangle, plane,
+    face_slope, tol, upper, one) -> (depth, slope, exact)``. (row, col): the point's map pixel
+    (the nearest centre). The first face among that pixel's and its 8 neighbours' whose triangle
+    contains the point (barycentric coordinates >= tol, summing to <= upper): its plane at the
+    point, exact, slope 0. Else the face of the nearest covered pixel within 2: its plane
+    extrapolated, with its slope. Else +inf. Arithmetic in the map's float type (``one``: 1 in it)."""
     import numba
 
     @numba.njit(cache=True, nogil=True)
-    def kernel(uv, ox, oy, pixel_m, face_id, triangle, plane, face_slope, const, best, slope, exact):
+    def depth_at(u, v, row, col, face_id, triangle, plane, face_slope, tol, upper, one):
         h, w = face_id.shape
+        for k in range(_LOOKUP_OFFSETS.shape[0]):
+            r, c = row + _LOOKUP_OFFSETS[k, 0], col + _LOOKUP_OFFSETS[k, 1]
+            if r < 0 or r >= h or c < 0 or c >= w:
+                continue
+            f = face_id[r, c]
+            if f < 0:
+                continue
+            t0u, t0v = triangle[f, 0, 0], triangle[f, 0, 1]
+            ex1, ey1 = triangle[f, 1, 0] - t0u, triangle[f, 1, 1] - t0v
+            ex2, ey2 = triangle[f, 2, 0] - t0u, triangle[f, 2, 1] - t0v
+            px, py = u - t0u, v - t0v
+            area = ex1 * ey2 - ey1 * ex2
+            if area == 0:
+                area = one
+            b1 = (px * ey2 - py * ex2) / area
+            b2 = (ex1 * py - ey1 * px) / area
+            if b1 >= tol and b2 >= tol and b1 + b2 <= upper:
+                return np.float64(plane[f, 2] + plane[f, 0] * (u - t0u) + plane[f, 1] * (v - t0v)), 0.0, True
+        for k in range(_NEAREST_OFFSETS.shape[0]):
+            r, c = row + _NEAREST_OFFSETS[k, 0], col + _NEAREST_OFFSETS[k, 1]
+            if r < 0 or r >= h or c < 0 or c >= w:
+                continue
+            f = face_id[r, c]
+            if f >= 0:
+                depth = plane[f, 2] + plane[f, 0] * (u - triangle[f, 0, 0]) + plane[f, 1] * (v - triangle[f, 0, 1])
+                return np.float64(depth), np.float64(face_slope[f]), False
+        return np.inf, 0.0, False
+
+    return depth_at
+
+
+@functools.cache
+def _depth_kernel():
+    """The compiled lookup of ``ShadowMap.occluder_depth`` (numba): ``face_depth_at`` at each point."""
+    import numba
+    depth_at = face_depth_at()
+
+    @numba.njit(cache=True, nogil=True)
+    def kernel(uv, ox, oy, pixel_m, face_id, triangle, plane, face_slope, const, best, slope, exact):
         tol, upper, one = const[0], const[1], const[2]
         for i in range(uv.shape[0]):
             u, v = uv[i, 0], uv[i, 1]
             col = int(np.rint((np.float64(u) - ox) / pixel_m))
             row = int(np.rint((oy - np.float64(v)) / pixel_m))
-            best[i] = np.inf
-            slope[i] = 0.0
-            exact[i] = False
-            for k in range(_LOOKUP_OFFSETS.shape[0]):
-                r, c = row + _LOOKUP_OFFSETS[k, 0], col + _LOOKUP_OFFSETS[k, 1]
-                if r < 0 or r >= h or c < 0 or c >= w:
-                    continue
-                f = face_id[r, c]
-                if f < 0:
-                    continue
-                t0u, t0v = triangle[f, 0, 0], triangle[f, 0, 1]
-                ex1, ey1 = triangle[f, 1, 0] - t0u, triangle[f, 1, 1] - t0v
-                ex2, ey2 = triangle[f, 2, 0] - t0u, triangle[f, 2, 1] - t0v
-                px, py = u - t0u, v - t0v
-                area = ex1 * ey2 - ey1 * ex2
-                if area == 0:
-                    area = one
-                b1 = (px * ey2 - py * ex2) / area
-                b2 = (ex1 * py - ey1 * px) / area
-                if b1 >= tol and b2 >= tol and b1 + b2 <= upper:
-                    best[i] = plane[f, 2] + plane[f, 0] * (u - t0u) + plane[f, 1] * (v - t0v)
-                    exact[i] = True
-                    break
-            if exact[i]:
-                continue
-            for k in range(_NEAREST_OFFSETS.shape[0]):
-                r, c = row + _NEAREST_OFFSETS[k, 0], col + _NEAREST_OFFSETS[k, 1]
-                if r < 0 or r >= h or c < 0 or c >= w:
-                    continue
-                f = face_id[r, c]
-                if f >= 0:
-                    best[i] = plane[f, 2] + plane[f, 0] * (u - triangle[f, 0, 0]) + plane[f, 1] * (v - triangle[f, 0, 1])
-                    slope[i] = face_slope[f]
-                    break
+            best[i], slope[i], exact[i] = depth_at(u, v, row, col, face_id, triangle, plane, face_slope, tol, upper,
+                                                   one)
 
     return kernel
 
