@@ -15,6 +15,7 @@ from jaxtyping import Array, Float
 from .params import Pose, Sun
 from .penumbra import edge_alpha, edge_coordinate
 from .plan import PointPlan
+from .wedge import wedge_alpha
 
 __all__ = ["plan_alpha", "plan_alpha_jit", "plan_coordinate", "plan_coordinate_light"]
 
@@ -39,11 +40,20 @@ def plan_alpha(points: Float[Array, "n 3"], plan: PointPlan, pose: Pose, sun: Su
     plan = _as_jax(plan)
     edges = plan.edges
     ev = pose.apply(edges.vertices_local)
+    if rule == "wedge":
+        alpha = _wedge_plan_alpha(points, plan, ev, sun.light, range_k, profile, pixel_axes)
+        return jnp.where(plan.active, alpha, plan.hard)
     paper = pose.apply_direction(edges.paper_normal_local) if rule == "paper" else None
     alpha = edge_alpha(points, plan.edge_id, ev, edges.outward_sign, sun.light, range_k,
                        plan.hard, rule, profile, paper, near_boundary=plan.near_boundary,
                        pixel_axes=pixel_axes, neighbours=edges.neighbours if corners else None)
     return jnp.where(plan.active, alpha, plan.hard)
+
+
+def _wedge_plan_alpha(points, plan: PointPlan, ev, light, range_k, profile, pixel_axes):
+    """The ``wedge`` rule's alpha at the plan's points (``softshadow.wedge``)."""
+    return wedge_alpha(points, plan.edge_id, ev, plan.edges.outward_sign, plan.edges.jump, light, range_k,
+                       plan.wedge, profile, pixel_axes)
 
 
 def plan_coordinate(points: Float[Array, "n 3"], plan: PointPlan, pose: Pose, sun: Sun, range_k,

@@ -16,6 +16,7 @@ import dataclasses
 import functools
 
 import equinox as eqx
+import jax
 import numpy as np
 from jaxtyping import Bool, Float, Int
 
@@ -23,8 +24,9 @@ from .camera import GroundGrid
 from .occluder import Occluder
 from .params import Pose, Sun
 from .posed import PosedOccluder
-from .raster import ShadowRaster, candidate_labels, rasterise_shadow
+from .raster import ShadowRaster, candidate_labels, rasterise_shadow, winding_count_fill
 from .shadowmap import LightFrame, depth_bias, faces_away, shadow_map
+from .wedge_plan import K_MAX, REACH_MARGIN, WedgeArrays, arrangement, edge_jumps, gather_candidates
 
 __all__ = ["EdgeSet", "PointPlan", "GridPlan", "plan_points", "plan_grid", "concatenate_plans",
            "edge_band_widths", "bucket_size", "grid_bucket_size", "light_band_widths", "BACKENDS"]
@@ -49,13 +51,16 @@ class EdgeSet(eqx.Module):
     vertices_local (s, 2, 3) metres; outward_sign (s,); paper_normal_local (s, 3);
     neighbours (s, 2) int32: the outline edge sharing each edge's first and second vertex
     (-1: none; ``raster.ShadowRaster.edge_neighbours``), for the outline's corners
-    (``penumbra.corner_alpha``); None where the plan has none.
+    (``penumbra.corner_alpha``); None where the plan has none. jump (s,): the depth
+    complexity's change across each edge (``wedge_plan.edge_jumps``; the ``wedge`` rule's),
+    None for the other rules.
     """
 
     vertices_local: Float[np.ndarray, "s 2 3"]
     outward_sign: Float[np.ndarray, " s"]
     paper_normal_local: Float[np.ndarray, "s 3"]
     neighbours: Int[np.ndarray, "s 2"] | None = None
+    jump: Float[np.ndarray, " s"] | None = None
 
 
 class PointPlan(eqx.Module):
@@ -64,7 +69,9 @@ class PointPlan(eqx.Module):
     edge_id (n, K) candidate governing edges; hard (n,) 0/1 in the hard shadow;
     active (n,) in a penumbra band (elsewhere alpha is ``hard``); near_boundary (n,)
     0/1 within a quarter penumbra of the hard shadow's boundary, where the side may
-    follow the edge's plane as the sun or pose moves.
+    follow the edge's plane as the sun or pose moves. For the ``wedge`` rule: edge_id holds
+    every edge the point's sun disk may meet (-1: none; ``wedge_plan``), and ``wedge`` the
+    arrangement's discrete choices (``wedge_plan.WedgeArrays``); None for the other rules.
     """
 
     edges: EdgeSet
@@ -72,6 +79,7 @@ class PointPlan(eqx.Module):
     hard: Float[np.ndarray, " n"]
     active: Bool[np.ndarray, " n"]
     near_boundary: Float[np.ndarray, " n"]
+    wedge: WedgeArrays | None = None
 
 
 def edge_band_widths(world_a: np.ndarray, world_b: np.ndarray, outward: np.ndarray,
@@ -86,8 +94,10 @@ def edge_band_widths(world_a: np.ndarray, world_b: np.ndarray, outward: np.ndarr
     return height * np.hypot(r[:, 0], r[:, 1])
 
 
-def _pack_edges(occ: Occluder, sil, dtype=np.float64, raster: ShadowRaster | None = None) -> EdgeSet:
-    """The silhouette's EdgeSet padded to a bucket, with the raster's outline neighbours."""
+def _pack_edges(occ: Occluder, sil, dtype=np.float64, raster: ShadowRaster | None = None,
+                jump: np.ndarray | None = None) -> EdgeSet:
+    """The silhouette's EdgeSet padded to a bucket, with the raster's outline neighbours (and
+    the ``wedge`` rule's jumps, 0 on padding edges)."""
     s = len(sil.vertex_ids)
     size = bucket_size(s, 16)
     neighbours = -np.ones((size, 2), np.int32)
@@ -102,7 +112,11 @@ def _pack_edges(occ: Occluder, sil, dtype=np.float64, raster: ShadowRaster | Non
         verts[:s] = occ.vertices[sil.vertex_ids]
         sign[:s] = sil.outward_sign
         paper[:s] = sil.paper_normal_local
-    return EdgeSet(verts, sign, paper, neighbours)
+    packed_jump = None
+    if jump is not None:
+        packed_jump = np.zeros(size, dtype)
+        packed_jump[:s] = jump
+    return EdgeSet(verts, sign, paper, neighbours, packed_jump)
 
 
 def _clean_outline(raster: ShadowRaster, label: np.ndarray) -> np.ndarray:
@@ -177,6 +191,8 @@ def plan_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k
     if backend == "light":
         return _plan_points_light(occ, pose, sun, points, range_k_max, rule, pixel_m, margin_px, pad_to,
                                   normals, dtype, receiver_tolerance_m)
+    if rule == "wedge":
+        return _plan_points_wedge(occ, pose, sun, points, range_k_max, pixel_m, margin_px, pad_to)
     posed = PosedOccluder.make(occ, pose, sun)
     sil, light = posed.silhouette, posed.light
     a, b, direction = posed.edge_geometry(rule)
@@ -405,6 +421,8 @@ def plan_grid(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, range_k_max
     dtype: the float type of the plan's arrays (the evaluation's, so a jitted call takes
     them without a conversion).
     """
+    if rule == "wedge":
+        return _plan_grid_wedge(occ, pose, sun, grid, range_k_max, dtype)
     posed = PosedOccluder.make(occ, pose, sun)
     sil, light, world = posed.silhouette, posed.light, posed.world
     a, b, direction = posed.edge_geometry(rule)
@@ -516,3 +534,175 @@ def concatenate_plans(plans: list[PointPlan], counts: list[int], pad_to: int | N
     edges = EdgeSet(v, pad(np.concatenate(signs), e_size, 1.0), paper, nbr)
     return PointPlan(edges, pad(np.concatenate(ids), size, 0), pad(np.concatenate(hards), size, 0.0),
                      pad(np.concatenate(actives), size, False), pad(np.concatenate(nears), size, 0.0))
+
+
+# -- the ``wedge`` rule -------------------------------------------------------------------------
+
+WEDGE_PIXEL_REACH = 1.0  # a grid pixel's reach (pixel widths): half its two sides (wedge._pixel_reach)
+
+
+def _wedge_edges(posed: PosedOccluder):
+    """The silhouette in the world: ends a, b (S, 3), outward normals (S, 3), jumps (S,)."""
+    sil = posed.silhouette
+    ids = sil.vertex_ids
+    outward = sil.normal_local @ posed.rotation.T
+    return posed.world[ids[:, 0]], posed.world[ids[:, 1]], outward, edge_jumps(posed.occluder, sil)
+
+
+def _wedge_columns(count: np.ndarray) -> int:
+    """Candidate columns for the evaluation: the most any point has, rounded up to 2, 4 or 8
+    (few compiled shapes)."""
+    most = int(count.max(initial=0))
+    return min(K_MAX, max(2, 1 << int(np.ceil(np.log2(max(most, 1))))))
+
+
+def _wedge_choices(posed: PosedOccluder, edges, points: np.ndarray, points_plane: np.ndarray,
+                   a_plane: np.ndarray, b_plane: np.ndarray, edge_reach: np.ndarray,
+                   range_k_max: float, pixel_reach, winding: np.ndarray, pixel_axes=None):
+    """The ``wedge`` rule's choices for points (n, 3): (active (m,) indices of the points to
+    evaluate, their candidates (m, K), their ``WedgeArrays``).
+
+    A point is evaluated when some candidate's part within the disk (of the plan's largest
+    radius) lies on the boundary of {W >= 1}; elsewhere the disk is wholly hidden or wholly
+    seen, and alpha is the hard shadow. pixel_axes (2, 3) or (n, 2, 3): each point's pixel
+    (``arrangement``), for the hard shadow's area within it."""
+    a, b, outward, jump = edges
+    cand = gather_candidates(points, points_plane, a, b, a_plane, b_plane, edge_reach, posed.light,
+                             range_k_max, pixel_reach)
+    w = np.where(cand.ids >= 0, jump[np.maximum(cand.ids, 0)], 0.0)
+    sel = np.flatnonzero((cand.count > 0) & (w.sum(axis=1) >= winding))
+    ids = cand.ids[sel, :_wedge_columns(cand.count[sel])]
+    axes = None
+    if pixel_axes is not None:
+        axes = np.asarray(pixel_axes, np.float64)
+        axes = axes[sel] if axes.ndim == 3 else axes
+    reach = np.broadcast_to(np.asarray(pixel_reach, np.float64), (len(points),))[sel]
+    arrays, boundary, _ = arrangement(points[sel], ids, a, b, outward, jump, posed.light, winding[sel],
+                                      range_k_max * (1.0 + REACH_MARGIN), reach, axes)
+    keep = np.flatnonzero(boundary)
+    return sel[keep], ids[keep], arrays.take(keep)
+
+
+def _pad_wedge(arrays: WedgeArrays, size: int, dtype=np.float64, index=None) -> WedgeArrays:
+    """The arrays placed at rows ``index`` (default: the first) of ``size`` rows (the others: no
+    boundary, no crossing); offsets stay float64, the rest in ``dtype``."""
+    def place(x):
+        x = np.asarray(x)
+        dt = x.dtype if x.dtype.kind == "i" else (np.float64 if x.ndim == 1 else dtype)
+        out = np.zeros((size,) + x.shape[1:], dt)
+        out[np.arange(len(x)) if index is None else index] = x
+        return out
+    return jax.tree_util.tree_map(place, arrays)
+
+
+def _no_wedge(k: int = 2, pixel: bool = False) -> WedgeArrays:
+    """WedgeArrays of no point."""
+    extra = (np.zeros((0, k)), np.zeros((0, k)), np.zeros((0, 1, 2), np.int32), np.zeros((0, 1))) if pixel else ()
+    return WedgeArrays(np.zeros(0), np.zeros((0, k)), np.zeros((0, k)), np.zeros((0, 1, 2), np.int32),
+                       np.zeros((0, 1)), *extra)
+
+
+def _ground_reach(posed: PosedOccluder, range_k_max: float, pixel_reach: float) -> np.ndarray:
+    """How far (ground metres) from an edge's shadow its candidates can lie (S,): the sun's cone
+    at the edge's height, widened by the pixel's reach, seen on the ground."""
+    ids = posed.silhouette.vertex_ids
+    lz = max(abs(float(posed.light[2])), 1e-9)
+    z = np.maximum(np.maximum(posed.world[ids[:, 0], 2], posed.world[ids[:, 1], 2]), 0.0)
+    return (range_k_max * (1.0 + REACH_MARGIN) * z / lz + pixel_reach) / lz
+
+
+def _plan_points_wedge(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k_max: float,
+                       pixel_m: float | None, margin_px: float, pad_to: int | None,
+                       pixel_axes: np.ndarray | None = None) -> PointPlan:
+    """``plan_points`` for the ``wedge`` rule on the ground (points on z = 0)."""
+    posed = PosedOccluder.make(occ, pose, sun)
+    sil = posed.silhouette
+    n = len(points)
+    size = pad_to or bucket_size(n)
+    hard = np.zeros(size)
+    active = np.zeros(size, bool)
+    jump = edge_jumps(occ, sil)
+    edges = _pack_edges(occ, sil, jump=jump)
+    with_pixel = pixel_axes is not None
+    if not (n and len(sil.vertex_ids)):
+        return PointPlan(edges, -np.ones((size, 2), np.int32), hard, active, np.zeros(size),
+                         _pad_wedge(_no_wedge(pixel=with_pixel), size))
+    ground = posed.ground_vertices()
+    winding = posed.winding_count_at(points[:, :2], ground)
+    hard[:n] = winding >= 0.5
+    lo, hi = points[:, :2].min(0), points[:, :2].max(0)
+    if pixel_m is None:
+        pixel_m = max(float((hi - lo).max()) / 1024, 1e-4)
+    reach_px = margin_px * pixel_m
+    if with_pixel:  # the pixels' own reach: half their two sides, as wedge._pixel_reach
+        axes = np.asarray(pixel_axes, np.float64)
+        reach_px = np.maximum(reach_px, 0.5 * (np.linalg.norm(axes[..., 0, :], axis=-1)
+                                               + np.linalg.norm(axes[..., 1, :], axis=-1)))
+    ids_v = sil.vertex_ids
+    sel, ids, arrays = _wedge_choices(posed, _wedge_edges(posed), points, points[:, :2], ground[ids_v[:, 0]],
+                                      ground[ids_v[:, 1]], _ground_reach(posed, range_k_max, np.max(reach_px)),
+                                      range_k_max, reach_px, winding, pixel_axes)
+    edge_id = -np.ones((size, ids.shape[1]), np.int32)
+    edge_id[sel] = ids
+    active[sel] = True
+    return PointPlan(edges, edge_id, hard, active, np.zeros(size), _pad_wedge(arrays, size, index=sel))
+
+
+def _plan_grid_wedge(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, range_k_max: float,
+                     dtype) -> GridPlan:
+    """``plan_grid`` for the ``wedge`` rule: the depth complexity of the window's pixels from the
+    winding counts of the fill layers, and the pixels whose disk meets the shadow's boundary in
+    the band."""
+    posed = PosedOccluder.make(occ, pose, sun)
+    sil = posed.silhouette
+    h, w = grid.height, grid.width
+    hard = np.zeros((h, w), np.uint8)
+    jump = edge_jumps(occ, sil)
+    ftype = np.dtype(dtype)
+    band_idx = np.zeros(0, np.int64)
+    ids = -np.ones((0, 2), np.int32)
+    arrays = _no_wedge(pixel=True)
+    hard_band = np.zeros(0)
+    if len(sil.vertex_ids):
+        ground = posed.ground_vertices()
+        reach_m = WEDGE_PIXEL_REACH * grid.pixel_m
+        reach = _ground_reach(posed, range_k_max, reach_m)
+        ids_v = sil.vertex_ids
+        # The window: the shadow's outline (the silhouette's shadow) padded by the widest reach.
+        seg = np.concatenate([ground[ids_v[:, 0]], ground[ids_v[:, 1]]])
+        px = grid.to_pixel(seg)
+        pad = float(reach.max()) / grid.pixel_m + 2.0
+        c0 = int(max(np.floor(px[:, 0].min() - pad), 0))
+        c1 = int(min(np.ceil(px[:, 0].max() + pad), w - 1))
+        r0 = int(max(np.floor(px[:, 1].min() - pad), 0))
+        r1 = int(min(np.ceil(px[:, 1].max() + pad), h - 1))
+        if c1 >= c0 and r1 >= r0:
+            window = GroundGrid(grid.pixel_m, (grid.origin_m[0] + c0 * grid.pixel_m,
+                                               grid.origin_m[1] - r0 * grid.pixel_m), c1 - c0 + 1, r1 - r0 + 1)
+            vpx = window.to_pixel(ground)
+            count = np.zeros((window.height, window.width), np.float32)
+            for edges_f, weights in sil.fill_edges:
+                count += np.abs(winding_count_fill((window.height, window.width), vpx[edges_f[:, 0]],
+                                                   vpx[edges_f[:, 1]], weights))
+            hard[r0:r1 + 1, c0:c1 + 1] = count >= 0.5
+            rows, cols = np.divmod(np.arange(window.height * window.width), window.width)
+            pts = window.to_world(cols, rows).reshape(-1, 3)
+            sel, ids, arrays = _wedge_choices(posed, _wedge_edges(posed), pts, pts[:, :2], ground[ids_v[:, 0]],
+                                              ground[ids_v[:, 1]], reach, range_k_max, reach_m,
+                                              count.reshape(-1).astype(np.float64),
+                                              np.eye(2, 3) * grid.pixel_m)
+            band_idx = (rows[sel] + r0) * w + (cols[sel] + c0)
+            hard_band = count.reshape(-1)[sel] >= 0.5
+    m = len(band_idx)
+    size = grid_bucket_size(m)
+    index = np.full(size, h * w, np.int32)
+    index[:m] = band_idx
+    edge_id = -np.ones((size, ids.shape[1]), np.int32)
+    edge_id[:m] = ids
+    active = np.zeros(size, bool)
+    active[:m] = True
+    hb = np.zeros(size, ftype)
+    hb[:m] = hard_band
+    plan = PointPlan(_pack_edges(occ, sil, ftype, jump=jump), edge_id, hb, active, np.zeros(size, ftype),
+                     _pad_wedge(arrays, size, ftype))
+    return GridPlan(grid, hard, index, plan, None, m, len(sil.vertex_ids))
