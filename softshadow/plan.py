@@ -26,7 +26,7 @@ from .params import Pose, Sun
 from .posed import PosedOccluder
 from .raster import ShadowRaster, candidate_labels, rasterise_shadow, winding_count_fill
 from .shadowmap import LightFrame, depth_bias, faces_away, shadow_map
-from .wedge_plan import K_MAX, REACH_MARGIN, WedgeArrays, arrangement, edge_jumps, gather_candidates
+from .wedge_plan import REACH_MARGIN, WedgeArrays, arrangement, edge_jumps, gather_candidates
 
 __all__ = ["EdgeSet", "PointPlan", "GridPlan", "plan_points", "plan_grid", "concatenate_plans",
            "edge_band_widths", "bucket_size", "grid_bucket_size", "light_band_widths", "BACKENDS"]
@@ -549,66 +549,56 @@ def _wedge_edges(posed: PosedOccluder):
     return posed.world[ids[:, 0]], posed.world[ids[:, 1]], outward, edge_jumps(posed.occluder, sil)
 
 
-def _wedge_columns(count: np.ndarray) -> int:
-    """Candidate columns for the evaluation: the most any point has, rounded up to 2, 4 or 8
-    (few compiled shapes)."""
-    most = int(count.max(initial=0))
-    return min(K_MAX, max(2, 1 << int(np.ceil(np.log2(max(most, 1))))))
+def _wedge_choices(posed: PosedOccluder, edges, points, edge_reach: np.ndarray, range_k_max: float,
+                   pixel_reach, winding_at, pixel_axes=None):
+    """The ``wedge`` rule's choices: (active (m,) indices of the points to evaluate, the
+    ``WedgeArrays`` of the points the arrangement saw, which of them are active (m,)).
 
-
-def _wedge_choices(posed: PosedOccluder, edges, points: np.ndarray, points_plane: np.ndarray,
-                   a_plane: np.ndarray, b_plane: np.ndarray, edge_reach: np.ndarray,
-                   range_k_max: float, pixel_reach, winding: np.ndarray, pixel_axes=None):
-    """The ``wedge`` rule's choices for points (n, 3): (active (m,) indices of the points to
-    evaluate, their candidates (m, K), their ``WedgeArrays``).
-
-    A point is evaluated when some candidate's part within the disk (of the plan's largest
-    radius) lies on the boundary of {W >= 1}; elsewhere the disk is wholly hidden or wholly
-    seen, and alpha is the hard shadow. pixel_axes (2, 3) or (n, 2, 3): each point's pixel
-    (``arrangement``), for the hard shadow's area within it."""
+    points: (n, 3), or a ground window (``gather_candidates``); winding_at:
+    W(0) at point indices (m,) -> (m,). A point is evaluated when the boundary of {W >= 1} passes
+    through its disk (of the plan's largest radius, widened by the pixel's reach) or its pixel;
+    elsewhere the disk is wholly hidden or wholly seen, and alpha is the hard shadow.
+    pixel_axes (2, 3) or (n, 2, 3): each point's pixel (``arrangement``), for the hard shadow's
+    area within it."""
     a, b, outward, jump = edges
-    cand = gather_candidates(points, points_plane, a, b, a_plane, b_plane, edge_reach, posed.light,
-                             range_k_max, pixel_reach)
+    cand = gather_candidates(points, a, b, edge_reach, posed.light, range_k_max, pixel_reach)
+    winding = winding_at(cand.index)
     w = np.where(cand.ids >= 0, jump[np.maximum(cand.ids, 0)], 0.0)
-    sel = np.flatnonzero((cand.count > 0) & (w.sum(axis=1) >= winding))
-    ids = cand.ids[sel, :_wedge_columns(cand.count[sel])]
+    keep = np.flatnonzero(w.sum(axis=1) >= winding)
+    index = cand.index[keep]
+    if isinstance(points, np.ndarray):
+        pts = points[index]
+    else:
+        rows, cols = np.divmod(index, points.width)
+        pts = points.to_world(cols, rows).reshape(-1, 3)
     axes = None
     if pixel_axes is not None:
         axes = np.asarray(pixel_axes, np.float64)
-        axes = axes[sel] if axes.ndim == 3 else axes
-    reach = np.broadcast_to(np.asarray(pixel_reach, np.float64), (len(points),))[sel]
-    arrays, boundary, _ = arrangement(points[sel], ids, a, b, outward, jump, posed.light, winding[sel],
+        axes = axes[index] if axes.ndim == 3 else axes
+    reach = np.asarray(pixel_reach, np.float64)
+    reach = reach[index] if reach.ndim else reach
+    ids = cand.ids[keep, :max(1, int(cand.count[keep].max(initial=0)))]
+    arrays, boundary, _ = arrangement(pts, ids, a, b, outward, jump, posed.light, winding[keep],
                                       range_k_max * (1.0 + REACH_MARGIN), reach, axes)
-    keep = np.flatnonzero(boundary)
-    return sel[keep], ids[keep], arrays.take(keep)
-
-
-def _pad_wedge(arrays: WedgeArrays, size: int, dtype=np.float64, index=None) -> WedgeArrays:
-    """The arrays placed at rows ``index`` (default: the first) of ``size`` rows (the others: no
-    boundary, no crossing); offsets stay float64, the rest in ``dtype``."""
-    def place(x):
-        x = np.asarray(x)
-        dt = x.dtype if x.dtype.kind == "i" else (np.float64 if x.ndim == 1 else dtype)
-        out = np.zeros((size,) + x.shape[1:], dt)
-        out[np.arange(len(x)) if index is None else index] = x
-        return out
-    return jax.tree_util.tree_map(place, arrays)
-
-
-def _no_wedge(k: int = 2, pixel: bool = False) -> WedgeArrays:
-    """WedgeArrays of no point."""
-    extra = (np.zeros((0, k)), np.zeros((0, k)), np.zeros((0, 1, 2), np.int32), np.zeros((0, 1))) if pixel else ()
-    return WedgeArrays(np.zeros(0), np.zeros((0, k)), np.zeros((0, k)), np.zeros((0, 1, 2), np.int32),
-                       np.zeros((0, 1)), *extra)
+    on = np.flatnonzero(boundary)
+    return index[on], arrays, on
 
 
 def _ground_reach(posed: PosedOccluder, range_k_max: float, pixel_reach: float) -> np.ndarray:
-    """How far (ground metres) from an edge's shadow its candidates can lie (S,): the sun's cone
-    at the edge's height, widened by the pixel's reach, seen on the ground."""
+    """How far (metres across the light) from an edge its candidates on the ground can lie (S,):
+    the sun's cone at the edge's height above them, widened by the pixel's reach."""
     ids = posed.silhouette.vertex_ids
     lz = max(abs(float(posed.light[2])), 1e-9)
     z = np.maximum(np.maximum(posed.world[ids[:, 0], 2], posed.world[ids[:, 1], 2]), 0.0)
-    return (range_k_max * (1.0 + REACH_MARGIN) * z / lz + pixel_reach) / lz
+    return range_k_max * (1.0 + REACH_MARGIN) * z / lz + pixel_reach
+
+
+def _no_wedge(size: int, pixel: bool) -> WedgeArrays:
+    """The choices of ``size`` points without any pair."""
+    extra = (np.zeros(0), np.zeros(0), np.zeros((0, 2), np.int32), np.zeros(0)) if pixel else ()
+    empty = WedgeArrays(np.zeros(0), np.zeros(0, np.int32), np.zeros(0, np.int32), np.zeros(0), np.zeros(0),
+                        np.zeros((0, 2), np.int32), np.zeros(0), *extra)
+    return empty.select(np.zeros(0, np.int64), pad_points=size)
 
 
 def _plan_points_wedge(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k_max: float,
@@ -623,10 +613,9 @@ def _plan_points_wedge(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, 
     active = np.zeros(size, bool)
     jump = edge_jumps(occ, sil)
     edges = _pack_edges(occ, sil, jump=jump)
-    with_pixel = pixel_axes is not None
+    none = np.zeros((size, 0), np.int32)
     if not (n and len(sil.vertex_ids)):
-        return PointPlan(edges, -np.ones((size, 2), np.int32), hard, active, np.zeros(size),
-                         _pad_wedge(_no_wedge(pixel=with_pixel), size))
+        return PointPlan(edges, none, hard, active, np.zeros(size), _no_wedge(size, pixel_axes is not None))
     ground = posed.ground_vertices()
     winding = posed.winding_count_at(points[:, :2], ground)
     hard[:n] = winding >= 0.5
@@ -634,25 +623,24 @@ def _plan_points_wedge(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, 
     if pixel_m is None:
         pixel_m = max(float((hi - lo).max()) / 1024, 1e-4)
     reach_px = margin_px * pixel_m
-    if with_pixel:  # the pixels' own reach: half their two sides, as wedge._pixel_reach
+    if pixel_axes is not None:  # the pixels' own reach: half their two sides (the footprint's box)
         axes = np.asarray(pixel_axes, np.float64)
         reach_px = np.maximum(reach_px, 0.5 * (np.linalg.norm(axes[..., 0, :], axis=-1)
                                                + np.linalg.norm(axes[..., 1, :], axis=-1)))
     ids_v = sil.vertex_ids
-    sel, ids, arrays = _wedge_choices(posed, _wedge_edges(posed), points, points[:, :2], ground[ids_v[:, 0]],
-                                      ground[ids_v[:, 1]], _ground_reach(posed, range_k_max, np.max(reach_px)),
-                                      range_k_max, reach_px, winding, pixel_axes)
-    edge_id = -np.ones((size, ids.shape[1]), np.int32)
-    edge_id[sel] = ids
+    sel, arrays, on = _wedge_choices(posed, _wedge_edges(posed), points,
+                                     _ground_reach(posed, range_k_max, float(np.max(reach_px))), range_k_max,
+                                     reach_px, lambda i: winding[i], pixel_axes)
     active[sel] = True
-    return PointPlan(edges, edge_id, hard, active, np.zeros(size), _pad_wedge(arrays, size, index=sel))
+    return PointPlan(edges, none, hard, active, np.zeros(size),
+                     arrays.select(on, pad_points=size, place=sel, default_offset=hard))
 
 
 def _plan_grid_wedge(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, range_k_max: float,
                      dtype) -> GridPlan:
     """``plan_grid`` for the ``wedge`` rule: the depth complexity of the window's pixels from the
-    winding counts of the fill layers, and the pixels whose disk meets the shadow's boundary in
-    the band."""
+    winding counts of the fill layers, and the pixels whose disk or pixel the shadow's boundary
+    passes in the band."""
     posed = PosedOccluder.make(occ, pose, sun)
     sil = posed.silhouette
     h, w = grid.height, grid.width
@@ -660,8 +648,7 @@ def _plan_grid_wedge(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, rang
     jump = edge_jumps(occ, sil)
     ftype = np.dtype(dtype)
     band_idx = np.zeros(0, np.int64)
-    ids = -np.ones((0, 2), np.int32)
-    arrays = _no_wedge(pixel=True)
+    arrays = None
     hard_band = np.zeros(0)
     if len(sil.vertex_ids):
         ground = posed.ground_vertices()
@@ -685,24 +672,21 @@ def _plan_grid_wedge(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, rang
                 count += np.abs(winding_count_fill((window.height, window.width), vpx[edges_f[:, 0]],
                                                    vpx[edges_f[:, 1]], weights))
             hard[r0:r1 + 1, c0:c1 + 1] = count >= 0.5
-            rows, cols = np.divmod(np.arange(window.height * window.width), window.width)
-            pts = window.to_world(cols, rows).reshape(-1, 3)
-            sel, ids, arrays = _wedge_choices(posed, _wedge_edges(posed), pts, pts[:, :2], ground[ids_v[:, 0]],
-                                              ground[ids_v[:, 1]], reach, range_k_max, reach_m,
-                                              count.reshape(-1).astype(np.float64),
-                                              np.eye(2, 3) * grid.pixel_m)
-            band_idx = (rows[sel] + r0) * w + (cols[sel] + c0)
-            hard_band = count.reshape(-1)[sel] >= 0.5
+            flat_count = count.reshape(-1)
+            sel, arrays, on = _wedge_choices(posed, _wedge_edges(posed), window, reach, range_k_max, reach_m,
+                                             lambda i: flat_count[i].astype(np.float64), np.eye(2, 3) * grid.pixel_m)
+            rows, cols = np.divmod(sel, window.width)
+            band_idx = (rows + r0) * w + (cols + c0)
+            hard_band = flat_count[sel] >= 0.5
     m = len(band_idx)
     size = grid_bucket_size(m)
     index = np.full(size, h * w, np.int32)
     index[:m] = band_idx
-    edge_id = -np.ones((size, ids.shape[1]), np.int32)
-    edge_id[:m] = ids
     active = np.zeros(size, bool)
     active[:m] = True
     hb = np.zeros(size, ftype)
     hb[:m] = hard_band
-    plan = PointPlan(_pack_edges(occ, sil, ftype, jump=jump), edge_id, hb, active, np.zeros(size, ftype),
-                     _pad_wedge(arrays, size, ftype))
+    choices = _no_wedge(size, True) if arrays is None else arrays.select(on, pad_points=size)
+    plan = PointPlan(_pack_edges(occ, sil, ftype, jump=jump), np.zeros((size, 0), np.int32), hb, active,
+                     np.zeros(size, ftype), choices.astype(ftype))
     return GridPlan(grid, hard, index, plan, None, m, len(sil.vertex_ids))

@@ -32,14 +32,21 @@ geometry (the segments' ends, the intersections along them, the lines' distances
 so alpha is differentiable in k, the sun and the pose, and continuous where the arrangement's
 combinatorics change (the area does not jump there).
 
-W(0) comes from the plan (``softshadow.wedge_plan``) as an offset F = W(0) - sum_j w_j theta_j
-/ 2 pi at the plan's parameters, theta_j the angle segment j subtends at the centre; here
-W(0) = round(F + sum_j w_j theta_j / 2 pi) follows the centre across a segment when the sun
-or the pose move the segment over it, as long as the far edges' angles change by much less
-than half a turn (a move of much less than the distance to them).
+The plan (``softshadow.wedge_plan``) makes the discrete choices once, in NumPy: the candidate
+edges, the depth complexity W(0) at the sun's centre, and along each segment where it lies on
+the boundary (its statuses at its ends and the crossings where they change). It hands a flat
+list of (point, edge) pairs of the segments that bound {W >= 1} or cross such a segment, and of
+their crossings; here each pair's segment is projected, its fans summed onto its point. The
+hard term [W(0) >= 1] comes as an offset F = [W(0) >= 1] - S / 2 pi, S the angle the boundary's
+pieces subtend at the centre at the plan's parameters: [W(0) >= 1] = round(F + S / 2 pi) follows
+the centre across a piece of the boundary when the sun or the pose move it over the centre (S
+jumps by a whole turn there), as long as the boundary's far parts turn by much less than half a
+turn (a move of much less than a penumbra).
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -47,7 +54,7 @@ import numpy as np
 
 from .penumbra import _fan, footprint_bump, profile_alpha
 
-__all__ = ["boundary_mass", "gnomonic_segments", "pixel_hard_area", "pixel_segments", "wedge_alpha"]
+__all__ = ["gnomonic_segments", "pixel_hard_area", "pixel_segments", "wedge_alpha"]
 
 _DEPTH_MIN = 1e-7       # metres in front of the receiver at which segments are clipped
 _DEPTH_REL = 1e-6       # ... plus this fraction of the vertex's distance
@@ -58,156 +65,172 @@ def _cross(ax, ay, bx, by):
     return ax * by - ay * bx
 
 
-def _light_frame(light):
-    """Unit s = -L and an orthonormal (e1, e2) spanning the plane perpendicular to it, right-handed
-    (e1 x e2 = s); light (3,) or (n, 1, 3). Component tuples. The helper axis (the world axis
-    least aligned with the light) is a discrete choice: the results do not depend on the frame's
-    rotation about s."""
-    sg = jax.lax.stop_gradient
-    s = tuple(-light[..., i] for i in range(3))
-    mag = jnp.stack([jnp.abs(sg(c)) for c in s], -1)
-    pick = jnp.argmin(mag, axis=-1)
-    axis = tuple((pick == i).astype(light.dtype) for i in range(3))
-    # e1 = axis x s, normalised; e2 = s x e1.
-    e1 = (axis[1] * s[2] - axis[2] * s[1], axis[2] * s[0] - axis[0] * s[2], axis[0] * s[1] - axis[1] * s[0])
-    norm = jnp.sqrt(e1[0] ** 2 + e1[1] ** 2 + e1[2] ** 2)
-    e1 = tuple(c / norm for c in e1)
-    e2 = (s[1] * e1[2] - s[2] * e1[1], s[2] * e1[0] - s[0] * e1[2], s[0] * e1[1] - s[1] * e1[0])
-    return s, e1, e2
+def _cross3(u, v):
+    return (u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0])
+
+
+def _dot3(u, v):
+    return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
 
 
 def gnomonic_segments(points, a, b, outward, light, scale=1.0):
     """The segments (a, b) seen from points, in the gnomonic plane of the sun's centre.
 
-    points (n, 3); a, b, outward (n, K, 3): the edges' ends and any vector along their outward
-    normal (only its side matters); light (3,) or (n, 3). Returns (ax, ay, bx, by, keep, theta),
-    each (n, K): the segment's ends in units of ``scale`` (tan of the angle from the sun's
-    centre), oriented so that the edge's covered side (its lit face's) is on the left; keep:
-    some of the segment lies in front of the point (the part behind is clipped off at a depth
-    of ``_DEPTH_MIN``); theta: the signed angle the segment subtends at the centre, in
-    (-pi, pi] (independent of ``scale``). The same arithmetic as ``wedge_plan.subtended_angles``.
+    points, a, b, outward (P, 3): each pair's receiver point, the edge's ends and a vector along
+    its outward normal (only its side matters); light (3,) or (P, 3). Returns (ax, ay, bx, by)
+    (P,) each: the segment's ends in units of ``scale`` (tan of the angle from the sun's centre),
+    oriented so that the edge's covered side (its lit face's) is on the left. The part behind the
+    point is clipped off at a depth of ``_DEPTH_MIN``. The arithmetic of
+    ``wedge_plan.arrangement``.
     """
-    light = jnp.asarray(light)
-    lt = light[None, None, :] if light.ndim == 1 else light[:, None, :]
-    s, e1, e2 = _light_frame(lt)
-    x = tuple(points[:, None, i] for i in range(3))
+    s, e1, e2 = _light_frame(jnp.asarray(light))
+    x = tuple(points[..., i] for i in range(3))
     wa = tuple(a[..., i] - x[i] for i in range(3))
     wb = tuple(b[..., i] - x[i] for i in range(3))
-    da = wa[0] * s[0] + wa[1] * s[1] + wa[2] * s[2]
-    db = wb[0] * s[0] + wb[1] * s[1] + wb[2] * s[2]
-    na = jnp.sqrt(wa[0] ** 2 + wa[1] ** 2 + wa[2] ** 2)
-    nb = jnp.sqrt(wb[0] ** 2 + wb[1] ** 2 + wb[2] ** 2)
-    dmin = _DEPTH_MIN + _DEPTH_REL * jnp.maximum(na, nb)
+    da, db = _dot3(wa, s), _dot3(wb, s)
+    dmin = _DEPTH_MIN + _DEPTH_REL * jnp.maximum(jnp.sqrt(_dot3(wa, wa)), jnp.sqrt(_dot3(wb, wb)))
     keep = (da > dmin) | (db > dmin)
-    # Clip the part behind dmin off: the end behind moves along the segment to depth dmin.
     step = db - da
-    safe = jnp.where(jnp.abs(step) > 0, step, 1.0)
-    t = jnp.clip((dmin - da) / safe, 0.0, 1.0)
-    cut_a = da < dmin
-    cut_b = db < dmin
-    ta = jnp.where(cut_a & keep, t, 0.0)
-    tb = jnp.where(cut_b & keep, t, 1.0)
+    t = jnp.clip((dmin - da) / jnp.where(step != 0, step, 1.0), 0.0, 1.0)
+    ta = jnp.where((da < dmin) & keep, t, 0.0)
+    tb = jnp.where((db < dmin) & keep, t, 1.0)
     pa = tuple(wa[i] + ta * (wb[i] - wa[i]) for i in range(3))
     pb = tuple(wa[i] + tb * (wb[i] - wa[i]) for i in range(3))
     dpa = jnp.where(keep, da + ta * step, 1.0)
     dpb = jnp.where(keep, da + tb * step, 1.0)
-    dot = lambda p, e: p[0] * e[0] + p[1] * e[1] + p[2] * e[2]
-    px, py = dot(pa, e1) / dpa, dot(pa, e2) / dpa
-    qx, qy = dot(pb, e1) / dpb, dot(pb, e2) / dpb
-    # The covered side: opposite the outward normal, seen in the plane. Swap the ends so that
+    px, py = _dot3(pa, e1) / dpa, _dot3(pa, e2) / dpa
+    qx, qy = _dot3(pb, e1) / dpb, _dot3(pb, e2) / dpb
+    # The covered side: opposite the outward normal, seen in the plane; the ends swapped so that
     # it is on the left (a discrete choice).
-    sg = jax.lax.stop_gradient
-    n1, n2 = dot(tuple(outward[..., i] for i in range(3)), e1), dot(tuple(outward[..., i] for i in range(3)), e2)
-    swap = sg(-(qy - py) * n1 + (qx - px) * n2) > 0
-    ax, ay = jnp.where(swap, qx, px), jnp.where(swap, qy, py)
-    bx, by = jnp.where(swap, px, qx), jnp.where(swap, py, qy)
-    theta = jnp.where(keep, jnp.arctan2(_cross(ax, ay, bx, by), ax * bx + ay * by), 0.0)
+    out = tuple(outward[..., i] for i in range(3))
+    n1, n2 = _dot3(out, e1), _dot3(out, e2)
+    swap = jax.lax.stop_gradient(-(qy - py) * n1 + (qx - px) * n2) > 0
     inv = 1.0 / scale
-    return ax * inv, ay * inv, bx * inv, by * inv, keep, theta
+    ax, ay = jnp.where(swap, qx, px) * inv, jnp.where(swap, qy, py) * inv
+    bx, by = jnp.where(swap, px, qx) * inv, jnp.where(swap, py, qy) * inv
+    return ax, ay, bx, by
 
 
-def _intersection_along(ax, ay, bx, by, j, i):
-    """Where along segment j (its coordinate y from the foot of the perpendicular) segment i's
-    line crosses it, clamped to the segment; slots j, i (n, C) into the (n, K) segments."""
-    take = lambda v, q: jnp.take_along_axis(v, q, axis=1)
-    axj, ayj, bxj, byj = take(ax, j), take(ay, j), take(bx, j), take(by, j)
-    axi, ayi, bxi, byi = take(ax, i), take(ay, i), take(bx, i), take(by, i)
-    dxj, dyj, dxi, dyi = bxj - axj, byj - ayj, bxi - axi, byi - ayi
-    den = _cross(dxj, dyj, dxi, dyi)
-    ok = den != 0
-    s = jnp.clip(_cross(axi - axj, ayi - ayj, dxi, dyi) / jnp.where(ok, den, 1.0), 0.0, 1.0)
-    length = jnp.sqrt(jnp.maximum(dxj * dxj + dyj * dyj, 0.0))
-    ln = jnp.where(length > 0, length, 1.0)
-    ya = (axj * dxj + ayj * dyj) / ln
-    return jnp.where(ok, ya + s * length, ya)
-
-
-def boundary_mass(ax, ay, bx, by, winding, side_start, side_end, cross_slots, cross_change,
-                  profile: str = "disk"):
-    """The light's mass over {W >= 1} within the unit disk, from the boundary's pieces the plan
-    found (``wedge_plan.arrangement``): ends (n, K) in sun radii, covered side on the left;
-    winding (n,) W at the centre; side_start, side_end (n, K); cross_slots (n, C, 2),
-    cross_change (n, C). Returns (n,) in [0, 1]."""
-    dx, dy = bx - ax, by - ay
-    len2 = dx * dx + dy * dy
-    ok = len2 > 0
-    length = jnp.sqrt(jnp.where(ok, len2, 1.0))
-    tx, ty = jnp.where(ok, dx / length, 1.0), jnp.where(ok, dy / length, 0.0)
-    u = ay * tx - ax * ty           # the centre's signed distance to the line (+ on the lit side)
-    ya = ax * tx + ay * ty          # the ends' positions along the line from the foot
-    yb = ya + jnp.where(ok, length, 0.0)
-    h = jnp.abs(u)
-    one = jnp.ones_like(ya)
-    sigma = jnp.where(jax.lax.stop_gradient(u) < 0, 1.0, -1.0)
-    ends = side_end * _fan(yb, one, h, profile) - side_start * _fan(ya, one, h, profile)
-    j, i = cross_slots[..., 0], cross_slots[..., 1]
-    y = _intersection_along(ax, ay, bx, by, j, i)
-    hj = jnp.take_along_axis(h, j, axis=1)
-    fans = _fan(y, jnp.ones_like(y), hj, profile)
-    inner = jnp.sum(sigma * ends, axis=1) - jnp.sum(jnp.take_along_axis(sigma, j, axis=1) * cross_change * fans,
-                                                     axis=1)
-    total = (winding >= 0.5).astype(ax.dtype) - inner / (2.0 * np.pi)
-    return jnp.clip(total, 0.0, 1.0)
+def _light_frame(light):
+    """Unit s = -L and an orthonormal (e1, e2) spanning the plane perpendicular to it (e1 x e2 =
+    s), as component tuples; light (3,) or (P, 3). The helper axis (the world axis least aligned
+    with the light) is a discrete choice: nothing depends on the frame's rotation about s."""
+    sg = jax.lax.stop_gradient
+    s = tuple(-light[..., i] for i in range(3))
+    mag = jnp.stack([jnp.abs(sg(c)) for c in s], -1)
+    pick = jnp.argmin(mag, axis=-1)
+    axis = tuple((pick == i).astype(light.dtype) for i in range(3))
+    e1 = _cross3(axis, s)
+    norm = jnp.sqrt(_dot3(e1, e1))
+    e1 = tuple(c / norm for c in e1)
+    return s, e1, _cross3(s, e1)
 
 
 def pixel_segments(points, a, b, outward, light, pixel_axes):
     """The segments' shadows on each pixel's plane, in pixel units (the pixel is the unit square
-    about the point): v - x = al a + be b + t s along the sun's direction s, a and b the pixel's
-    sides (pixel_axes (n, 2, 3)). Returns (ax, ay, bx, by, keep), each (n, K), oriented with the
-    covered side on the left (mirrored axes are swapped); the part on the far side of the plane
-    from the sun (t < 0) is clipped off. The arithmetic of ``wedge_plan.arrangement``."""
+    about the point): v - x = al A + be B + t s along the sun's direction s, A and B the pixel's
+    sides (pixel_axes (P, 2, 3)); points, a, b, outward (P, 3). Returns (ax, ay, bx, by) (P,),
+    oriented with the covered side on the left (mirrored axes are swapped); the part on the far
+    side of the plane from the sun (t < 0) is clipped off. The arithmetic of
+    ``wedge_plan.arrangement``."""
     sg = jax.lax.stop_gradient
+    light = jnp.asarray(light)
     s = tuple(-light[..., i] for i in range(3))
-    s = tuple(c[:, None] if c.ndim == 1 else c for c in s)
-    A = tuple(pixel_axes[:, 0, i][:, None] for i in range(3))
-    B = tuple(pixel_axes[:, 1, i][:, None] for i in range(3))
-    cross = lambda u, v: (u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0])
-    dot = lambda u, v: u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
-    c_bs, c_sa, c_ab = cross(B, s), cross(s, A), cross(A, B)
-    det = dot(A, c_bs)
+    A = tuple(pixel_axes[..., 0, i] for i in range(3))
+    B = tuple(pixel_axes[..., 1, i] for i in range(3))
+    c_bs, c_sa, c_ab = _cross3(B, s), _cross3(s, A), _cross3(A, B)
+    det = _dot3(A, c_bs)
     det = jnp.where(det == 0, 1.0, det)
     flip = sg(det) < 0
-    x = tuple(points[:, None, i] for i in range(3))
+    x = tuple(points[..., i] for i in range(3))
     wa = tuple(a[..., i] - x[i] for i in range(3))
     wb = tuple(b[..., i] - x[i] for i in range(3))
-    ta, tb = dot(c_ab, wa) / det, dot(c_ab, wb) / det
-    keep = (ta > 0) | (tb > 0)
+    ta, tb = _dot3(c_ab, wa) / det, _dot3(c_ab, wb) / det
     den = jnp.where(ta - tb == 0, 1.0, ta - tb)
     t_lo = jnp.where(ta < 0, ta / den, 0.0)
     t_hi = jnp.where((ta >= 0) & (tb < 0), ta / den, 1.0)
-    pa, pb = dot(c_bs, wa) / det, dot(c_sa, wa) / det
-    qa, qb = dot(c_bs, wb) / det, dot(c_sa, wb) / det
+    pa, pb = _dot3(c_bs, wa) / det, _dot3(c_sa, wa) / det
+    qa, qb = _dot3(c_bs, wb) / det, _dot3(c_sa, wb) / det
     px, py = pa + t_lo * (qa - pa), pb + t_lo * (qb - pb)
     qx, qy = pa + t_hi * (qa - pa), pb + t_hi * (qb - pb)
     px, py = jnp.where(flip, py, px), jnp.where(flip, px, py)
     qx, qy = jnp.where(flip, qy, qx), jnp.where(flip, qx, qy)
     out = tuple(outward[..., i] for i in range(3))
-    n1, n2 = dot(c_bs, out) / det, dot(c_sa, out) / det
+    n1, n2 = _dot3(c_bs, out) / det, _dot3(c_sa, out) / det
     n1, n2 = jnp.where(flip, n2, n1), jnp.where(flip, n1, n2)
     swap = sg((qx - px) * n2 - (qy - py) * n1) > 0
     ax, ay = jnp.where(swap, qx, px), jnp.where(swap, qy, py)
     bx, by = jnp.where(swap, px, qx), jnp.where(swap, py, qy)
-    return ax, ay, bx, by, keep
+    return ax, ay, bx, by
+
+
+class _Lines(NamedTuple):
+    """Each pair's segment as a line seen from the origin: unit direction (tx, ty), the origin's
+    signed distance u (+ on the lit side), the ends' positions ya, yb from the foot of the
+    perpendicular, and the segment's length."""
+
+    tx: jax.Array
+    ty: jax.Array
+    u: jax.Array
+    ya: jax.Array
+    yb: jax.Array
+    length: jax.Array
+
+
+def _lines(ax, ay, bx, by) -> _Lines:
+    dx, dy = bx - ax, by - ay
+    len2 = dx * dx + dy * dy
+    ok = len2 > 0
+    length = jnp.where(ok, jnp.sqrt(jnp.where(ok, len2, 1.0)), 0.0)
+    ln = jnp.where(ok, length, 1.0)
+    tx, ty = jnp.where(ok, dx / ln, 1.0), jnp.where(ok, dy / ln, 0.0)
+    ya = ax * tx + ay * ty
+    return _Lines(tx, ty, ay * tx - ax * ty, ya, ya + length, length)
+
+
+def _crossing_along(ax, ay, bx, by, lines: _Lines, cross):
+    """Where along segment j each crossing (C, 2) pairs (j, i) lies (its y), clamped to j."""
+    j, i = cross[:, 0], cross[:, 1]
+    dxj, dyj = bx[j] - ax[j], by[j] - ay[j]
+    dxi, dyi = bx[i] - ax[i], by[i] - ay[i]
+    den = _cross(dxj, dyj, dxi, dyi)
+    ok = den != 0
+    t = jnp.clip(_cross(ax[i] - ax[j], ay[i] - ay[j], dxi, dyi) / jnp.where(ok, den, 1.0), 0.0, 1.0)
+    return lines.ya[j] + t * lines.length[j]
+
+
+def _angle_along(ax, ay, lines: _Lines, y, j=None):
+    """The angle from a segment's start A to its point at position y, seen from the origin
+    (within (-pi, pi): a segment spans less than half a turn unless it passes the origin)."""
+    take = (lambda v: v) if j is None else (lambda v: v[j])
+    axj, ayj, tx, ty = take(ax), take(ay), take(lines.tx), take(lines.ty)
+    yy = y - take(lines.ya)
+    return jnp.arctan2(yy * (axj * ty - ayj * tx), axj * axj + ayj * ayj + yy * (axj * tx + ayj * ty))
+
+
+def _per_point(values, index, n):
+    return jax.ops.segment_sum(values, index, num_segments=n)
+
+
+def _hard_term(ax, ay, lines: _Lines, choices, y_cross, n, dtype):
+    """[W(0) >= 1] per point (n,), from the plan's offset and the boundary pieces' angles."""
+    sg = jax.lax.stop_gradient
+    pp, cj = choices.pair_point, choices.cross[:, 0]
+    ends = choices.side_end * _angle_along(ax, ay, lines, lines.yb)
+    crossings = choices.cross_change * _angle_along(ax, ay, lines, y_cross, cj)
+    turns = choices.hard_offset + (_per_point(ends, pp, n) - _per_point(crossings, pp[cj], n)) / (2.0 * np.pi)
+    return jnp.clip(jnp.round(sg(turns)), 0.0, 1.0).astype(dtype)
+
+
+def _disk_mass(lines: _Lines, choices, y_cross, hard, n, profile):
+    """The light's mass over {W >= 1} within the unit disk (module docstring), per point."""
+    pp, cj = choices.pair_point, choices.cross[:, 0]
+    h = jnp.abs(lines.u)
+    one = jnp.ones_like(h)
+    sigma = jnp.where(jax.lax.stop_gradient(lines.u) < 0, 1.0, -1.0)
+    ends = sigma * (choices.side_end * _fan(lines.yb, one, h, profile) - choices.side_start * _fan(lines.ya, one, h, profile))
+    crossings = sigma[cj] * choices.cross_change * _fan(y_cross, jnp.ones_like(y_cross), h[cj], profile)
+    return jnp.clip(hard - (_per_point(ends, pp, n) - _per_point(crossings, pp[cj], n)) / (2.0 * np.pi), 0.0, 1.0)
 
 
 def _square_sector(qx, qy):
@@ -224,143 +247,114 @@ def _square_sector(qx, qy):
     return 0.25 * perimeter
 
 
-def _square_span(ax, ay, tx, ty, ya):
-    """The positions y along each line (y from the foot of the perpendicular, the line through
-    A with direction t) where it is inside the unit square: (y_in, y_out), y_in > y_out when it
-    misses."""
+def _square_span(ax, ay, lines: _Lines):
+    """The positions y along each line where it is inside the unit square: (y_in, y_out), both
+    the start's position when it misses."""
     big = jnp.asarray(1e30, ax.dtype)
     lo, hi = -big, big
-    for p0, d in ((ax, tx), (ay, ty)):
+    for p0, d in ((ax, lines.tx), (ay, lines.ty)):
         flat = d == 0
         dd = jnp.where(flat, 1.0, d)
         t1, t2 = (-0.5 - p0) / dd, (0.5 - p0) / dd
-        tmin, tmax = jnp.minimum(t1, t2), jnp.maximum(t1, t2)
         inside = jnp.abs(p0) <= 0.5
-        lo = jnp.where(flat, jnp.where(inside, lo, big), jnp.maximum(lo, tmin))
-        hi = jnp.where(flat, jnp.where(inside, hi, -big), jnp.minimum(hi, tmax))
-    return ya + lo, ya + hi
+        lo = jnp.where(flat, jnp.where(inside, lo, big), jnp.maximum(lo, jnp.minimum(t1, t2)))
+        hi = jnp.where(flat, jnp.where(inside, hi, -big), jnp.minimum(hi, jnp.maximum(t1, t2)))
+    misses = lo >= hi
+    return lines.ya + jnp.where(misses, 0.0, lo), lines.ya + jnp.where(misses, 0.0, hi)
 
 
-def pixel_hard_area(ax, ay, bx, by, winding, side_start, side_end, cross_slots, cross_change):
-    """The area of {W >= 1} within the unit square about the origin (the pixel), from the
-    boundary's pieces the plan found in the pixel (``WedgeArrays.pixel_*``): ends (n, K) in pixel
-    units, covered side on the left; winding (n,). By Green's theorem about the pixel's centre:
-    [W(0) >= 1] plus, for each piece from q0 to q1 (clipped to the square), its swept triangle
-    q0 x q1 / 2 less the square's sector over the same angle. Returns (n,) in [0, 1]."""
-    dx, dy = bx - ax, by - ay
-    len2 = dx * dx + dy * dy
-    ok = len2 > 0
-    length = jnp.sqrt(jnp.where(ok, len2, 1.0))
-    tx, ty = jnp.where(ok, dx / length, 1.0), jnp.where(ok, dy / length, 0.0)
-    u = ay * tx - ax * ty
-    ya = ax * tx + ay * ty
-    yb = ya + jnp.where(ok, length, 0.0)
-    y_in, y_out = _square_span(ax, ay, tx, ty, ya)
-    misses = y_in >= y_out
-    y_in = jnp.where(misses, ya, y_in)
-    y_out = jnp.where(misses, ya, y_out)
-    fx, fy = -u * ty, u * tx                       # the foot of the perpendicular: A - (A . t) t
+def pixel_hard_area(ax, ay, bx, by, choices, hard, n):
+    """The area of {W >= 1} within each point's pixel (n,), from the boundary's pieces the plan
+    found there (``WedgeArrays.pixel_*``); ax.. (P,) the pairs' segments in pixel units (the
+    pixel is the unit square about the origin), covered side on the left; hard (n,) [W(0) >= 1].
+    By Green's theorem about the pixel's centre: [W(0) >= 1] plus, for each piece from q0 to q1
+    (clipped to the square), its swept triangle q0 x q1 / 2 less the square's sector over the
+    same angle."""
+    lines = _lines(ax, ay, bx, by)
+    y_in, y_out = _square_span(ax, ay, lines)
+    fx, fy = -lines.u * lines.ty, lines.u * lines.tx   # the foot of the perpendicular
 
-    def term(y, k_in, k_out, uu, fxx, fyy, txx, tyy):
+    def term(y, j=None):
+        take = (lambda v: v) if j is None else (lambda v: v[j])
+        k_in, k_out, u, tx, ty, fxx, fyy = (take(v) for v in (y_in, y_out, lines.u, lines.tx, lines.ty, fx, fy))
         yc = jnp.clip(y, k_in, k_out)
-        swept = _square_sector(fxx + yc * txx, fyy + yc * tyy) - _square_sector(fxx + k_in * txx, fyy + k_in * tyy)
-        return -0.5 * yc * uu - (swept - jnp.round(swept))
+        swept = _square_sector(fxx + yc * tx, fyy + yc * ty) - _square_sector(fxx + k_in * tx, fyy + k_in * ty)
+        return -0.5 * yc * u - (swept - jnp.round(jax.lax.stop_gradient(swept)))
 
-    ends = side_end * term(yb, y_in, y_out, u, fx, fy, tx, ty) - side_start * term(ya, y_in, y_out, u, fx, fy, tx, ty)
-    j, i = cross_slots[..., 0], cross_slots[..., 1]
-    y = _intersection_along(ax, ay, bx, by, j, i)
-    take = lambda v: jnp.take_along_axis(v, j, axis=1)
-    crossings = cross_change * term(y, take(y_in), take(y_out), take(u), take(fx), take(fy), take(tx), take(ty))
-    total = (winding >= 0.5).astype(ax.dtype) + jnp.sum(ends, axis=1) - jnp.sum(crossings, axis=1)
-    return jnp.clip(total, 0.0, 1.0)
+    pp, cross = choices.pair_point, choices.pixel_cross
+    ends = choices.pixel_side_end * term(lines.yb) - choices.pixel_side_start * term(lines.ya)
+    y = _crossing_along(ax, ay, bx, by, lines, cross)
+    crossings = choices.pixel_cross_change * term(y, cross[:, 0])
+    return jnp.clip(hard + _per_point(ends, pp, n) - _per_point(crossings, pp[cross[:, 0]], n), 0.0, 1.0)
 
 
-def _line_share(ya, yb, y_cross, h, scale, side_start, side_end, cross_slots, cross_change, profile):
-    """Each segment's boundary pieces' share (n, K) of its whole line's deficit, for a light of
-    radius ``scale`` (n, K) sun radii: 1 for a boundary line crossing the light, 0 beyond it."""
-    one = jnp.ones_like(ya)
-    hs = h / scale
-    ends = side_end * _fan(yb / scale, one, hs, profile) - side_start * _fan(ya / scale, one, hs, profile)
-    j = cross_slots[..., 0]
-    take = lambda v: jnp.take_along_axis(v, j, axis=1)
-    fans = cross_change * _fan(y_cross / take(scale), jnp.ones_like(y_cross), take(hs), profile)
-    # Scatter each crossing's fan onto its segment j (a one-hot sum: C and K are small).
-    per_segment = jnp.sum(fans[..., None] * (j[..., None] == jnp.arange(ya.shape[1])), axis=1)
+def _line_share(lines: _Lines, choices, y_cross, scale, profile):
+    """Each pair's boundary pieces' share (P,) of its whole line's deficit, for the light of
+    radius ``scale`` (P,) sun radii: 1 for a boundary line crossing the light, 0 beyond it."""
+    cj = choices.cross[:, 0]
+    hs = jnp.abs(lines.u) / scale
+    one = jnp.ones_like(hs)
+    ends = choices.side_end * _fan(lines.yb / scale, one, hs, profile) \
+        - choices.side_start * _fan(lines.ya / scale, one, hs, profile)
+    crossings = choices.cross_change * _fan(y_cross / scale[cj], jnp.ones_like(y_cross), hs[cj], profile)
+    parts = ends - jax.ops.segment_sum(crossings, cj, num_segments=hs.shape[0])
     whole = 2.0 * np.pi * profile_alpha(hs, profile)
     ok = whole > 0
-    return jnp.where(ok, (ends - per_segment) / jnp.where(ok, whole, 1.0), 0.0)
+    return jnp.where(ok, parts / jnp.where(ok, whole, 1.0), 0.0)
 
 
-def wedge_alpha(points, edge_ids, edge_vertices_world, outward_sign, jump, light, range_k,
-                choices, profile: str = "disk", pixel_axes=None):
+def wedge_alpha(points, edge_vertices_world, outward_sign, light, range_k, choices, profile: str = "disk",
+                pixel_axes=None):
     """Alpha (n,) at points (n, 3): the light's mass behind the mesh (module docstring).
 
-    edge_ids (n, K) candidate edges (-1: none; the plan's: every silhouette edge whose segment
-    may meet the disk), edge_vertices_world (s, 2, 3), outward_sign (s,), jump (s,) W's change
-    across each edge; light (3,) or (n, 3); range_k: the disk's radius tan r (``disk``; for
-    ``linear``, the light whose straight edge gives the linear ramp of that half-width);
-    choices: the plan's ``wedge_plan.WedgeArrays``.
+    edge_vertices_world (s, 2, 3), outward_sign (s,): the silhouette edges; light (3,) or (n, 3);
+    range_k: the disk's radius tan r (``disk``; for ``linear``, the light whose straight edge
+    gives the linear ramp of that half-width); choices: the plan's ``wedge_plan.WedgeArrays``.
+    Points without pairs take [W(0) >= 1] (the plan's hard shadow for them, as ``evaluate``
+    does for inactive points).
 
     pixel_axes (2, 3) or (n, 2, 3): the mean over each pixel (the plan must have been made with
     the same axes): the hard shadow's exact area in the pixel (``pixel_hard_area``) plus, for
     each boundary segment, its straight line's pixel-mean departure from the hard shadow
     (``penumbra.footprint_bump``, exact for one straight edge) times the share of that line's
     deficit its boundary pieces take (``_line_share``, for the light widened by the pixel's reach
-    in sun radii). As the pixel shrinks this is the value at the point; as the penumbra
-    narrows within the pixel, the hard shadow's area; continuous in between, where pieces or
-    the nearest edge change.
+    in sun radii). As the pixel shrinks this is the value at the point; as the penumbra narrows
+    within the pixel, the hard shadow's area; continuous in between.
     """
     dtype = points.dtype
+    n = points.shape[0]
     k = jnp.maximum(jnp.asarray(range_k, dtype), _K_MIN)
-    safe = jnp.maximum(edge_ids, 0)
-    ev = edge_vertices_world[safe]                      # (n, K, 2, 3)
-    a, b = ev[..., 0, :], ev[..., 1, :]
+    pp, pe = choices.pair_point, choices.pair_edge  # padding pairs: point -1 (their sums are dropped)
+    choices = jax.tree_util.tree_map(lambda x: x.astype(dtype) if jnp.issubdtype(x.dtype, jnp.floating)
+                                     and x.ndim == 1 and x.shape[0] == pp.shape[0] else x, choices)
+    ev = edge_vertices_world[pe]
+    a, b = ev[:, 0], ev[:, 1]
     light = jnp.asarray(light, dtype)
-    lt = light if light.ndim == 1 else light[:, None, :]
+    lt = light if light.ndim == 1 else light[jnp.maximum(pp, 0)]
     tvec = b - a
-    cvec = jnp.stack([tvec[..., 1] * lt[..., 2] - tvec[..., 2] * lt[..., 1],
-                      tvec[..., 2] * lt[..., 0] - tvec[..., 0] * lt[..., 2],
-                      tvec[..., 0] * lt[..., 1] - tvec[..., 1] * lt[..., 0]], -1)
-    outward = outward_sign[safe][..., None] * cvec
-    used = (edge_ids >= 0) & (jump[safe] > 0)
+    outward = outward_sign[pe][:, None] * jnp.stack(_cross3(tuple(tvec[:, i] for i in range(3)),
+                                                             tuple(lt[..., i] for i in range(3))), -1)
+    x = points[jnp.maximum(pp, 0)]
+
+    def geometry(xx):
+        ax, ay, bx, by = gnomonic_segments(xx, a, b, outward, lt, k)
+        lines = _lines(ax, ay, bx, by)
+        return lines.u, (ax, ay, bx, by, lines)
+
     if pixel_axes is None:
-        ax, ay, bx, by, keep, theta = gnomonic_segments(points, a, b, outward, light, k)
-        w = jnp.where(keep & used, jump[safe], 0.0).astype(dtype)
-        winding = jnp.round(jax.lax.stop_gradient(choices.winding + jnp.sum(w * theta, axis=1) / (2.0 * np.pi)))
-        return boundary_mass(ax, ay, bx, by, winding, choices.side_start.astype(dtype),
-                             choices.side_end.astype(dtype), choices.cross_slots, choices.cross_change.astype(dtype),
-                             profile)
-    if choices.pixel_side_start is None:
-        raise ValueError("a pixel mean of the wedge rule needs a plan made with the pixel's axes")
-    axes = jnp.broadcast_to(jnp.asarray(pixel_axes, dtype), (points.shape[0], 2, 3))
-
-    def line_geometry(xx):
-        ax, ay, bx, by, keep, theta = gnomonic_segments(xx, a, b, outward, light, k)
-        dx, dy = bx - ax, by - ay
-        len2 = dx * dx + dy * dy
-        ln = jnp.sqrt(jnp.where(len2 > 0, len2, 1.0))
-        u = (ay * dx - ax * dy) / ln
-        return u, (ax, ay, bx, by, keep, theta)
-
-    u, lin, (ax, ay, bx, by, keep, theta) = jax.linearize(line_geometry, points, has_aux=True)
-    du_a, du_b = lin(axes[:, 0]), lin(axes[:, 1])
-    w = jnp.where(keep & used, jump[safe], 0.0).astype(dtype)
-    winding = jnp.round(jax.lax.stop_gradient(choices.winding + jnp.sum(w * theta, axis=1) / (2.0 * np.pi)))
-    # The hard shadow's area in the pixel.
-    pax, pay, pbx, pby, _ = pixel_segments(points, a, b, outward, light, axes)
-    area = pixel_hard_area(pax, pay, pbx, pby, winding, choices.pixel_side_start.astype(dtype),
-                           choices.pixel_side_end.astype(dtype), choices.pixel_cross_slots,
-                           choices.pixel_cross_change.astype(dtype))
-    # Each boundary line's penumbra, over the pixel, by its pieces' share.
-    dx, dy = bx - ax, by - ay
-    len2 = dx * dx + dy * dy
-    ln = jnp.sqrt(jnp.where(len2 > 0, len2, 1.0))
-    ya = (ax * dx + ay * dy) / ln
-    yb = ya + jnp.where(len2 > 0, ln, 0.0)
-    y_cross = _intersection_along(ax, ay, bx, by, choices.cross_slots[..., 0], choices.cross_slots[..., 1])
+        _, (ax, ay, bx, by, lines) = geometry(x)
+    else:
+        if choices.pixel_side_start is None:
+            raise ValueError("a pixel mean of the wedge rule needs a plan made with the pixel's axes")
+        axes = jnp.broadcast_to(jnp.asarray(pixel_axes, dtype), (n, 2, 3))[jnp.maximum(pp, 0)]
+        u, lin, (ax, ay, bx, by, lines) = jax.linearize(geometry, x, has_aux=True)
+        du_a, du_b = lin(axes[:, 0]), lin(axes[:, 1])
+    y_cross = _crossing_along(ax, ay, bx, by, lines, choices.cross)
+    hard = _hard_term(ax, ay, lines, choices, y_cross, n, dtype)
+    if pixel_axes is None:
+        return _disk_mass(lines, choices, y_cross, hard, n, profile)
+    area = pixel_hard_area(*pixel_segments(x, a, b, outward, lt, axes), choices, hard, n)
     scale = 1.0 + 0.5 * (jnp.abs(du_a) + jnp.abs(du_b))
-    share = _line_share(ya, yb, y_cross, jnp.abs(u), scale, choices.side_start.astype(dtype),
-                        choices.side_end.astype(dtype), choices.cross_slots, choices.cross_change.astype(dtype),
-                        profile)
+    share = _line_share(lines, choices, y_cross, scale, profile)
     bump = footprint_bump(u, du_a, du_b, profile)
-    return jnp.clip(area + jnp.sum(share * bump, axis=1), 0.0, 1.0)
+    return jnp.clip(area + _per_point(share * bump, pp, n), 0.0, 1.0)

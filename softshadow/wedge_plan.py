@@ -28,8 +28,8 @@ import jax
 import numpy as np
 from jaxtyping import Float, Int
 
-__all__ = ["K_MAX", "REACH_MARGIN", "WedgeArrays", "WedgeCandidates", "arrangement", "edge_jumps",
-           "gather_candidates"]
+__all__ = ["K_MAX", "REACH_MARGIN", "WedgeArrays", "WedgeCandidates", "arrangement", "bucket",
+           "concatenate_wedge", "edge_jumps", "gather_candidates"]
 
 K_MAX = 8            # candidate edges kept per point
 REACH_MARGIN = 0.05  # the cone's radius is k_max (1 + REACH_MARGIN)
@@ -38,11 +38,12 @@ _DEPTH_REL = 1e-6
 
 
 class WedgeCandidates:
-    """ids (n, K) int32 candidate edges per point (-1: none), count (n,) how many, overflow:
-    points that had more than K_MAX within reach (the farthest were dropped)."""
+    """The points that have candidates: index (m,) into the points, ids (m, K) int32 their
+    candidate edges deepest in their cones first (-1: none), count (m,) how many, overflow: points
+    that had more than K_MAX within reach (the farthest were dropped)."""
 
-    def __init__(self, ids, count, overflow):
-        self.ids, self.count, self.overflow = ids, count, overflow
+    def __init__(self, index, ids, count, overflow):
+        self.index, self.ids, self.count, self.overflow = index, ids, count, overflow
 
 
 def _light_frame(light: np.ndarray):
@@ -56,31 +57,121 @@ def _light_frame(light: np.ndarray):
 
 
 class WedgeArrays(eqx.Module):
-    """The ``wedge`` rule's per-point choices (NumPy leaves), beside ``PointPlan.edge_id``.
+    """The ``wedge`` rule's discrete choices (NumPy leaves) for n points: a flat list of P
+    (point, edge) pairs, the segments that bound {W >= 1} near each point, and of their
+    crossings.
 
-    winding (n,): F = W(0) - sum_j w_j theta_j / 2 pi at the plan's parameters (the evaluation
-    recovers W(0) from it). In the sun's view: side_start, side_end (n, K) 0/1: whether the
-    start and the end of each candidate segment's part near the sun lie on the boundary of
-    {W >= 1} (W = 0 just beside it on its lit side); cross_slots (n, C, 2) int32: the slots
-    (j, i) of the crossings of segment j by segment i along which that changes, cross_change
-    (n, C) by how much (+-1; 0 in padding). pixel_*: the same in the receiver's pixel (the
-    segments' shadows on the pixel's plane, for the hard shadow's area in it), None when the
-    plan was made without pixel axes.
+    hard_offset (n,): F = [W(0) >= 1] - S / 2 pi at the plan's parameters, S the sum of the
+    angles the boundary's pieces subtend at the sun's centre (the evaluation recovers [W(0) >= 1]
+    from it as the sun and pose move). pair_point, pair_edge (P,) int32: each pair's point and
+    silhouette edge (padding: point -1, edge 0, no boundary). In the sun's view: side_start,
+    side_end (P,) 0/1: whether the start and the end of the segment's part near the sun lie on
+    the boundary of {W >= 1} (W = 0 just beside it on its lit side); cross (C, 2) int32: the
+    pairs (j, i) of the crossings of segment j by segment i along which that changes (the same
+    point), cross_change (C,) by how much (+-1; 0 in padding). pixel_*: the same in the point's
+    pixel (the segments' shadows on the pixel's plane, for the hard shadow's area in it), None
+    when the plan was made without pixel axes.
     """
 
-    winding: Float[np.ndarray, " n"]
-    side_start: Float[np.ndarray, "n K"]
-    side_end: Float[np.ndarray, "n K"]
-    cross_slots: Int[np.ndarray, "n C 2"]
-    cross_change: Float[np.ndarray, "n C"]
-    pixel_side_start: Float[np.ndarray, "n K"] | None = None
-    pixel_side_end: Float[np.ndarray, "n K"] | None = None
-    pixel_cross_slots: Int[np.ndarray, "n D 2"] | None = None
-    pixel_cross_change: Float[np.ndarray, "n D"] | None = None
+    hard_offset: Float[np.ndarray, " n"]
+    pair_point: Int[np.ndarray, " P"]
+    pair_edge: Int[np.ndarray, " P"]
+    side_start: Float[np.ndarray, " P"]
+    side_end: Float[np.ndarray, " P"]
+    cross: Int[np.ndarray, "C 2"]
+    cross_change: Float[np.ndarray, " C"]
+    pixel_side_start: Float[np.ndarray, " P"] | None = None
+    pixel_side_end: Float[np.ndarray, " P"] | None = None
+    pixel_cross: Int[np.ndarray, "D 2"] | None = None
+    pixel_cross_change: Float[np.ndarray, " D"] | None = None
 
-    def take(self, index) -> "WedgeArrays":
-        """The rows ``index`` of every array."""
-        return jax.tree_util.tree_map(lambda x: np.asarray(x)[index], self)
+    @property
+    def n_pairs(self) -> int:
+        return len(self.pair_point)
+
+    def select(self, keep: np.ndarray, pad_points: int | None = None, place: np.ndarray | None = None,
+               default_offset: np.ndarray | None = None) -> "WedgeArrays":
+        """The choices of the points ``keep`` (m,) (indices), renumbered 0..m-1 (or to ``place``
+        (m,)) among ``pad_points`` points (default m), whose other offsets are default_offset
+        (default 0); pairs and crossings padded to buckets (``bucket``)."""
+        keep = np.asarray(keep, np.int64)
+        target = np.arange(len(keep)) if place is None else np.asarray(place, np.int64)
+        n_new = pad_points or len(keep)
+        where = -np.ones(len(self.hard_offset), np.int64)
+        where[keep] = target
+        pair_point = np.asarray(self.pair_point)
+        real = np.flatnonzero((pair_point >= 0) & (where[np.maximum(pair_point, 0)] >= 0))
+        remap = -np.ones(self.n_pairs, np.int64)
+        remap[real] = np.arange(len(real))
+        offset = np.zeros(n_new) if default_offset is None else np.array(default_offset, np.float64)
+        offset[target] = np.asarray(self.hard_offset)[keep]
+        p_size = bucket(len(real))
+        ftype = np.asarray(self.side_start).dtype
+
+        def pairs(x, dtype=None):
+            out = np.zeros(p_size, dtype or ftype)
+            out[:len(real)] = np.asarray(x)[real]
+            return out
+
+        def crossings(cr, ch):
+            cr, ch = np.asarray(cr), np.asarray(ch)
+            ok = np.flatnonzero((remap[cr[:, 0]] >= 0) & (ch != 0)) if len(cr) else np.zeros(0, np.int64)
+            size = bucket(len(ok))
+            out, out_ch = np.zeros((size, 2), np.int32), np.zeros(size, ch.dtype)
+            out[:len(ok)] = remap[cr[ok]]
+            out_ch[:len(ok)] = ch[ok]
+            return out, out_ch
+
+        pp = -np.ones(p_size, np.int32)  # padding pairs belong to no point
+        pp[:len(real)] = where[pair_point[real]]
+        extra = ()
+        if self.pixel_side_start is not None:
+            extra = (pairs(self.pixel_side_start), pairs(self.pixel_side_end),
+                     *crossings(self.pixel_cross, self.pixel_cross_change))
+        return WedgeArrays(offset, pp, pairs(self.pair_edge, np.int32), pairs(self.side_start),
+                           pairs(self.side_end), *crossings(self.cross, self.cross_change), *extra)
+
+    def astype(self, dtype) -> "WedgeArrays":
+        """Statuses and changes in ``dtype`` (the offsets stay float64, indices int32)."""
+        cast = lambda x: None if x is None else np.asarray(x, dtype)
+        return WedgeArrays(self.hard_offset, self.pair_point, self.pair_edge, cast(self.side_start),
+                           cast(self.side_end), self.cross, cast(self.cross_change), cast(self.pixel_side_start),
+                           cast(self.pixel_side_end), self.pixel_cross, cast(self.pixel_cross_change))
+
+
+def bucket(n: int, minimum: int = 64) -> int:
+    """Pairs and crossings are padded to four sizes per octave (few compiled shapes)."""
+    if n <= minimum:
+        return minimum
+    step = 1 << (int(np.floor(np.log2(n))) - 2)
+    return -(-n // step) * step
+
+
+def concatenate_wedge(parts: list[WedgeArrays], counts: list[int], pad_points: int) -> WedgeArrays:
+    """One WedgeArrays for several point sets (their first ``counts`` points each), pairs
+    renumbered, padded to ``pad_points`` points."""
+    trimmed = [p.select(np.arange(c)) for p, c in zip(parts, counts)]
+    offsets = np.cumsum([0] + list(counts))
+    pair_base = np.cumsum([0] + [t.n_pairs for t in trimmed])
+    cat = lambda xs: np.concatenate(xs) if xs else np.zeros(0)
+    with_pixel = all(t.pixel_side_start is not None for t in trimmed) and trimmed
+    fields = {
+        "hard_offset": cat([t.hard_offset for t in trimmed]),
+        "pair_point": cat([np.asarray(t.pair_point) + o for t, o in zip(trimmed, offsets)]).astype(np.int32),
+        "pair_edge": cat([t.pair_edge for t in trimmed]).astype(np.int32),
+        "side_start": cat([t.side_start for t in trimmed]),
+        "side_end": cat([t.side_end for t in trimmed]),
+        "cross": cat([np.asarray(t.cross) + base for t, base in zip(trimmed, pair_base)]).reshape(-1, 2).astype(np.int32),
+        "cross_change": cat([t.cross_change for t in trimmed]),
+    }
+    merged = WedgeArrays(**fields)
+    if with_pixel:
+        merged = WedgeArrays(**fields, pixel_side_start=cat([t.pixel_side_start for t in trimmed]),
+                             pixel_side_end=cat([t.pixel_side_end for t in trimmed]),
+                             pixel_cross=cat([np.asarray(t.pixel_cross) + base for t, base in
+                                              zip(trimmed, pair_base)]).reshape(-1, 2).astype(np.int32),
+                             pixel_cross_change=cat([t.pixel_cross_change for t in trimmed]))
+    return merged.select(np.arange(int(offsets[-1])), pad_points=pad_points)
 
 
 def arrangement(points: np.ndarray, ids: np.ndarray, a: np.ndarray, b: np.ndarray, outward: np.ndarray,
@@ -93,8 +184,8 @@ def arrangement(points: np.ndarray, ids: np.ndarray, a: np.ndarray, b: np.ndarra
     points (n, 3); ids (n, K) candidates (-1: none); a, b, outward (S, 3) the edges in the world;
     jump (S,); winding (n,) W(0); pixel_reach: scalar or (n,), metres; pixel_axes (2, 3) or
     (n, 2, 3): the offsets across the whole pixel along its two sides. Returns (WedgeArrays
-    with C = the most crossings any point has, boundary (n,) bool: the boundary passes through
-    the disk or the pixel, overflow: crossings dropped beyond ``max_crossings``).
+    (unpadded), boundary (n,) bool: the boundary passes through the disk or the pixel, overflow:
+    crossings dropped beyond ``max_crossings`` per point).
     """
     n, k = ids.shape
     s, e1, e2 = _light_frame(light)
@@ -103,24 +194,36 @@ def arrangement(points: np.ndarray, ids: np.ndarray, a: np.ndarray, b: np.ndarra
     axes = np.zeros((n, 2, 3)) if not with_pixel else np.ascontiguousarray(
         np.broadcast_to(np.asarray(pixel_axes, np.float64), (n, 2, 3)))
     reach = np.ascontiguousarray(np.broadcast_to(np.asarray(pixel_reach, np.float64), (n,)))
-    out = [np.zeros((n, k)), np.zeros((n, k)), np.zeros((n, max_crossings, 2), np.int32),
-           np.zeros((n, max_crossings)), np.zeros(n, np.int64)]
-    pix = [np.zeros((n, k)), np.zeros((n, k)), np.zeros((n, max_crossings, 2), np.int32),
-           np.zeros((n, max_crossings)), np.zeros(n, np.int64)]
     offset = np.asarray(winding, np.float64).copy()
+    pair_edge = np.zeros((n, k), np.int32)
+    status = [np.zeros((n, k)) for _ in range(4)]
+    n_pairs, n_cross, n_pcross = np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros(n, np.int64)
+    cross, pcross = np.zeros((n, max_crossings, 2), np.int32), np.zeros((n, max_crossings, 2), np.int32)
+    change, pchange = np.zeros((n, max_crossings)), np.zeros((n, max_crossings))
     boundary = np.zeros(n, bool)
-    overflow = np.zeros(1, np.int64)
+    overflow = np.zeros(64, np.int64)
     _arrangement_kernel()(np.ascontiguousarray(points, np.float64), np.ascontiguousarray(ids, np.int64),
                           np.ascontiguousarray(a, np.float64), np.ascontiguousarray(b, np.float64),
                           np.ascontiguousarray(outward, np.float64), np.asarray(jump, np.float64), frame,
-                          float(radius), reach, axes, with_pixel, offset, *out, *pix, boundary, overflow)
-    c = max(1, int(out[4].max(initial=0)))
-    arrays = WedgeArrays(offset, out[0], out[1], out[2][:, :c].copy(), out[3][:, :c].copy())
+                          float(radius), reach, axes, with_pixel, offset, pair_edge, *status, n_pairs, cross, change,
+                          n_cross, pcross, pchange, n_pcross, boundary, overflow)
+    # Compact: the pairs in point order, the crossings' slots renumbered to pairs.
+    pair_of = np.arange(k)[None, :] < n_pairs[:, None]
+    pair_point = np.nonzero(pair_of)[0].astype(np.int32)
+    base = np.concatenate([[0], np.cumsum(n_pairs)[:-1]])
+
+    def crossings(cr, ch, count):
+        some = np.flatnonzero(count)
+        on = np.arange(max_crossings)[None, :] < count[some, None]
+        rows = some[np.nonzero(on)[0]]
+        return (cr[some][on] + base[rows][:, None]).astype(np.int32), ch[some][on]
+
+    cr, ch = crossings(cross, change, n_cross)
+    fields = (offset, pair_point, pair_edge[pair_of], status[0][pair_of], status[1][pair_of], cr, ch)
     if with_pixel:
-        d = max(1, int(pix[4].max(initial=0)))
-        arrays = WedgeArrays(offset, out[0], out[1], out[2][:, :c].copy(), out[3][:, :c].copy(),
-                             pix[0], pix[1], pix[2][:, :d].copy(), pix[3][:, :d].copy())
-    return arrays, boundary, int(overflow[0])
+        fields += (status[2][pair_of], status[3][pair_of], *crossings(pcross, pchange, n_pcross))
+    arrays = WedgeArrays(*fields)
+    return arrays, boundary, int(overflow.sum())
 
 
 def edge_jumps(occ, sil) -> np.ndarray:
@@ -146,24 +249,40 @@ def edge_jumps(occ, sil) -> np.ndarray:
     return np.where(found & (total > 0), total, 1.0)
 
 
-def gather_candidates(points: np.ndarray, points_plane: np.ndarray, a: np.ndarray, b: np.ndarray,
-                      a_plane: np.ndarray, b_plane: np.ndarray, edge_reach: np.ndarray,
-                      light: np.ndarray, range_k: float, pixel_reach, k_max: int = K_MAX) -> WedgeCandidates:
-    """Candidate edges of each point (module docstring).
+def gather_candidates(points, a: np.ndarray, b: np.ndarray, edge_reach: np.ndarray, light: np.ndarray,
+                      range_k: float, pixel_reach, k_max: int = K_MAX) -> WedgeCandidates:
+    """Candidate edges of points (module docstring).
 
-    points (n, 3) world; points_plane (n, 2) the points in the plane of the cells; a, b (S, 3)
-    the edges' ends in the world and a_plane, b_plane (S, 2) in that plane; edge_reach (S,) a
-    bound on how far (plane metres) an edge's candidates lie from it there; range_k: the cone's
-    radius (tan); pixel_reach: r, scalar or (n,), metres across the light.
+    points: (n, 3) world points, or a ``GroundGrid`` (its pixel centres on z = 0); a, b (S, 3) the
+    edges' ends in the world; edge_reach (S,) a bound on how far (metres, across the light) an
+    edge's candidates lie from it; range_k: the cone's radius (tan); pixel_reach: r, scalar or
+    (n,) (a scalar for a grid), metres across the light. The cells are in the plane perpendicular
+    to the light, where the cones are round.
     """
-    n = len(points)
-    ids = -np.ones((n, k_max), np.int32)
-    count = np.zeros(n, np.int32)
+    grid = None if isinstance(points, np.ndarray) else points
+    n = grid.width * grid.height if grid is not None else len(points)
     if not n or not len(a):
-        return WedgeCandidates(ids, count, 0)
+        return WedgeCandidates(np.zeros(0, np.int64), -np.ones((0, k_max), np.int32), np.zeros(0, np.int32), 0)
+    _, e1, e2 = _light_frame(light)
+    uv = lambda p: np.stack([p @ e1, p @ e2], axis=-1)
     reach = np.maximum(np.asarray(edge_reach, np.float64), 1e-9)
-    lo = np.minimum(points_plane.min(0), np.minimum(a_plane.min(0), b_plane.min(0)) - reach.max())
-    hi = np.maximum(points_plane.max(0), np.maximum(a_plane.max(0), b_plane.max(0)) + reach.max())
+    a_uv, b_uv = uv(a), uv(b)
+    if grid is not None:
+        corners = grid.to_world(np.array([0, grid.width - 1, 0, grid.width - 1]),
+                                np.array([0, 0, grid.height - 1, grid.height - 1])).reshape(-1, 3)
+        cuv = uv(corners)
+        g0, g1 = cuv.min(0), cuv.max(0)
+        pts = np.zeros((1, 3))
+        plane = np.zeros((1, 2))
+        r = np.full(1, float(pixel_reach))
+    else:
+        pts = np.ascontiguousarray(points, np.float64)
+        plane = np.ascontiguousarray(uv(pts))
+        g0 = np.array([plane[:, 0].min(), plane[:, 1].min()])
+        g1 = np.array([plane[:, 0].max(), plane[:, 1].max()])
+        r = np.ascontiguousarray(np.broadcast_to(np.asarray(pixel_reach, np.float64), (n,)))
+    lo = np.maximum(np.minimum(g0, np.minimum(a_uv.min(0), b_uv.min(0)) - reach.max()), g0 - reach.max())
+    hi = np.minimum(np.maximum(g1, np.maximum(a_uv.max(0), b_uv.max(0)) + reach.max()), g1 + reach.max())
     # Cells about the typical reach: an edge registers in a few, a point looks in one.
     span = float(np.max(hi - lo))
     cell = max(float(np.median(reach)), span / 4096, 1e-9)
@@ -174,8 +293,7 @@ def gather_candidates(points: np.ndarray, points_plane: np.ndarray, a: np.ndarra
         n_cols = int(np.ceil((hi[0] - lo[0]) / cell)) + 1
         n_rows = int(np.ceil((hi[1] - lo[1]) / cell)) + 1
     register, query = _kernels()
-    ap = np.ascontiguousarray(a_plane, np.float64)
-    bp = np.ascontiguousarray(b_plane, np.float64)
+    ap, bp = np.ascontiguousarray(a_uv), np.ascontiguousarray(b_uv)
     counts = np.zeros(n_cols * n_rows + 1, np.int64)
     register(ap, bp, reach, lo[0], lo[1], cell, n_cols, n_rows, counts, np.zeros(0, np.int32), False)
     start = np.concatenate([[0], np.cumsum(counts[:-1])])
@@ -183,14 +301,19 @@ def gather_candidates(points: np.ndarray, points_plane: np.ndarray, a: np.ndarra
     fill = start.copy()
     register(ap, bp, reach, lo[0], lo[1], cell, n_cols, n_rows, fill, members, True)
     s = -np.asarray(light, np.float64)
-    r = np.broadcast_to(np.asarray(pixel_reach, np.float64), (n,)).copy()
-    score = np.empty((n, k_max))
-    overflow = np.zeros(1, np.int64)
-    query(np.ascontiguousarray(points, np.float64), np.ascontiguousarray(points_plane, np.float64), r,
-          np.ascontiguousarray(a, np.float64), np.ascontiguousarray(b, np.float64), s,
+    ids = np.empty((n, k_max), np.int32)
+    count = np.empty(n, np.int32)
+    overflow = np.zeros(64, np.int64)
+    geometry = np.array([grid.origin_m[0], grid.origin_m[1], grid.pixel_m] if grid is not None else [0.0, 0.0, 0.0])
+    # Per edge: its ends across the light and along s, the box of its ends, its reach squared.
+    box = [np.minimum(a_uv[:, 0], b_uv[:, 0]), np.maximum(a_uv[:, 0], b_uv[:, 0]),
+           np.minimum(a_uv[:, 1], b_uv[:, 1]), np.maximum(a_uv[:, 1], b_uv[:, 1])]
+    ends = np.ascontiguousarray(np.column_stack([a_uv, a @ s, b_uv, b @ s, *box, reach * reach]))
+    query(grid is not None, grid.width if grid is not None else 0, n, geometry, pts, plane, r, e1, e2, ends, s,
           float(range_k) * (1.0 + REACH_MARGIN), lo[0], lo[1], cell, n_cols, n_rows, start, members,
-          ids, score, count, overflow)
-    return WedgeCandidates(ids, count, int(overflow[0]))
+          ids, count, overflow)
+    index = np.flatnonzero(count)
+    return WedgeCandidates(index, ids[index], count[index], int(overflow.sum()))
 
 
 @functools.cache
@@ -233,30 +356,25 @@ def _kernels():
                     fill[k] += 1
 
     @numba.njit(cache=True, nogil=True)
-    def cone_gap(x, a, b, s, kappa, r):
-        """min over the edge's part in front of x of |p_perp| - kappa d - r (<= 0: a candidate),
-        and kappa d + r there (for the score)."""
-        wa0, wa1, wa2 = a[0] - x[0], a[1] - x[1], a[2] - x[2]
-        wb0, wb1, wb2 = b[0] - x[0], b[1] - x[1], b[2] - x[2]
-        da = wa0 * s[0] + wa1 * s[1] + wa2 * s[2]
-        db = wb0 * s[0] + wb1 * s[1] + wb2 * s[2]
-        dmin = 1e-7 + 1e-6 * max(np.sqrt(wa0 * wa0 + wa1 * wa1 + wa2 * wa2),
-                                 np.sqrt(wb0 * wb0 + wb1 * wb1 + wb2 * wb2))
-        t_lo, t_hi = 0.0, 1.0
-        step = db - da
+    def cone_gap(px, py, pd, e, ends, kappa, r):
+        """min over edge e's part in front of the point (px, py) (across the light), pd (along s)
+        of |p_perp| - kappa d - r (<= 0: a candidate), and kappa d + r there (for the score);
+        ends (S, 6): each edge's ends across the light and along s."""
+        pa0, pa1, da = ends[e, 0] - px, ends[e, 1] - py, ends[e, 2] - pd
+        pb0, pb1, db = ends[e, 3] - px, ends[e, 4] - py, ends[e, 5] - pd
+        C = pa0 * pa0 + pa1 * pa1
+        dmin = 1e-7 + 1e-6 * np.sqrt(max(C + da * da, pb0 * pb0 + pb1 * pb1 + db * db))
         if da < dmin and db < dmin:
             return 1e300, 1.0
+        step = db - da
+        t_lo, t_hi = 0.0, 1.0
         if da < dmin:
             t_lo = (dmin - da) / step
         elif db < dmin:
             t_hi = (dmin - da) / step
-        # p_perp(t) = P + t D, depth(t) = da + t step
-        p0, p1, p2 = wa0 - da * s[0], wa1 - da * s[1], wa2 - da * s[2]
-        q0, q1, q2 = wb0 - db * s[0], wb1 - db * s[1], wb2 - db * s[2]
-        d0, d1, d2 = q0 - p0, q1 - p1, q2 - p2
-        A = d0 * d0 + d1 * d1 + d2 * d2
-        B = p0 * d0 + p1 * d1 + p2 * d2
-        C = p0 * p0 + p1 * p1 + p2 * p2
+        d0, d1 = pb0 - pa0, pb1 - pa1
+        A = d0 * d0 + d1 * d1
+        B = pa0 * d0 + pa1 * d1
         m = kappa * step
         best, best_t = 1e300, t_lo
         for k in range(3):
@@ -266,10 +384,9 @@ def _kernels():
                 t = t_hi
             else:
                 # f'(t) = (A t + B) / |P + t D| - m = 0
-                if A <= m * m or A <= 0.0:
+                if A <= m * m:
                     continue
-                disc = (A * C - B * B) / (A - m * m)
-                t = (-B + m * np.sqrt(max(disc, 0.0))) / A
+                t = (-B + m * np.sqrt(max((A * C - B * B) / (A - m * m), 0.0))) / A
                 t = min(max(t, t_lo), t_hi)
             f = np.sqrt(max(A * t * t + 2.0 * B * t + C, 0.0)) - kappa * (da + t * step) - r
             if f < best:
@@ -277,42 +394,66 @@ def _kernels():
         return best, kappa * (da + best_t * step) + r
 
     @numba.njit(cache=True, nogil=True)
-    def query(points, plane, rpix, a, b, s, kappa, x0, y0, cell, n_cols, n_rows, start, members,
-              ids, score, count, overflow):
+    def query(is_grid, width, n, geometry, points, plane, rpix, e1, e2, ends, s, kappa, x0, y0, cell, n_cols,
+              n_rows, start, members, ids, count, overflow):
         k_max = ids.shape[1]
-        for i in range(points.shape[0]):
-            col = int(np.floor((plane[i, 0] - x0) / cell))
-            row = int(np.floor((plane[i, 1] - y0) / cell))
-            if col < 0 or col >= n_cols or row < 0 or row >= n_rows:
-                continue
-            k = row * n_cols + col
-            n_found = 0
-            extra = False
-            for j in range(start[k], start[k + 1]):
-                e = members[j]
-                gap, scale = cone_gap(points[i], a[e], b[e], s, kappa, rpix[i])
-                if gap > 0.0:
-                    continue
-                sc = gap / max(scale, 1e-300)
-                # Insert, keeping the k_max lowest scores in order.
-                if n_found < k_max:
-                    pos = n_found
-                    n_found += 1
-                elif sc < score[i, k_max - 1]:
-                    pos = k_max - 1
-                    extra = True
+        n_chunks = min(64, max(1, n // 1024))
+        for c in range(n_chunks):
+            x = np.zeros(3)
+            score = np.empty(k_max)
+            for i in range(c * n // n_chunks, (c + 1) * n // n_chunks):
+                count[i] = 0
+                if is_grid:
+                    row, col_px = i // width, i % width
+                    x[0] = geometry[0] + col_px * geometry[2]
+                    x[1] = geometry[1] - row * geometry[2]
+                    x[2] = 0.0
+                    px = x[0] * e1[0] + x[1] * e1[1]
+                    py = x[0] * e2[0] + x[1] * e2[1]
+                    r = rpix[0]
                 else:
-                    extra = True
+                    x[0], x[1], x[2] = points[i, 0], points[i, 1], points[i, 2]
+                    px, py, r = plane[i, 0], plane[i, 1], rpix[i]
+                pd = x[0] * s[0] + x[1] * s[1] + x[2] * s[2]
+                col = int(np.floor((px - x0) / cell))
+                row = int(np.floor((py - y0) / cell))
+                if col < 0 or col >= n_cols or row < 0 or row >= n_rows:
                     continue
-                while pos > 0 and score[i, pos - 1] > sc:
-                    score[i, pos] = score[i, pos - 1]
-                    ids[i, pos] = ids[i, pos - 1]
-                    pos -= 1
-                score[i, pos] = sc
-                ids[i, pos] = e
-            count[i] = n_found
-            if extra:
-                overflow[0] += 1
+                k = row * n_cols + col
+                n_found = 0
+                extra = False
+                for j in range(start[k], start[k + 1]):
+                    e = members[j]
+                    # The box of the edge's ends across the light, grown by its reach, first.
+                    ox = max(ends[e, 6] - px, 0.0, px - ends[e, 7])
+                    oy = max(ends[e, 8] - py, 0.0, py - ends[e, 9])
+                    if ox * ox + oy * oy > ends[e, 10]:
+                        continue
+                    gap, scale = cone_gap(px, py, pd, e, ends, kappa, r)
+                    if gap > 0.0:
+                        continue
+                    sc = gap / max(scale, 1e-300)
+                    # Insert, keeping the k_max lowest scores in order.
+                    if n_found < k_max:
+                        pos = n_found
+                        n_found += 1
+                    elif sc < score[k_max - 1]:
+                        pos = k_max - 1
+                        extra = True
+                    else:
+                        extra = True
+                        continue
+                    while pos > 0 and score[pos - 1] > sc:
+                        score[pos] = score[pos - 1]
+                        ids[i, pos] = ids[i, pos - 1]
+                        pos -= 1
+                    score[pos] = sc
+                    ids[i, pos] = e
+                count[i] = n_found
+                for q in range(n_found, k_max):
+                    ids[i, q] = -1
+                if extra:
+                    overflow[c] += 1
 
     return register, query
 
@@ -320,28 +461,33 @@ def _kernels():
 @functools.cache
 def _arrangement_kernel():
     """The compiled loop of ``arrangement`` (numba): per point, the segments in the sun's view
-    (the arithmetic of ``wedge.gnomonic_segments``) and W(0)'s offset, then the walk along each
-    segment (``walk``); with pixel axes, the same for the segments' shadows on the pixel's plane
-    (``wedge.pixel_segments``)."""
+    (the arithmetic of ``wedge.gnomonic_segments``) and the walk along each (``walk``); with pixel
+    axes, the same for the segments' shadows on the pixel's plane (``wedge.pixel_segments``);
+    then the pairs and crossings of the segments that take part."""
     import numba
 
     @numba.njit(cache=True, nogil=True)
-    def walk(ax, ay, bx, by, w, lo, hi, W0, row_start, row_end, slots, change, p, overflow):
+    def walk(ax, ay, bx, by, w, lo, hi, W0, st, en, cj, ci, cd, ys, js, who, box, with_angle):
         """Along each segment j's part [lo_j, hi_j] (positions from the foot of the perpendicular
         from the origin): W on its lit side, from a reference point nearest the origin (W0 at the
         origin plus the signed crossings of the path there), then through its crossings in order.
-        Records the boundary's statuses at the part's ends and its changes at crossings; returns
-        (crossings recorded, whether the boundary passes)."""
+        Fills the boundary's statuses at the part's ends (st, en) and its changes at crossings
+        (cj, ci, cd); returns (crossings, the boundary pieces' angle sum S at the origin, with
+        statuses extended to the segments' ends, crossings dropped beyond cj's length). ys, js, who
+        (k,) and box (4, k): scratch space (allocated once by the caller: allocations per point
+        cost more than the walk)."""
         k = ax.shape[0]
-        c_max = slots.shape[1]
-        ys = np.empty(k)
-        js = np.empty(k)
-        who = np.empty(k, np.int64)
+        c_max = cj.shape[0]
+        x_lo, x_hi, y_lo, y_hi = box[0], box[1], box[2], box[3]
         nc = 0
-        passes = False
+        dropped = 0
+        angle = 0.0
+        for i in range(k):  # bounding boxes: most pairs of segments are far apart
+            x_lo[i], x_hi[i] = min(ax[i], bx[i]), max(ax[i], bx[i])
+            y_lo[i], y_hi[i] = min(ay[i], by[i]), max(ay[i], by[i])
         for j in range(k):
-            row_start[p, j] = 0.0
-            row_end[p, j] = 0.0
+            st[j] = 0.0
+            en[j] = 0.0
             if w[j] <= 0.0 or lo[j] >= hi[j]:
                 continue
             dx, dy = bx[j] - ax[j], by[j] - ay[j]
@@ -354,18 +500,21 @@ def _arrangement_kernel():
             qx, qy = ax[j] + (ystar - ya) * tx, ay[j] + (ystar - ya) * ty
             W = W0 - (w[j] if u < 0.0 else 0.0)
             m = 0
+            qx_lo, qx_hi, qy_lo, qy_hi = min(qx, 0.0), max(qx, 0.0), min(qy, 0.0), max(qy, 0.0)
             for i in range(k):
                 if i == j or w[i] <= 0.0:
                     continue
                 dxi, dyi = bx[i] - ax[i], by[i] - ay[i]
+                path = x_lo[i] <= qx_hi and x_hi[i] >= qx_lo and y_lo[i] <= qy_hi and y_hi[i] >= qy_lo
                 den = qx * dyi - qy * dxi
-                if den != 0.0:
+                if path and den != 0.0:
                     s_ = (ax[i] * dyi - ay[i] * dxi) / den
                     r_ = (ax[i] * qy - ay[i] * qx) / den
                     if 0.0 < s_ < 1.0 and 0.0 < r_ < 1.0:
                         W += -w[i] if den > 0.0 else w[i]
+                meet = x_lo[i] <= x_hi[j] and x_hi[i] >= x_lo[j] and y_lo[i] <= y_hi[j] and y_hi[i] >= y_lo[j]
                 den = dx * dyi - dy * dxi
-                if den != 0.0:
+                if meet and den != 0.0:
                     ex, ey = ax[i] - ax[j], ay[i] - ay[j]
                     s_ = (ex * dyi - ey * dxi) / den
                     r_ = (ex * dy - ey * dx) / den
@@ -387,23 +536,28 @@ def _arrangement_kernel():
                 if ys[q] < ystar:
                     W -= js[q]
             on = 1.0 if (W <= 0.0 and W + w[j] >= 1.0) else 0.0
-            row_start[p, j] = on
-            passes = passes or on > 0.0
+            st[j] = on
+            # The angle from the segment's start A to its point at y, seen from the origin.
+            a2 = ax[j] * ax[j] + ay[j] * ay[j]
+            at = ax[j] * tx + ay[j] * ty
+            axt = ax[j] * ty - ay[j] * tx
             for q in range(m):
                 W += js[q]
                 new = 1.0 if (W <= 0.0 and W + w[j] >= 1.0) else 0.0
                 if new != on:
                     if nc < c_max:
-                        slots[p, nc, 0] = j
-                        slots[p, nc, 1] = who[q]
-                        change[p, nc] = new - on
+                        cj[nc], ci[nc], cd[nc] = j, who[q], new - on
                         nc += 1
+                        if with_angle:
+                            yy = ys[q] - ya
+                            angle -= (new - on) * np.arctan2(yy * axt, a2 + yy * at)
                     else:
-                        overflow[0] += 1
+                        dropped += 1
                     on = new
-                    passes = passes or on > 0.0
-            row_end[p, j] = on
-        return nc, passes
+            en[j] = on
+            if with_angle and on > 0.0:
+                angle += np.arctan2(ln * axt, a2 + ln * at)
+        return nc, angle, dropped
 
     @numba.njit(cache=True, nogil=True)
     def clip_span(ax, ay, bx, by, t_lo, t_hi):
@@ -424,10 +578,11 @@ def _arrangement_kernel():
         return t_lo, t_hi
 
     @numba.njit(cache=True, nogil=True)
-    def kernel(points, ids, a, b, outward, jump, frame, radius, reach, axes, with_pixel, offset,
-               side_start, side_end, slots, change, count, p_start, p_end, p_slots, p_change, p_count,
-               boundary, overflow):
+    def point_range(first, last, chunk, points, ids, a, b, outward, jump, frame, radius, reach, axes, with_pixel,
+                    offset, pair_edge, p_st, p_en, p_pst, p_pen, n_pairs, cross, cross_change, n_cross, pcross,
+                    pcross_change, n_pcross, boundary, overflow):
         n, k = ids.shape
+        c_max = cross.shape[1]
         ax = np.empty(k)
         ay = np.empty(k)
         bx = np.empty(k)
@@ -435,15 +590,32 @@ def _arrangement_kernel():
         w = np.empty(k)
         lo = np.empty(k)
         hi = np.empty(k)
+        st = np.zeros(k)
+        en = np.zeros(k)
+        pst = np.zeros(k)
+        pen = np.zeros(k)
+        cj = np.empty(c_max, np.int64)
+        ci = np.empty(c_max, np.int64)
+        cd = np.empty(c_max)
+        pj = np.empty(c_max, np.int64)
+        pi_ = np.empty(c_max, np.int64)
+        pd = np.empty(c_max)
+        need = np.zeros(k, np.bool_)
+        near_pixel = np.zeros(k, np.bool_)
+        ys = np.empty(k)
+        js = np.empty(k)
+        who = np.empty(k, np.int64)
+        box = np.empty((4, k))
+        slot = np.empty(k, np.int64)
         s0, s1, s2 = frame[0, 0], frame[0, 1], frame[0, 2]
-        for p in range(n):
+        for p in range(first, last):
             x0, x1, x2 = points[p, 0], points[p, 1], points[p, 2]
             W0 = offset[p]
-            total = 0.0
             for j in range(k):
                 w[j] = 0.0
                 ax[j] = ay[j] = bx[j] = by[j] = 0.0
                 lo[j], hi[j] = 1.0, 0.0
+                near_pixel[j] = False
                 e = ids[p, j]
                 if e < 0:
                     continue
@@ -473,77 +645,122 @@ def _arrangement_kernel():
                     px, py, qx, qy = qx, qy, px, py
                 ax[j], ay[j], bx[j], by[j] = px, py, qx, qy
                 w[j] = jump[e]
-                total += w[j] * np.arctan2(px * qy - py * qx, px * qx + py * qy)
                 # The part within the disk, widened by the pixel's reach at the segment's depth.
                 dx, dy = qx - px, qy - py
                 ln = np.sqrt(dx * dx + dy * dy)
+                near_pixel[j] = False
                 if ln > 0.0:
                     u = (py * dx - px * dy) / ln
                     rad = radius + reach[p] / max(dpa, dpb)
+                    ya = (px * dx + py * dy) / ln
                     if abs(u) < rad:
                         chord = np.sqrt(rad * rad - u * u)
-                        ya = (px * dx + py * dy) / ln
                         lo[j], hi[j] = max(ya, -chord), min(ya + ln, chord)
-            offset[p] = W0 - total / (2.0 * np.pi)
-            nc, passes = walk(ax, ay, bx, by, w, lo, hi, W0, side_start, side_end, slots, change, p, overflow)
-            count[p] = nc
-            boundary[p] = passes
-            if not with_pixel:
-                continue
-            # The segments' shadows on the pixel's plane, in pixel units (the pixel: the unit
-            # square about the point), along the sun's direction s: v - x = al a + be b + t s.
-            a0, a1, a2 = axes[p, 0, 0], axes[p, 0, 1], axes[p, 0, 2]
-            b0, b1, b2 = axes[p, 1, 0], axes[p, 1, 1], axes[p, 1, 2]
-            c_bs = (b1 * s2 - b2 * s1, b2 * s0 - b0 * s2, b0 * s1 - b1 * s0)
-            c_sa = (s1 * a2 - s2 * a1, s2 * a0 - s0 * a2, s0 * a1 - s1 * a0)
-            c_ab = (a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0)
-            det = a0 * c_bs[0] + a1 * c_bs[1] + a2 * c_bs[2]
-            if det == 0.0:
-                continue
-            flip = det < 0.0  # mirrored axes: swap them (as wedge.pixel_segments)
+                    # Whether its shadow may cross the pixel: within the pixel's reach across the
+                    # light at its shallower end (the segment's nearest point to the centre).
+                    yc = min(max(0.0, ya), ya + ln)
+                    near_pixel[j] = u * u + yc * yc <= (reach[p] / min(dpa, dpb)) ** 2
+            nc, angle, dropped = walk(ax, ay, bx, by, w, lo, hi, W0, st, en, cj, ci, cd, ys, js, who, box, True)
+            overflow[chunk] += dropped
+            offset[p] = (1.0 if W0 >= 0.5 else 0.0) - angle / (2.0 * np.pi)
+            npc = 0
             for j in range(k):
-                w[j] = 0.0
-                lo[j], hi[j] = 1.0, 0.0
-                e = ids[p, j]
-                if e < 0:
-                    continue
-                wa0, wa1, wa2 = a[e, 0] - x0, a[e, 1] - x1, a[e, 2] - x2
-                wb0, wb1, wb2 = b[e, 0] - x0, b[e, 1] - x1, b[e, 2] - x2
-                ta_ = (c_ab[0] * wa0 + c_ab[1] * wa1 + c_ab[2] * wa2) / det
-                tb_ = (c_ab[0] * wb0 + c_ab[1] * wb1 + c_ab[2] * wb2) / det
-                if not (ta_ > 0.0 or tb_ > 0.0):
-                    continue  # wholly on the far side of the pixel's plane from the sun
-                pa_ = (c_bs[0] * wa0 + c_bs[1] * wa1 + c_bs[2] * wa2) / det
-                pb_ = (c_sa[0] * wa0 + c_sa[1] * wa1 + c_sa[2] * wa2) / det
-                qa_ = (c_bs[0] * wb0 + c_bs[1] * wb1 + c_bs[2] * wb2) / det
-                qb_ = (c_sa[0] * wb0 + c_sa[1] * wb1 + c_sa[2] * wb2) / det
-                # Clip the part behind the plane off (t >= 0).
-                t_lo, t_hi = 0.0, 1.0
-                if ta_ < 0.0:
-                    t_lo = ta_ / (ta_ - tb_)
-                elif tb_ < 0.0:
-                    t_hi = ta_ / (ta_ - tb_)
-                px, py = pa_ + t_lo * (qa_ - pa_), pb_ + t_lo * (qb_ - pb_)
-                qx, qy = pa_ + t_hi * (qa_ - pa_), pb_ + t_hi * (qb_ - pb_)
-                if flip:
-                    px, py, qx, qy = py, px, qy, qx
-                n1 = (c_bs[0] * outward[e, 0] + c_bs[1] * outward[e, 1] + c_bs[2] * outward[e, 2]) / det
-                n2 = (c_sa[0] * outward[e, 0] + c_sa[1] * outward[e, 1] + c_sa[2] * outward[e, 2]) / det
-                if flip:
-                    n1, n2 = n2, n1
-                if (qx - px) * n2 - (qy - py) * n1 > 0:
-                    px, py, qx, qy = qx, qy, px, py
-                ax[j], ay[j], bx[j], by[j] = px, py, qx, qy
-                w[j] = jump[e]
-                dx, dy = qx - px, qy - py
-                ln = np.sqrt(dx * dx + dy * dy)
-                if ln > 0.0:
-                    c0, c1 = clip_span(px, py, qx, qy, 0.0, 1.0)
-                    if c0 < c1:
-                        ya = (px * dx + py * dy) / ln
-                        lo[j], hi[j] = ya + c0 * ln, ya + c1 * ln
-            nc, passes = walk(ax, ay, bx, by, w, lo, hi, W0, p_start, p_end, p_slots, p_change, p, overflow)
-            p_count[p] = nc
-            boundary[p] = boundary[p] or passes
+                pst[j] = 0.0
+                pen[j] = 0.0
+            if with_pixel:
+                # The segments' shadows on the pixel's plane, in pixel units (the pixel: the unit
+                # square about the point), along the sun's direction s: v - x = al a + be b + t s.
+                a0, a1, a2 = axes[p, 0, 0], axes[p, 0, 1], axes[p, 0, 2]
+                b0, b1, b2 = axes[p, 1, 0], axes[p, 1, 1], axes[p, 1, 2]
+                cbs0, cbs1, cbs2 = b1 * s2 - b2 * s1, b2 * s0 - b0 * s2, b0 * s1 - b1 * s0
+                csa0, csa1, csa2 = s1 * a2 - s2 * a1, s2 * a0 - s0 * a2, s0 * a1 - s1 * a0
+                cab0, cab1, cab2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+                det = a0 * cbs0 + a1 * cbs1 + a2 * cbs2
+                if det != 0.0:
+                    flip = det < 0.0  # mirrored axes: swap them (as wedge.pixel_segments)
+                    for j in range(k):
+                        w[j] = 0.0
+                        lo[j], hi[j] = 1.0, 0.0
+                        e = ids[p, j]
+                        if e < 0 or not near_pixel[j]:
+                            continue
+                        wa0, wa1, wa2 = a[e, 0] - x0, a[e, 1] - x1, a[e, 2] - x2
+                        wb0, wb1, wb2 = b[e, 0] - x0, b[e, 1] - x1, b[e, 2] - x2
+                        ta_ = (cab0 * wa0 + cab1 * wa1 + cab2 * wa2) / det
+                        tb_ = (cab0 * wb0 + cab1 * wb1 + cab2 * wb2) / det
+                        if not (ta_ > 0.0 or tb_ > 0.0):
+                            continue  # wholly on the far side of the pixel's plane from the sun
+                        pa_ = (cbs0 * wa0 + cbs1 * wa1 + cbs2 * wa2) / det
+                        pb_ = (csa0 * wa0 + csa1 * wa1 + csa2 * wa2) / det
+                        qa_ = (cbs0 * wb0 + cbs1 * wb1 + cbs2 * wb2) / det
+                        qb_ = (csa0 * wb0 + csa1 * wb1 + csa2 * wb2) / det
+                        t_lo, t_hi = 0.0, 1.0
+                        if ta_ < 0.0:
+                            t_lo = ta_ / (ta_ - tb_)
+                        elif tb_ < 0.0:
+                            t_hi = ta_ / (ta_ - tb_)
+                        px, py = pa_ + t_lo * (qa_ - pa_), pb_ + t_lo * (qb_ - pb_)
+                        qx, qy = pa_ + t_hi * (qa_ - pa_), pb_ + t_hi * (qb_ - pb_)
+                        n1 = (cbs0 * outward[e, 0] + cbs1 * outward[e, 1] + cbs2 * outward[e, 2]) / det
+                        n2 = (csa0 * outward[e, 0] + csa1 * outward[e, 1] + csa2 * outward[e, 2]) / det
+                        if flip:
+                            px, py, qx, qy, n1, n2 = py, px, qy, qx, n2, n1
+                        if (qx - px) * n2 - (qy - py) * n1 > 0:
+                            px, py, qx, qy = qx, qy, px, py
+                        ax[j], ay[j], bx[j], by[j] = px, py, qx, qy
+                        w[j] = jump[e]
+                        dx, dy = qx - px, qy - py
+                        ln = np.sqrt(dx * dx + dy * dy)
+                        if ln > 0.0:
+                            c0, c1 = clip_span(px, py, qx, qy, 0.0, 1.0)
+                            if c0 < c1:
+                                ya = (px * dx + py * dy) / ln
+                                lo[j], hi[j] = ya + c0 * ln, ya + c1 * ln
+                    npc, _, dropped = walk(ax, ay, bx, by, w, lo, hi, W0, pst, pen, pj, pi_, pd, ys, js, who, box, False)
+                    overflow[chunk] += dropped
+            # The pairs: the segments on the boundary somewhere, or crossing it.
+            any_on = False
+            for j in range(k):
+                need[j] = st[j] > 0.0 or en[j] > 0.0 or pst[j] > 0.0 or pen[j] > 0.0
+                any_on = any_on or need[j]
+            for q in range(nc):
+                need[cj[q]] = True
+                need[ci[q]] = True
+                any_on = True
+            for q in range(npc):
+                need[pj[q]] = True
+                need[pi_[q]] = True
+                any_on = True
+            boundary[p] = any_on
+            m = 0
+            for j in range(k):
+                if need[j]:
+                    slot[j] = m
+                    pair_edge[p, m] = ids[p, j]
+                    p_st[p, m], p_en[p, m] = st[j], en[j]
+                    p_pst[p, m], p_pen[p, m] = pst[j], pen[j]
+                    m += 1
+            n_pairs[p] = m
+            for q in range(nc):
+                cross[p, q, 0], cross[p, q, 1] = slot[cj[q]], slot[ci[q]]
+                cross_change[p, q] = cd[q]
+            n_cross[p] = nc
+            for q in range(npc):
+                pcross[p, q, 0], pcross[p, q, 1] = slot[pj[q]], slot[pi_[q]]
+                pcross_change[p, q] = pd[q]
+            n_pcross[p] = npc
+
+
+    @numba.njit(cache=True, nogil=True)
+    def kernel(points, ids, a, b, outward, jump, frame, radius, reach, axes, with_pixel, offset,
+               pair_edge, p_st, p_en, p_pst, p_pen, n_pairs, cross, cross_change, n_cross, pcross, pcross_change,
+               n_pcross, boundary, overflow):
+        n, k = ids.shape
+        c_max = cross.shape[1]
+        n_chunks = min(64, max(1, n // 256))
+        for chunk in range(n_chunks):
+            point_range(chunk * n // n_chunks, (chunk + 1) * n // n_chunks, chunk, points, ids, a, b, outward,
+                        jump, frame, radius, reach, axes, with_pixel, offset, pair_edge, p_st, p_en, p_pst, p_pen,
+                        n_pairs, cross, cross_change, n_cross, pcross, pcross_change, n_pcross, boundary, overflow)
 
     return kernel
