@@ -52,7 +52,7 @@ def plan_alpha(points: Float[Array, "n 3"], plan: PointPlan, pose: Pose, sun: Su
 
 def _wedge_plan_alpha(points, plan: PointPlan, ev, light, range_k, profile, pixel_axes):
     """The ``wedge`` rule's alpha at the plan's points (``softshadow.wedge``)."""
-    return wedge_alpha(points, ev, plan.edges.outward_sign, light, range_k, plan.wedge, profile, pixel_axes)
+    return wedge_alpha(points, ev, light, range_k, plan.wedge, profile, pixel_axes)
 
 
 def plan_coordinate(points: Float[Array, "n 3"], plan: PointPlan, pose: Pose, sun: Sun, range_k,

@@ -26,7 +26,8 @@ from .params import Pose, Sun
 from .posed import PosedOccluder
 from .raster import ShadowRaster, candidate_labels, rasterise_shadow, winding_count_fill
 from .shadowmap import LightFrame, depth_bias, faces_away, shadow_map
-from .wedge_plan import REACH_MARGIN, WedgeArrays, arrangement, edge_jumps, gather_candidates
+from .wedge_plan import (REACH_MARGIN, WedgeArrays, WedgeEdges, arrangement, concatenate_wedge, gather_candidates,
+                         wedge_edges)
 
 __all__ = ["EdgeSet", "PointPlan", "GridPlan", "plan_points", "plan_grid", "concatenate_plans",
            "edge_band_widths", "bucket_size", "grid_bucket_size", "light_band_widths", "BACKENDS"]
@@ -159,7 +160,8 @@ def _empty_plan_arrays(size: int):
 def plan_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k_max: float,
                 rule: str = "edge", pixel_m: float | None = None,
                 margin_px: float = 2.5, pad_to: int | None = None, normals: np.ndarray | None = None,
-                backend: str = "auto", dtype=np.float64, receiver_tolerance_m: float = 0.0) -> PointPlan:
+                backend: str = "auto", dtype=np.float64, receiver_tolerance_m: float = 0.0,
+                pixel_axes: np.ndarray | None = None) -> PointPlan:
     """Discrete choices for receiver points (N, 3) anywhere: the ground, a range image, a mesh,
     the object itself.
 
@@ -176,6 +178,10 @@ def plan_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k
     dtype: the float type of the light-space depth test (float32 to measure precision).
     receiver_tolerance_m: the receiver points' own depth error (a range image's
     quantisation), added to the depth test's bias (``softshadow.shadowmap``).
+    pixel_axes (2, 3) or (N, 2, 3): the ``wedge`` rule's pixel footprints (its pixel means need
+    them in the plan: the hard shadow's area in each pixel); the other rules take them at the
+    evaluation only. The ``wedge`` rule needs no raster for points and tests depth by ray
+    casting, not a shadow map (pixel_m, margin_px, dtype and receiver_tolerance_m do not apply).
     """
     if backend not in BACKENDS:
         raise ValueError(f"unknown receiver back end {backend!r}; choose one of {BACKENDS}")
@@ -188,11 +194,12 @@ def plan_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k
         flat = not np.any(points[:, 2]) and (normals is None or (
             not np.any(normals[:, :2]) and np.all(normals[:, 2] > 0)))
         backend = "ground" if flat else "light"
+    if rule == "wedge":
+        return _plan_points_wedge(occ, pose, sun, points, range_k_max, pad_to, normals, backend == "ground",
+                                  pixel_axes)
     if backend == "light":
         return _plan_points_light(occ, pose, sun, points, range_k_max, rule, pixel_m, margin_px, pad_to,
                                   normals, dtype, receiver_tolerance_m)
-    if rule == "wedge":
-        return _plan_points_wedge(occ, pose, sun, points, range_k_max, pixel_m, margin_px, pad_to)
     posed = PosedOccluder.make(occ, pose, sun)
     sil, light = posed.silhouette, posed.light
     a, b, direction = posed.edge_geometry(rule)
@@ -415,14 +422,15 @@ class GridPlan:
 
 
 def plan_grid(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, range_k_max: float,
-              rule: str = "edge", margin_px: float = 2.5, dtype=np.float64) -> GridPlan:
+              rule: str = "edge", margin_px: float = 2.5, dtype=np.float64, footprint: bool = True) -> GridPlan:
     """Discrete choices for every pixel of a ground map; only band pixels go to JAX.
 
     dtype: the float type of the plan's arrays (the evaluation's, so a jitted call takes
-    them without a conversion).
+    them without a conversion). footprint: the ``wedge`` rule plans the pixel means too (the
+    hard shadow's area in each pixel); without it the map can only be point-sampled.
     """
     if rule == "wedge":
-        return _plan_grid_wedge(occ, pose, sun, grid, range_k_max, dtype)
+        return _plan_grid_wedge(occ, pose, sun, grid, range_k_max, dtype, footprint)
     posed = PosedOccluder.make(occ, pose, sun)
     sil, light, world = posed.silhouette, posed.light, posed.world
     a, b, direction = posed.edge_geometry(rule)
@@ -507,8 +515,10 @@ def concatenate_plans(plans: list[PointPlan], counts: list[int], pad_to: int | N
     counts: how many leading points of each plan are real (the rest is padding).
     """
     verts, signs, papers, ids, hards, actives, nears, neighbours = [], [], [], [], [], [], [], []
+    edge_offsets = []
     offset = 0
     for plan, n in zip(plans, counts):
+        edge_offsets.append(offset)
         e = plan.edges
         if e.neighbours is not None:
             nbr = np.asarray(e.neighbours)
@@ -531,22 +541,53 @@ def concatenate_plans(plans: list[PointPlan], counts: list[int], pad_to: int | N
     paper = pad(np.concatenate(papers), e_size, 0.0)
     paper[offset:, 2] = 1.0
     nbr = pad(np.concatenate(neighbours), e_size, -1) if len(neighbours) == len(plans) and plans else None
-    edges = EdgeSet(v, pad(np.concatenate(signs), e_size, 1.0), paper, nbr)
+    jumps = [p.edges.jump for p in plans]
+    jump = None
+    if plans and all(j is not None for j in jumps):
+        jump = pad(np.concatenate([np.asarray(j) for j in jumps]), e_size, 0.0)
+    edges = EdgeSet(v, pad(np.concatenate(signs), e_size, 1.0), paper, nbr, jump)
+    wedge = None
+    if plans and all(p.wedge is not None for p in plans):
+        # Each plan's pairs point at its own edges: offset them as the edge ids are.
+        shifted = [_shift_edges(p.wedge, off) for p, off in zip(plans, edge_offsets)]
+        wedge = concatenate_wedge(shifted, counts, size)
     return PointPlan(edges, pad(np.concatenate(ids), size, 0), pad(np.concatenate(hards), size, 0.0),
-                     pad(np.concatenate(actives), size, False), pad(np.concatenate(nears), size, 0.0))
+                     pad(np.concatenate(actives), size, False), pad(np.concatenate(nears), size, 0.0), wedge)
+
+
+def _shift_edges(arrays: WedgeArrays, offset: int) -> WedgeArrays:
+    """The choices with their pairs' edge ids moved by ``offset`` (plans concatenated)."""
+    return WedgeArrays(**{**arrays.fields(), "pair_edge": np.asarray(arrays.pair_edge) + offset})
 
 
 # -- the ``wedge`` rule -------------------------------------------------------------------------
 
-WEDGE_PIXEL_REACH = 1.0  # a grid pixel's reach (pixel widths): half its two sides (wedge._pixel_reach)
+def _pixel_reach(axes: np.ndarray, light: np.ndarray) -> np.ndarray:
+    """How far across the light (metres) a pixel's box reaches from its centre, (...,) for axes
+    (..., 2, 3): half the sum of its two sides seen along the light (the reach of the footprint's
+    box in penumbra units, ``wedge._line_share``), with a margin."""
+    across = axes - (axes @ light)[..., None] * light
+    return 0.5 * (1.0 + REACH_MARGIN) * np.linalg.norm(across, axis=-1).sum(-1)
 
 
-def _wedge_edges(posed: PosedOccluder):
-    """The silhouette in the world: ends a, b (S, 3), outward normals (S, 3), jumps (S,)."""
-    sil = posed.silhouette
-    ids = sil.vertex_ids
-    outward = sil.normal_local @ posed.rotation.T
-    return posed.world[ids[:, 0]], posed.world[ids[:, 1]], outward, edge_jumps(posed.occluder, sil)
+def _wedge_edges(posed: PosedOccluder, range_k_max: float) -> WedgeEdges:
+    """The edges the ``wedge`` rule may need under this sun (``wedge_plan.wedge_edges``)."""
+    return wedge_edges(posed.occluder, posed.silhouette, posed.world, posed.rotation, posed.light, range_k_max)
+
+
+def _pack_wedge_edges(occ: Occluder, edges: WedgeEdges, dtype=np.float64) -> EdgeSet:
+    """The wedge edges as an EdgeSet padded to a bucket (jump 0 on padding edges; the other
+    rules' fields are unused)."""
+    s = len(edges.jump)
+    size = bucket_size(s, 16)
+    verts = np.zeros((size, 2, 3), dtype)
+    verts[:, 1, 0] = 1.0
+    verts[:s] = occ.vertices[edges.vertex_ids]
+    paper = np.zeros((size, 3), dtype)
+    paper[:, 2] = 1.0
+    jump = np.zeros(size, dtype)
+    jump[:s] = edges.jump
+    return EdgeSet(verts, np.ones(size, dtype), paper, None, jump)
 
 
 def _wedge_choices(posed: PosedOccluder, edges, points, edge_reach: np.ndarray, range_k_max: float,
@@ -560,10 +601,9 @@ def _wedge_choices(posed: PosedOccluder, edges, points, edge_reach: np.ndarray, 
     elsewhere the disk is wholly hidden or wholly seen, and alpha is the hard shadow.
     pixel_axes (2, 3) or (n, 2, 3): each point's pixel (``arrangement``), for the hard shadow's
     area within it."""
-    a, b, outward, jump = edges
-    cand = gather_candidates(points, a, b, edge_reach, posed.light, range_k_max, pixel_reach)
+    cand = gather_candidates(points, edges.a, edges.b, edge_reach, posed.light, range_k_max, pixel_reach)
     winding = winding_at(cand.index)
-    w = np.where(cand.ids >= 0, jump[np.maximum(cand.ids, 0)], 0.0)
+    w = np.where(cand.ids >= 0, edges.jump[np.maximum(cand.ids, 0)], 0.0)
     keep = np.flatnonzero(w.sum(axis=1) >= winding)
     index = cand.index[keep]
     if isinstance(points, np.ndarray):
@@ -578,66 +618,114 @@ def _wedge_choices(posed: PosedOccluder, edges, points, edge_reach: np.ndarray, 
     reach = np.asarray(pixel_reach, np.float64)
     reach = reach[index] if reach.ndim else reach
     ids = cand.ids[keep, :max(1, int(cand.count[keep].max(initial=0)))]
-    arrays, boundary, _ = arrangement(pts, ids, a, b, outward, jump, posed.light, winding[keep],
-                                      range_k_max * (1.0 + REACH_MARGIN), reach, axes)
+    arrays, boundary, _ = arrangement(pts, ids, edges, posed.light, winding[keep], range_k_max * (1.0 + REACH_MARGIN),
+                                      reach, axes)
     on = np.flatnonzero(boundary)
     return index[on], arrays, on
 
 
-def _ground_reach(posed: PosedOccluder, range_k_max: float, pixel_reach: float) -> np.ndarray:
+def _ground_reach(posed: PosedOccluder, edges: WedgeEdges, range_k_max: float, pixel_reach: float) -> np.ndarray:
     """How far (metres across the light) from an edge its candidates on the ground can lie (S,):
     the sun's cone at the edge's height above them, widened by the pixel's reach."""
-    ids = posed.silhouette.vertex_ids
     lz = max(abs(float(posed.light[2])), 1e-9)
-    z = np.maximum(np.maximum(posed.world[ids[:, 0], 2], posed.world[ids[:, 1], 2]), 0.0)
-    return range_k_max * (1.0 + REACH_MARGIN) * z / lz + pixel_reach
+    kappa = range_k_max * (1.0 + REACH_MARGIN)
+    z = np.maximum(np.maximum(edges.a[:, 2], edges.b[:, 2]), 0.0)
+    return kappa * (z + pixel_reach) / max(lz - kappa, 1e-9) + pixel_reach
 
 
 def _no_wedge(size: int, pixel: bool) -> WedgeArrays:
     """The choices of ``size`` points without any pair."""
-    extra = (np.zeros(0), np.zeros(0), np.zeros((0, 2), np.int32), np.zeros(0)) if pixel else ()
-    empty = WedgeArrays(np.zeros(0), np.zeros(0, np.int32), np.zeros(0, np.int32), np.zeros(0), np.zeros(0),
-                        np.zeros((0, 2), np.int32), np.zeros(0), *extra)
-    return empty.select(np.zeros(0, np.int64), pad_points=size)
+    none = dict(pair_point=np.zeros(0, np.int32), pair_edge=np.zeros(0, np.int32), flip=np.zeros(0),
+                side_start=np.zeros(0), side_end=np.zeros(0), cross=np.zeros((0, 2), np.int32), cross_change=np.zeros(0))
+    if pixel:
+        none.update(pixel_flip=np.zeros(0), pixel_side_start=np.zeros(0), pixel_side_end=np.zeros(0),
+                    pixel_cross=np.zeros((0, 2), np.int32), pixel_cross_change=np.zeros(0))
+    return WedgeArrays(hard_offset=np.zeros(0), **none).select(np.zeros(0, np.int64), pad_points=size)
+
+
+def _layers_in_front(posed: PosedOccluder, points: np.ndarray) -> np.ndarray:
+    """The depth complexity (N,) between points (N, 3) and the sun: how many layers of the mesh
+    the ray from each point towards the sun crosses (lit faces for a closed mesh, every face not
+    edge-on for an open one; ray casting, trimesh/embree)."""
+    import trimesh
+    occ, light = posed.occluder, posed.light
+    count = np.zeros(len(points))
+    if not len(points):
+        return count
+    ndotl = (occ.face_normals @ posed.rotation.T) @ light
+    faces = occ.faces[ndotl < 0] if occ.watertight else occ.faces[np.abs(ndotl) > 1e-7]
+    if not len(faces):
+        return count
+    mesh = trimesh.Trimesh(posed.world, faces, process=False)
+    scale = float(np.abs(posed.world).max(initial=1.0))
+    origins = points - (1e-6 * scale) * light  # off the receiver's own surface, towards the sun
+    _, ray = mesh.ray.intersects_id(origins, np.broadcast_to(-light, points.shape), multiple_hits=True)
+    np.add.at(count, ray, 1.0)
+    return count
 
 
 def _plan_points_wedge(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k_max: float,
-                       pixel_m: float | None, margin_px: float, pad_to: int | None,
+                       pad_to: int | None, normals: np.ndarray | None, ground: bool,
                        pixel_axes: np.ndarray | None = None) -> PointPlan:
-    """``plan_points`` for the ``wedge`` rule on the ground (points on z = 0)."""
+    """``plan_points`` for the ``wedge`` rule: points on the ground (``ground``: z = 0, the depth
+    complexity from the fill layers' winding counts) or anywhere (normals: attached shadow; the
+    depth complexity in front of each point by ray casting where the occluder may lie behind it,
+    else from the winding counts in the sun's view)."""
     posed = PosedOccluder.make(occ, pose, sun)
-    sil = posed.silhouette
+    sil, light = posed.silhouette, posed.light
     n = len(points)
     size = pad_to or bucket_size(n)
     hard = np.zeros(size)
     active = np.zeros(size, bool)
-    jump = edge_jumps(occ, sil)
-    edges = _pack_edges(occ, sil, jump=jump)
+    wedge = _wedge_edges(posed, range_k_max)
+    edges = _pack_wedge_edges(occ, wedge)
     none = np.zeros((size, 0), np.int32)
-    if not (n and len(sil.vertex_ids)):
+    attached = np.zeros(n, bool) if normals is None else faces_away(normals, light)
+    hard[:n] = attached
+    if not (n and len(wedge.jump)):
         return PointPlan(edges, none, hard, active, np.zeros(size), _no_wedge(size, pixel_axes is not None))
-    ground = posed.ground_vertices()
-    winding = posed.winding_count_at(points[:, :2], ground)
-    hard[:n] = winding >= 0.5
-    lo, hi = points[:, :2].min(0), points[:, :2].max(0)
-    if pixel_m is None:
-        pixel_m = max(float((hi - lo).max()) / 1024, 1e-4)
-    reach_px = margin_px * pixel_m
-    if pixel_axes is not None:  # the pixels' own reach: half their two sides (the footprint's box)
-        axes = np.asarray(pixel_axes, np.float64)
-        reach_px = np.maximum(reach_px, 0.5 * (np.linalg.norm(axes[..., 0, :], axis=-1)
-                                               + np.linalg.norm(axes[..., 1, :], axis=-1)))
-    ids_v = sil.vertex_ids
-    sel, arrays, on = _wedge_choices(posed, _wedge_edges(posed), points,
-                                     _ground_reach(posed, range_k_max, float(np.max(reach_px))), range_k_max,
-                                     reach_px, lambda i: winding[i], pixel_axes)
-    active[sel] = True
+    if ground:
+        winding = posed.winding_count_at(points[:, :2], posed.ground_vertices())
+    else:
+        frame = LightFrame.of_light(light, 0.5 * (posed.world.min(0) + posed.world.max(0)))
+        uv_v, d_v = frame.project(posed.world)
+        uv_p, d_p = frame.project(points)
+        winding = posed.winding_count_at(uv_p, projected=uv_v)
+        # Farther from the sun than the whole occluder: every layer in the view lies in front.
+        among = np.flatnonzero((winding > 0) & (d_p <= d_v.max() + 1e-9 * float(np.abs(posed.world).max())))
+        winding[among] = _layers_in_front(posed, points[among])
+    winding[attached] = 0.0
+    hard[:n] = hard[:n] + (1 - hard[:n]) * (winding >= 0.5)
+    reach_px = np.zeros(n)  # point sampling: the disk alone
+    if pixel_axes is not None:  # the pixels' own reach (the footprint's box)
+        reach_px = np.broadcast_to(_pixel_reach(np.asarray(pixel_axes, np.float64), light), (n,)).copy()
+    r = float(reach_px.max())
+    kappa = range_k_max * (1.0 + REACH_MARGIN)
+    if ground:
+        reach = _ground_reach(posed, wedge, range_k_max, r)
+    else:
+        d_e = np.minimum(wedge.a @ frame.light, wedge.b @ frame.light) - frame.origin @ frame.light
+        reach = kappa * np.maximum(float(d_p.max()) - d_e, 0.0) + r
+    free = np.flatnonzero(~attached)
+    sel, arrays, on = _wedge_choices(posed, wedge, points[free], reach, range_k_max,
+                                     reach_px[free], lambda i: winding[free][i],
+                                     None if pixel_axes is None else (
+                                         pixel_axes if np.ndim(pixel_axes) == 2 else np.asarray(pixel_axes)[free]))
+    active[free[sel]] = True
     return PointPlan(edges, none, hard, active, np.zeros(size),
-                     arrays.select(on, pad_points=size, place=sel, default_offset=hard))
+                     _placed(arrays, on, free[sel], size, hard[:n]))
+
+
+def _placed(arrays: WedgeArrays, on: np.ndarray, rows: np.ndarray, size: int, hard: np.ndarray) -> WedgeArrays:
+    """The choices of the arrangement's points ``on`` placed at rows ``rows`` of ``size`` points
+    whose other offsets are their hard shadow (n,)."""
+    default = np.zeros(size)
+    default[:len(hard)] = hard
+    return arrays.select(on, pad_points=size, place=rows, default_offset=default)
 
 
 def _plan_grid_wedge(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, range_k_max: float,
-                     dtype) -> GridPlan:
+                     dtype, footprint: bool = True) -> GridPlan:
     """``plan_grid`` for the ``wedge`` rule: the depth complexity of the window's pixels from the
     winding counts of the fill layers, and the pixels whose disk or pixel the shadow's boundary
     passes in the band."""
@@ -645,16 +733,17 @@ def _plan_grid_wedge(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, rang
     sil = posed.silhouette
     h, w = grid.height, grid.width
     hard = np.zeros((h, w), np.uint8)
-    jump = edge_jumps(occ, sil)
+    wedge = _wedge_edges(posed, range_k_max)
     ftype = np.dtype(dtype)
     band_idx = np.zeros(0, np.int64)
     arrays = None
     hard_band = np.zeros(0)
-    if len(sil.vertex_ids):
+    if len(wedge.jump):
         ground = posed.ground_vertices()
-        reach_m = WEDGE_PIXEL_REACH * grid.pixel_m
-        reach = _ground_reach(posed, range_k_max, reach_m)
-        ids_v = sil.vertex_ids
+        axes = np.eye(2, 3) * grid.pixel_m if footprint else None
+        reach_m = float(_pixel_reach(axes, posed.light)) if footprint else 0.0
+        reach = _ground_reach(posed, wedge, range_k_max, reach_m)
+        ids_v = wedge.vertex_ids
         # The window: the shadow's outline (the silhouette's shadow) padded by the widest reach.
         seg = np.concatenate([ground[ids_v[:, 0]], ground[ids_v[:, 1]]])
         px = grid.to_pixel(seg)
@@ -673,8 +762,8 @@ def _plan_grid_wedge(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, rang
                                                    vpx[edges_f[:, 1]], weights))
             hard[r0:r1 + 1, c0:c1 + 1] = count >= 0.5
             flat_count = count.reshape(-1)
-            sel, arrays, on = _wedge_choices(posed, _wedge_edges(posed), window, reach, range_k_max, reach_m,
-                                             lambda i: flat_count[i].astype(np.float64), np.eye(2, 3) * grid.pixel_m)
+            sel, arrays, on = _wedge_choices(posed, wedge, window, reach, range_k_max, reach_m,
+                                             lambda i: flat_count[i].astype(np.float64), axes)
             rows, cols = np.divmod(sel, window.width)
             band_idx = (rows + r0) * w + (cols + c0)
             hard_band = flat_count[sel] >= 0.5
@@ -686,7 +775,7 @@ def _plan_grid_wedge(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, rang
     active[:m] = True
     hb = np.zeros(size, ftype)
     hb[:m] = hard_band
-    choices = _no_wedge(size, True) if arrays is None else arrays.select(on, pad_points=size)
-    plan = PointPlan(_pack_edges(occ, sil, ftype, jump=jump), np.zeros((size, 0), np.int32), hb, active,
+    choices = _no_wedge(size, footprint) if arrays is None else arrays.select(on, pad_points=size)
+    plan = PointPlan(_pack_wedge_edges(occ, wedge, ftype), np.zeros((size, 0), np.int32), hb, active,
                      np.zeros(size, ftype), choices.astype(ftype))
-    return GridPlan(grid, hard, index, plan, None, m, len(sil.vertex_ids))
+    return GridPlan(grid, hard, index, plan, None, m, len(wedge.jump))

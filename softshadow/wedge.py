@@ -57,7 +57,7 @@ from .penumbra import _fan, footprint_bump, profile_alpha
 __all__ = ["gnomonic_segments", "pixel_hard_area", "pixel_segments", "wedge_alpha"]
 
 _DEPTH_MIN = 1e-7       # metres in front of the receiver at which segments are clipped
-_DEPTH_REL = 1e-6       # ... plus this fraction of the vertex's distance
+_DEPTH_REL = 1e-6       # ... plus this fraction of the vertex's offset (L1 norm)
 _K_MIN = 1e-9           # the disk's radius (tan r) is at least this: keeps 1/k finite
 
 
@@ -73,22 +73,22 @@ def _dot3(u, v):
     return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
 
 
-def gnomonic_segments(points, a, b, outward, light, scale=1.0):
+def gnomonic_segments(points, a, b, flip, light, scale=1.0):
     """The segments (a, b) seen from points, in the gnomonic plane of the sun's centre.
 
-    points, a, b, outward (P, 3): each pair's receiver point, the edge's ends and a vector along
-    its outward normal (only its side matters); light (3,) or (P, 3). Returns (ax, ay, bx, by)
-    (P,) each: the segment's ends in units of ``scale`` (tan of the angle from the sun's centre),
-    oriented so that the edge's covered side (its lit face's) is on the left. The part behind the
-    point is clipped off at a depth of ``_DEPTH_MIN``. The arithmetic of
-    ``wedge_plan.arrangement``.
+    points, a, b (P, 3): each pair's receiver point and the edge's ends; flip (P,): the plan's
+    choice of direction (1: from b to a), so that the edge's covered side is on the left; light
+    (3,) or (P, 3). Returns (ax, ay, bx, by) (P,) each: the segment's ends in units of ``scale``
+    (tan of the angle from the sun's centre). The part behind the point is clipped off at a depth
+    of ``_DEPTH_MIN``. The arithmetic of ``wedge_plan.arrangement``.
     """
     s, e1, e2 = _light_frame(jnp.asarray(light))
     x = tuple(points[..., i] for i in range(3))
     wa = tuple(a[..., i] - x[i] for i in range(3))
     wb = tuple(b[..., i] - x[i] for i in range(3))
     da, db = _dot3(wa, s), _dot3(wb, s)
-    dmin = _DEPTH_MIN + _DEPTH_REL * jnp.maximum(jnp.sqrt(_dot3(wa, wa)), jnp.sqrt(_dot3(wb, wb)))
+    l1 = lambda v: jnp.abs(v[0]) + jnp.abs(v[1]) + jnp.abs(v[2])
+    dmin = _DEPTH_MIN + _DEPTH_REL * jnp.maximum(l1(wa), l1(wb))
     keep = (da > dmin) | (db > dmin)
     step = db - da
     t = jnp.clip((dmin - da) / jnp.where(step != 0, step, 1.0), 0.0, 1.0)
@@ -100,11 +100,7 @@ def gnomonic_segments(points, a, b, outward, light, scale=1.0):
     dpb = jnp.where(keep, da + tb * step, 1.0)
     px, py = _dot3(pa, e1) / dpa, _dot3(pa, e2) / dpa
     qx, qy = _dot3(pb, e1) / dpb, _dot3(pb, e2) / dpb
-    # The covered side: opposite the outward normal, seen in the plane; the ends swapped so that
-    # it is on the left (a discrete choice).
-    out = tuple(outward[..., i] for i in range(3))
-    n1, n2 = _dot3(out, e1), _dot3(out, e2)
-    swap = jax.lax.stop_gradient(-(qy - py) * n1 + (qx - px) * n2) > 0
+    swap = flip > 0.5
     inv = 1.0 / scale
     ax, ay = jnp.where(swap, qx, px) * inv, jnp.where(swap, qy, py) * inv
     bx, by = jnp.where(swap, px, qx) * inv, jnp.where(swap, py, qy) * inv
@@ -126,12 +122,12 @@ def _light_frame(light):
     return s, e1, _cross3(s, e1)
 
 
-def pixel_segments(points, a, b, outward, light, pixel_axes):
+def pixel_segments(points, a, b, flip, light, pixel_axes):
     """The segments' shadows on each pixel's plane, in pixel units (the pixel is the unit square
     about the point): v - x = al A + be B + t s along the sun's direction s, A and B the pixel's
-    sides (pixel_axes (P, 2, 3)); points, a, b, outward (P, 3). Returns (ax, ay, bx, by) (P,),
-    oriented with the covered side on the left (mirrored axes are swapped); the part on the far
-    side of the plane from the sun (t < 0) is clipped off. The arithmetic of
+    sides (pixel_axes (P, 2, 3)); points, a, b (P, 3); flip (P,) the plan's choice of direction
+    (covered side on the left; mirrored axes are swapped). Returns (ax, ay, bx, by) (P,); the part
+    on the far side of the plane from the sun (t < 0) is clipped off. The arithmetic of
     ``wedge_plan.arrangement``."""
     sg = jax.lax.stop_gradient
     light = jnp.asarray(light)
@@ -141,7 +137,7 @@ def pixel_segments(points, a, b, outward, light, pixel_axes):
     c_bs, c_sa, c_ab = _cross3(B, s), _cross3(s, A), _cross3(A, B)
     det = _dot3(A, c_bs)
     det = jnp.where(det == 0, 1.0, det)
-    flip = sg(det) < 0
+    mirror = sg(det) < 0
     x = tuple(points[..., i] for i in range(3))
     wa = tuple(a[..., i] - x[i] for i in range(3))
     wb = tuple(b[..., i] - x[i] for i in range(3))
@@ -153,12 +149,9 @@ def pixel_segments(points, a, b, outward, light, pixel_axes):
     qa, qb = _dot3(c_bs, wb) / det, _dot3(c_sa, wb) / det
     px, py = pa + t_lo * (qa - pa), pb + t_lo * (qb - pb)
     qx, qy = pa + t_hi * (qa - pa), pb + t_hi * (qb - pb)
-    px, py = jnp.where(flip, py, px), jnp.where(flip, px, py)
-    qx, qy = jnp.where(flip, qy, qx), jnp.where(flip, qx, qy)
-    out = tuple(outward[..., i] for i in range(3))
-    n1, n2 = _dot3(c_bs, out) / det, _dot3(c_sa, out) / det
-    n1, n2 = jnp.where(flip, n2, n1), jnp.where(flip, n1, n2)
-    swap = sg((qx - px) * n2 - (qy - py) * n1) > 0
+    px, py = jnp.where(mirror, py, px), jnp.where(mirror, px, py)
+    qx, qy = jnp.where(mirror, qy, qx), jnp.where(mirror, qx, qy)
+    swap = flip > 0.5
     ax, ay = jnp.where(swap, qx, px), jnp.where(swap, qy, py)
     bx, by = jnp.where(swap, px, qx), jnp.where(swap, py, qy)
     return ax, ay, bx, by
@@ -303,11 +296,10 @@ def _line_share(lines: _Lines, choices, y_cross, scale, profile):
     return jnp.where(ok, parts / jnp.where(ok, whole, 1.0), 0.0)
 
 
-def wedge_alpha(points, edge_vertices_world, outward_sign, light, range_k, choices, profile: str = "disk",
-                pixel_axes=None):
+def wedge_alpha(points, edge_vertices_world, light, range_k, choices, profile: str = "disk", pixel_axes=None):
     """Alpha (n,) at points (n, 3): the light's mass behind the mesh (module docstring).
 
-    edge_vertices_world (s, 2, 3), outward_sign (s,): the silhouette edges; light (3,) or (n, 3);
+    edge_vertices_world (s, 2, 3): the plan's edges (``wedge_plan.WedgeEdges``); light (3,) or (n, 3);
     range_k: the disk's radius tan r (``disk``; for ``linear``, the light whose straight edge
     gives the linear ramp of that half-width); choices: the plan's ``wedge_plan.WedgeArrays``.
     Points without pairs take [W(0) >= 1] (the plan's hard shadow for them, as ``evaluate``
@@ -331,13 +323,10 @@ def wedge_alpha(points, edge_vertices_world, outward_sign, light, range_k, choic
     a, b = ev[:, 0], ev[:, 1]
     light = jnp.asarray(light, dtype)
     lt = light if light.ndim == 1 else light[jnp.maximum(pp, 0)]
-    tvec = b - a
-    outward = outward_sign[pe][:, None] * jnp.stack(_cross3(tuple(tvec[:, i] for i in range(3)),
-                                                             tuple(lt[..., i] for i in range(3))), -1)
     x = points[jnp.maximum(pp, 0)]
 
     def geometry(xx):
-        ax, ay, bx, by = gnomonic_segments(xx, a, b, outward, lt, k)
+        ax, ay, bx, by = gnomonic_segments(xx, a, b, choices.flip, lt, k)
         lines = _lines(ax, ay, bx, by)
         return lines.u, (ax, ay, bx, by, lines)
 
@@ -353,7 +342,7 @@ def wedge_alpha(points, edge_vertices_world, outward_sign, light, range_k, choic
     hard = _hard_term(ax, ay, lines, choices, y_cross, n, dtype)
     if pixel_axes is None:
         return _disk_mass(lines, choices, y_cross, hard, n, profile)
-    area = pixel_hard_area(*pixel_segments(x, a, b, outward, lt, axes), choices, hard, n)
+    area = pixel_hard_area(*pixel_segments(x, a, b, choices.pixel_flip, lt, axes), choices, hard, n)
     scale = 1.0 + 0.5 * (jnp.abs(du_a) + jnp.abs(du_b))
     share = _line_share(lines, choices, y_cross, scale, profile)
     bump = footprint_bump(u, du_a, du_b, profile)

@@ -28,13 +28,13 @@ import jax
 import numpy as np
 from jaxtyping import Float, Int
 
-__all__ = ["K_MAX", "REACH_MARGIN", "WedgeArrays", "WedgeCandidates", "arrangement", "bucket",
-           "concatenate_wedge", "edge_jumps", "gather_candidates"]
+__all__ = ["K_MAX", "REACH_MARGIN", "WEDGE_FIELDS", "WedgeArrays", "WedgeCandidates", "WedgeEdges", "arrangement",
+           "bucket", "concatenate_wedge", "edge_jumps", "gather_candidates", "wedge_edges"]
 
-K_MAX = 8            # candidate edges kept per point
+K_MAX = 32           # candidate edges kept per point
 REACH_MARGIN = 0.05  # the cone's radius is k_max (1 + REACH_MARGIN)
 _DEPTH_MIN = 1e-7    # as ``wedge._DEPTH_MIN`` and ``_DEPTH_REL``: where segments are clipped
-_DEPTH_REL = 1e-6
+_DEPTH_REL = 1e-6   # times the L1 norm of the offset
 
 
 class WedgeCandidates:
@@ -64,22 +64,25 @@ class WedgeArrays(eqx.Module):
     hard_offset (n,): F = [W(0) >= 1] - S / 2 pi at the plan's parameters, S the sum of the
     angles the boundary's pieces subtend at the sun's centre (the evaluation recovers [W(0) >= 1]
     from it as the sun and pose move). pair_point, pair_edge (P,) int32: each pair's point and
-    silhouette edge (padding: point -1, edge 0, no boundary). In the sun's view: side_start,
-    side_end (P,) 0/1: whether the start and the end of the segment's part near the sun lie on
-    the boundary of {W >= 1} (W = 0 just beside it on its lit side); cross (C, 2) int32: the
-    pairs (j, i) of the crossings of segment j by segment i along which that changes (the same
-    point), cross_change (C,) by how much (+-1; 0 in padding). pixel_*: the same in the point's
-    pixel (the segments' shadows on the pixel's plane, for the hard shadow's area in it), None
-    when the plan was made without pixel axes.
+    edge (padding: point -1, edge 0, no boundary). In the sun's view from the point: flip (P,)
+    1 where the segment runs from its second end to its first (so that its covered side is on
+    its left); side_start, side_end (P,) 0/1: whether the start and the end of the segment's
+    part near the sun lie on the boundary of {W >= 1} (W = 0 just beside it on its lit side);
+    cross (C, 2) int32: the pairs (j, i) of the crossings of segment j by segment i along which
+    that changes (the same point), cross_change (C,) by how much (+-1; 0 in padding). pixel_*:
+    the same in the point's pixel (the segments' shadows along the sun on the pixel's plane, for
+    the hard shadow's area in it), None when the plan was made without pixel axes.
     """
 
     hard_offset: Float[np.ndarray, " n"]
     pair_point: Int[np.ndarray, " P"]
     pair_edge: Int[np.ndarray, " P"]
+    flip: Float[np.ndarray, " P"]
     side_start: Float[np.ndarray, " P"]
     side_end: Float[np.ndarray, " P"]
     cross: Int[np.ndarray, "C 2"]
     cross_change: Float[np.ndarray, " C"]
+    pixel_flip: Float[np.ndarray, " P"] | None = None
     pixel_side_start: Float[np.ndarray, " P"] | None = None
     pixel_side_end: Float[np.ndarray, " P"] | None = None
     pixel_cross: Int[np.ndarray, "D 2"] | None = None
@@ -88,6 +91,9 @@ class WedgeArrays(eqx.Module):
     @property
     def n_pairs(self) -> int:
         return len(self.pair_point)
+
+    def fields(self) -> dict:
+        return {f: getattr(self, f) for f in WEDGE_FIELDS}
 
     def select(self, keep: np.ndarray, pad_points: int | None = None, place: np.ndarray | None = None,
                default_offset: np.ndarray | None = None) -> "WedgeArrays":
@@ -124,19 +130,25 @@ class WedgeArrays(eqx.Module):
 
         pp = -np.ones(p_size, np.int32)  # padding pairs belong to no point
         pp[:len(real)] = where[pair_point[real]]
-        extra = ()
+        out = dict(hard_offset=offset, pair_point=pp, pair_edge=pairs(self.pair_edge, np.int32),
+                   flip=pairs(self.flip), side_start=pairs(self.side_start), side_end=pairs(self.side_end))
+        out["cross"], out["cross_change"] = crossings(self.cross, self.cross_change)
         if self.pixel_side_start is not None:
-            extra = (pairs(self.pixel_side_start), pairs(self.pixel_side_end),
-                     *crossings(self.pixel_cross, self.pixel_cross_change))
-        return WedgeArrays(offset, pp, pairs(self.pair_edge, np.int32), pairs(self.side_start),
-                           pairs(self.side_end), *crossings(self.cross, self.cross_change), *extra)
+            out.update(pixel_flip=pairs(self.pixel_flip), pixel_side_start=pairs(self.pixel_side_start),
+                       pixel_side_end=pairs(self.pixel_side_end))
+            out["pixel_cross"], out["pixel_cross_change"] = crossings(self.pixel_cross, self.pixel_cross_change)
+        return WedgeArrays(**out)
 
     def astype(self, dtype) -> "WedgeArrays":
-        """Statuses and changes in ``dtype`` (the offsets stay float64, indices int32)."""
-        cast = lambda x: None if x is None else np.asarray(x, dtype)
-        return WedgeArrays(self.hard_offset, self.pair_point, self.pair_edge, cast(self.side_start),
-                           cast(self.side_end), self.cross, cast(self.cross_change), cast(self.pixel_side_start),
-                           cast(self.pixel_side_end), self.pixel_cross, cast(self.pixel_cross_change))
+        """Flags and changes in ``dtype`` (the offsets stay float64, indices int32)."""
+        cast = {"flip", "side_start", "side_end", "cross_change", "pixel_flip", "pixel_side_start",
+                "pixel_side_end", "pixel_cross_change"}
+        return WedgeArrays(**{f: (None if v is None else np.asarray(v, dtype)) if f in cast else v
+                              for f, v in self.fields().items()})
+
+
+WEDGE_FIELDS = ("hard_offset", "pair_point", "pair_edge", "flip", "side_start", "side_end", "cross", "cross_change",
+                "pixel_flip", "pixel_side_start", "pixel_side_end", "pixel_cross", "pixel_cross_change")
 
 
 def bucket(n: int, minimum: int = 64) -> int:
@@ -153,39 +165,78 @@ def concatenate_wedge(parts: list[WedgeArrays], counts: list[int], pad_points: i
     trimmed = [p.select(np.arange(c)) for p, c in zip(parts, counts)]
     offsets = np.cumsum([0] + list(counts))
     pair_base = np.cumsum([0] + [t.n_pairs for t in trimmed])
-    cat = lambda xs: np.concatenate(xs) if xs else np.zeros(0)
-    with_pixel = all(t.pixel_side_start is not None for t in trimmed) and trimmed
-    fields = {
-        "hard_offset": cat([t.hard_offset for t in trimmed]),
-        "pair_point": cat([np.asarray(t.pair_point) + o for t, o in zip(trimmed, offsets)]).astype(np.int32),
-        "pair_edge": cat([t.pair_edge for t in trimmed]).astype(np.int32),
-        "side_start": cat([t.side_start for t in trimmed]),
-        "side_end": cat([t.side_end for t in trimmed]),
-        "cross": cat([np.asarray(t.cross) + base for t, base in zip(trimmed, pair_base)]).reshape(-1, 2).astype(np.int32),
-        "cross_change": cat([t.cross_change for t in trimmed]),
-    }
-    merged = WedgeArrays(**fields)
-    if with_pixel:
-        merged = WedgeArrays(**fields, pixel_side_start=cat([t.pixel_side_start for t in trimmed]),
-                             pixel_side_end=cat([t.pixel_side_end for t in trimmed]),
-                             pixel_cross=cat([np.asarray(t.pixel_cross) + base for t, base in
-                                              zip(trimmed, pair_base)]).reshape(-1, 2).astype(np.int32),
-                             pixel_cross_change=cat([t.pixel_cross_change for t in trimmed]))
-    return merged.select(np.arange(int(offsets[-1])), pad_points=pad_points)
+    cat = lambda name: np.concatenate([np.asarray(getattr(t, name)) for t in trimmed])
+    out = {f: cat(f) for f in ("hard_offset", "pair_edge", "flip", "side_start", "side_end", "cross_change")}
+    out["pair_point"] = np.concatenate([np.where(np.asarray(t.pair_point) >= 0, np.asarray(t.pair_point) + o, -1)
+                                        for t, o in zip(trimmed, offsets)]).astype(np.int32)
+    out["cross"] = np.concatenate([np.asarray(t.cross) + base for t, base in zip(trimmed, pair_base)]).astype(np.int32)
+    if all(t.pixel_side_start is not None for t in trimmed):
+        out.update({f: cat(f) for f in ("pixel_flip", "pixel_side_start", "pixel_side_end", "pixel_cross_change")})
+        out["pixel_cross"] = np.concatenate([np.asarray(t.pixel_cross) + base
+                                             for t, base in zip(trimmed, pair_base)]).astype(np.int32)
+    return WedgeArrays(**out).select(np.arange(int(offsets[-1])), pad_points=pad_points)
 
 
-def arrangement(points: np.ndarray, ids: np.ndarray, a: np.ndarray, b: np.ndarray, outward: np.ndarray,
-                jump: np.ndarray, light: np.ndarray, winding: np.ndarray, radius: float, pixel_reach=0.0,
-                pixel_axes: np.ndarray | None = None, max_crossings: int = 16):
+class WedgeEdges(eqx.Module):
+    """The edges the ``wedge`` rule may need under one sun (NumPy leaves): the silhouette from the
+    sun's centre and every edge beside a face within the disk's angle of edge-on to the sun (from
+    some point of the receiver, such an edge may bound the mesh). a, b (S, 3) their ends in the
+    world; vertex_ids (S, 2); jump (S,) the depth complexity's change across each (as
+    ``edge_jumps``); centre (S,) bool: a silhouette edge from the sun's centre; faces (S, 13):
+    each edge's two faces' unit normals, their inward directions (centroid less the edge's middle,
+    world) and their count (1 or 2)."""
+
+    a: Float[np.ndarray, "S 3"]
+    b: Float[np.ndarray, "S 3"]
+    vertex_ids: Int[np.ndarray, "S 2"]
+    jump: Float[np.ndarray, " S"]
+    centre: np.ndarray
+    faces: Float[np.ndarray, "S 13"]
+
+
+def wedge_edges(occ, sil, world: np.ndarray, rotation: np.ndarray, light: np.ndarray, range_k: float) -> WedgeEdges:
+    """The ``WedgeEdges`` of a posed occluder (world vertices, rotation) with silhouette ``sil``
+    under ``light``, for disks up to tan r = range_k."""
+    light_local = rotation.T @ np.asarray(light, np.float64)
+    ndotl = occ.face_normals @ light_local
+    ef = occ.edge_faces
+    valid = ef >= 0
+    # Pre-merge silhouette edges (as ``occluder.silhouette``), to leave out of the extras.
+    lit = sil.lit
+    lit_e = valid & lit[np.maximum(ef, 0)]
+    on_sil = ((lit_e.sum(1) > 0) & (lit_e.sum(1) < valid.sum(1))) | (valid.sum(1) == 1)
+    # A face within the cone's angle of edge-on: from some point it may face the sun or not.
+    band = np.abs(ndotl) <= 1.5 * range_k * (1.0 + REACH_MARGIN) + 1e-9
+    near = (valid & band[np.maximum(ef, 0)]).any(1) & ~on_sil
+    extra = np.flatnonzero(near)
+    sil_ids = np.asarray(sil.vertex_ids)
+    edge_index = np.asarray(sil.edge_index) if sil.edge_index is not None else np.zeros(len(sil_ids), np.int64)
+    vids = np.concatenate([sil_ids, occ.edges[extra]]).astype(np.int64)
+    mesh_edge = np.concatenate([edge_index, extra]).astype(np.int64)
+    jump = np.concatenate([edge_jumps(occ, sil), np.where(valid[extra].sum(1) == 1, 1.0,
+                                                          1.0 if occ.watertight else 2.0)])
+    centre = np.concatenate([np.ones(len(sil_ids), bool), np.zeros(len(extra), bool)])
+    slots = np.concatenate([ef, -np.ones((len(ef), 1), ef.dtype)], 1)[mesh_edge][:, :2]
+    count = (slots >= 0).sum(1)
+    normals = occ.face_normals[np.maximum(slots, 0)] @ rotation.T            # (S, 2, 3)
+    inward_all = np.concatenate([occ.edge_inward, np.zeros_like(occ.edge_inward[:, :1])], 1)
+    inward = inward_all[mesh_edge][:, :2] @ rotation.T                        # (S, 2, 3)
+    faces = np.concatenate([normals[:, 0], np.where(count[:, None] > 1, normals[:, 1], 0.0), inward[:, 0],
+                            np.where(count[:, None] > 1, inward[:, 1], 0.0), count[:, None].astype(np.float64)], 1)
+    return WedgeEdges(world[vids[:, 0]], world[vids[:, 1]], vids, jump, centre, np.ascontiguousarray(faces))
+
+
+def arrangement(points: np.ndarray, ids: np.ndarray, edges: WedgeEdges, light: np.ndarray, winding: np.ndarray,
+                radius: float, pixel_reach=0.0, pixel_axes: np.ndarray | None = None, max_crossings: int = 8):
     """The boundary of {W >= 1} among each point's candidates (``softshadow.wedge``), in the
-    sun's view within ``radius`` (tan) of its centre, widened for each segment by pixel_reach
-    over its depth, and, with pixel_axes, in the pixel's square.
+    sun's view from the point within ``radius`` (tan) of the sun's centre, widened for each
+    segment by pixel_reach over its depth, and, with pixel_axes, in the pixel's square.
 
-    points (n, 3); ids (n, K) candidates (-1: none); a, b, outward (S, 3) the edges in the world;
-    jump (S,); winding (n,) W(0); pixel_reach: scalar or (n,), metres; pixel_axes (2, 3) or
-    (n, 2, 3): the offsets across the whole pixel along its two sides. Returns (WedgeArrays
-    (unpadded), boundary (n,) bool: the boundary passes through the disk or the pixel, overflow:
-    crossings dropped beyond ``max_crossings`` per point).
+    points (n, 3); ids (n, K) candidates (-1: none) into ``edges``; winding (n,) W(0);
+    pixel_reach: scalar or (n,), metres; pixel_axes (2, 3) or (n, 2, 3): the offsets across the
+    whole pixel along its two sides. Returns (WedgeArrays (unpadded), boundary (n,) bool: the
+    boundary passes through the disk or the pixel, overflow: crossings dropped beyond
+    ``max_crossings`` per point).
     """
     n, k = ids.shape
     s, e1, e2 = _light_frame(light)
@@ -195,35 +246,37 @@ def arrangement(points: np.ndarray, ids: np.ndarray, a: np.ndarray, b: np.ndarra
         np.broadcast_to(np.asarray(pixel_axes, np.float64), (n, 2, 3)))
     reach = np.ascontiguousarray(np.broadcast_to(np.asarray(pixel_reach, np.float64), (n,)))
     offset = np.asarray(winding, np.float64).copy()
-    pair_edge = np.zeros((n, k), np.int32)
-    status = [np.zeros((n, k)) for _ in range(4)]
+    # Per point and slot; filled only up to each point's counts (np.empty: no zeroing pass).
+    pair_edge = np.empty((n, k), np.int32)
+    flags = [np.empty((n, k), np.int8) for _ in range(6)]  # start, end, pixel start, pixel end, flips
     n_pairs, n_cross, n_pcross = np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros(n, np.int64)
-    cross, pcross = np.zeros((n, max_crossings, 2), np.int32), np.zeros((n, max_crossings, 2), np.int32)
-    change, pchange = np.zeros((n, max_crossings)), np.zeros((n, max_crossings))
+    cross, pcross = np.empty((n, max_crossings, 2), np.int8), np.empty((n, max_crossings, 2), np.int8)
+    change, pchange = np.empty((n, max_crossings), np.int8), np.empty((n, max_crossings), np.int8)
     boundary = np.zeros(n, bool)
     overflow = np.zeros(64, np.int64)
     _arrangement_kernel()(np.ascontiguousarray(points, np.float64), np.ascontiguousarray(ids, np.int64),
-                          np.ascontiguousarray(a, np.float64), np.ascontiguousarray(b, np.float64),
-                          np.ascontiguousarray(outward, np.float64), np.asarray(jump, np.float64), frame,
-                          float(radius), reach, axes, with_pixel, offset, pair_edge, *status, n_pairs, cross, change,
+                          np.ascontiguousarray(edges.a, np.float64), np.ascontiguousarray(edges.b, np.float64),
+                          edges.faces, np.asarray(edges.centre, np.bool_), np.asarray(edges.jump, np.float64), frame,
+                          float(radius), reach, axes, with_pixel, offset, pair_edge, *flags, n_pairs, cross, change,
                           n_cross, pcross, pchange, n_pcross, boundary, overflow)
     # Compact: the pairs in point order, the crossings' slots renumbered to pairs.
     pair_of = np.arange(k)[None, :] < n_pairs[:, None]
-    pair_point = np.nonzero(pair_of)[0].astype(np.int32)
     base = np.concatenate([[0], np.cumsum(n_pairs)[:-1]])
 
     def crossings(cr, ch, count):
         some = np.flatnonzero(count)
         on = np.arange(max_crossings)[None, :] < count[some, None]
         rows = some[np.nonzero(on)[0]]
-        return (cr[some][on] + base[rows][:, None]).astype(np.int32), ch[some][on]
+        return (cr[some][on] + base[rows][:, None]).astype(np.int32), ch[some][on].astype(np.float64)
 
-    cr, ch = crossings(cross, change, n_cross)
-    fields = (offset, pair_point, pair_edge[pair_of], status[0][pair_of], status[1][pair_of], cr, ch)
+    flag = lambda x: x[pair_of].astype(np.float64)
+    out = dict(hard_offset=offset, pair_point=np.nonzero(pair_of)[0].astype(np.int32), pair_edge=pair_edge[pair_of],
+               flip=flag(flags[4]), side_start=flag(flags[0]), side_end=flag(flags[1]))
+    out["cross"], out["cross_change"] = crossings(cross, change, n_cross)
     if with_pixel:
-        fields += (status[2][pair_of], status[3][pair_of], *crossings(pcross, pchange, n_pcross))
-    arrays = WedgeArrays(*fields)
-    return arrays, boundary, int(overflow.sum())
+        out.update(pixel_flip=flag(flags[5]), pixel_side_start=flag(flags[2]), pixel_side_end=flag(flags[3]))
+        out["pixel_cross"], out["pixel_cross_change"] = crossings(pcross, pchange, n_pcross)
+    return WedgeArrays(**out), boundary, int(overflow.sum())
 
 
 def edge_jumps(occ, sil) -> np.ndarray:
@@ -363,7 +416,7 @@ def _kernels():
         pa0, pa1, da = ends[e, 0] - px, ends[e, 1] - py, ends[e, 2] - pd
         pb0, pb1, db = ends[e, 3] - px, ends[e, 4] - py, ends[e, 5] - pd
         C = pa0 * pa0 + pa1 * pa1
-        dmin = 1e-7 + 1e-6 * np.sqrt(max(C + da * da, pb0 * pb0 + pb1 * pb1 + db * db))
+        dmin = 1e-7 + 2e-6 * np.sqrt(max(C + da * da, pb0 * pb0 + pb1 * pb1 + db * db))  # >= the L1 rule's
         if da < dmin and db < dmin:
             return 1e300, 1.0
         step = db - da
@@ -467,7 +520,7 @@ def _arrangement_kernel():
     import numba
 
     @numba.njit(cache=True, nogil=True)
-    def walk(ax, ay, bx, by, w, lo, hi, W0, st, en, cj, ci, cd, ys, js, who, box, with_angle):
+    def walk(kk, ax, ay, bx, by, w, lo, hi, W0, st, en, cj, ci, cd, ys, js, who, box, with_angle):
         """Along each segment j's part [lo_j, hi_j] (positions from the foot of the perpendicular
         from the origin): W on its lit side, from a reference point nearest the origin (W0 at the
         origin plus the signed crossings of the path there), then through its crossings in order.
@@ -475,8 +528,8 @@ def _arrangement_kernel():
         (cj, ci, cd); returns (crossings, the boundary pieces' angle sum S at the origin, with
         statuses extended to the segments' ends, crossings dropped beyond cj's length). ys, js, who
         (k,) and box (4, k): scratch space (allocated once by the caller: allocations per point
-        cost more than the walk)."""
-        k = ax.shape[0]
+        cost more than the walk); kk: the slots in use (the candidates come first)."""
+        k = kk
         c_max = cj.shape[0]
         x_lo, x_hi, y_lo, y_hi = box[0], box[1], box[2], box[3]
         nc = 0
@@ -578,9 +631,9 @@ def _arrangement_kernel():
         return t_lo, t_hi
 
     @numba.njit(cache=True, nogil=True)
-    def point_range(first, last, chunk, points, ids, a, b, outward, jump, frame, radius, reach, axes, with_pixel,
-                    offset, pair_edge, p_st, p_en, p_pst, p_pen, n_pairs, cross, cross_change, n_cross, pcross,
-                    pcross_change, n_pcross, boundary, overflow):
+    def point_range(first, last, chunk, points, ids, a, b, faces, centre, jump, frame, radius, reach, axes,
+                    with_pixel, offset, pair_edge, p_st, p_en, p_pst, p_pen, p_flip, p_pflip, n_pairs, cross,
+                    cross_change, n_cross, pcross, pcross_change, n_pcross, boundary, overflow):
         n, k = ids.shape
         c_max = cross.shape[1]
         ax = np.empty(k)
@@ -594,6 +647,8 @@ def _arrangement_kernel():
         en = np.zeros(k)
         pst = np.zeros(k)
         pen = np.zeros(k)
+        flip_d = np.zeros(k, np.bool_)
+        flip_p = np.zeros(k, np.bool_)
         cj = np.empty(c_max, np.int64)
         ci = np.empty(c_max, np.int64)
         cd = np.empty(c_max)
@@ -610,8 +665,15 @@ def _arrangement_kernel():
         s0, s1, s2 = frame[0, 0], frame[0, 1], frame[0, 2]
         for p in range(first, last):
             x0, x1, x2 = points[p, 0], points[p, 1], points[p, 2]
+            kk = 0
+            while kk < k and ids[p, kk] >= 0:  # the candidates fill the first slots
+                kk += 1
             W0 = offset[p]
-            for j in range(k):
+            # W can fall only across a segment whose covered side holds the centre (a straight path
+            # from the centre crosses each line once): if those cannot bring W0 down to 0, the
+            # region is wholly hidden and there is no boundary to walk.
+            down = 0.0
+            for j in range(kk):
                 w[j] = 0.0
                 ax[j] = ay[j] = bx[j] = by[j] = 0.0
                 lo[j], hi[j] = 1.0, 0.0
@@ -623,8 +685,7 @@ def _arrangement_kernel():
                 wb0, wb1, wb2 = b[e, 0] - x0, b[e, 1] - x1, b[e, 2] - x2
                 da = wa0 * s0 + wa1 * s1 + wa2 * s2
                 db = wb0 * s0 + wb1 * s1 + wb2 * s2
-                dmin = 1e-7 + 1e-6 * max(np.sqrt(wa0 * wa0 + wa1 * wa1 + wa2 * wa2),
-                                         np.sqrt(wb0 * wb0 + wb1 * wb1 + wb2 * wb2))
+                dmin = 1e-7 + 1e-6 * max(abs(wa0) + abs(wa1) + abs(wa2), abs(wb0) + abs(wb1) + abs(wb2))
                 if not (da > dmin or db > dmin):
                     continue
                 step = db - da
@@ -639,12 +700,30 @@ def _arrangement_kernel():
                 py = (pa0 * frame[2, 0] + pa1 * frame[2, 1] + pa2 * frame[2, 2]) / dpa
                 qx = (pb0 * frame[1, 0] + pb1 * frame[1, 1] + pb2 * frame[1, 2]) / dpb
                 qy = (pb0 * frame[2, 0] + pb1 * frame[2, 1] + pb2 * frame[2, 2]) / dpb
-                n1 = outward[e, 0] * frame[1, 0] + outward[e, 1] * frame[1, 1] + outward[e, 2] * frame[1, 2]
-                n2 = outward[e, 0] * frame[2, 0] + outward[e, 1] * frame[2, 1] + outward[e, 2] * frame[2, 2]
-                if -(qy - py) * n1 + (qx - px) * n2 > 0:
+                # Seen from the point, the edge bounds the mesh (a contour) when exactly one of its
+                # faces faces the point, or it has one face; its covered side is where its faces lie:
+                # the inward direction of the face less edge-on to the point, projected at the
+                # segment's middle.
+                f1 = faces[e, 0] * wa0 + faces[e, 1] * wa1 + faces[e, 2] * wa2
+                contour = True
+                g = 6
+                if faces[e, 12] > 1.5:
+                    f2 = faces[e, 3] * wa0 + faces[e, 4] * wa1 + faces[e, 5] * wa2
+                    contour = (f1 < 0.0) != (f2 < 0.0)
+                    if abs(f2) > abs(f1):
+                        g = 9
+                m0, m1, m2 = 0.5 * (pa0 + pb0), 0.5 * (pa1 + pb1), 0.5 * (pa2 + pb2)
+                dm = m0 * s0 + m1 * s1 + m2 * s2
+                mx = (m0 * frame[1, 0] + m1 * frame[1, 1] + m2 * frame[1, 2]) / dm
+                my = (m0 * frame[2, 0] + m1 * frame[2, 1] + m2 * frame[2, 2]) / dm
+                gs = faces[e, g] * s0 + faces[e, g + 1] * s1 + faces[e, g + 2] * s2
+                gx = faces[e, g] * frame[1, 0] + faces[e, g + 1] * frame[1, 1] + faces[e, g + 2] * frame[1, 2] - mx * gs
+                gy = faces[e, g] * frame[2, 0] + faces[e, g + 1] * frame[2, 1] + faces[e, g + 2] * frame[2, 2] - my * gs
+                flip_d[j] = (qx - px) * gy - (qy - py) * gx < 0.0
+                if flip_d[j]:
                     px, py, qx, qy = qx, qy, px, py
                 ax[j], ay[j], bx[j], by[j] = px, py, qx, qy
-                w[j] = jump[e]
+                w[j] = jump[e] if contour else 0.0
                 # The part within the disk, widened by the pixel's reach at the segment's depth.
                 dx, dy = qx - px, qy - py
                 ln = np.sqrt(dx * dx + dy * dy)
@@ -656,18 +735,29 @@ def _arrangement_kernel():
                     if abs(u) < rad:
                         chord = np.sqrt(rad * rad - u * u)
                         lo[j], hi[j] = max(ya, -chord), min(ya + ln, chord)
+                        if u < 0.0 and lo[j] < hi[j]:
+                            down += w[j]
                     # Whether its shadow may cross the pixel: within the pixel's reach across the
                     # light at its shallower end (the segment's nearest point to the centre).
                     yc = min(max(0.0, ya), ya + ln)
                     near_pixel[j] = u * u + yc * yc <= (reach[p] / min(dpa, dpb)) ** 2
-            nc, angle, dropped = walk(ax, ay, bx, by, w, lo, hi, W0, st, en, cj, ci, cd, ys, js, who, box, True)
+            if W0 >= 0.5 and down < W0:
+                nc, angle, dropped = 0, 0.0, 0
+                for j in range(kk):
+                    st[j] = 0.0
+                    en[j] = 0.0
+            else:
+                nc, angle, dropped = walk(kk, ax, ay, bx, by, w, lo, hi, W0, st, en, cj, ci, cd, ys, js, who, box, True)
             overflow[chunk] += dropped
             offset[p] = (1.0 if W0 >= 0.5 else 0.0) - angle / (2.0 * np.pi)
             npc = 0
-            for j in range(k):
+            for j in range(kk):
                 pst[j] = 0.0
                 pen[j] = 0.0
-            if with_pixel:
+            some_near = False
+            for j in range(kk):
+                some_near = some_near or near_pixel[j]
+            if with_pixel and some_near:
                 # The segments' shadows on the pixel's plane, in pixel units (the pixel: the unit
                 # square about the point), along the sun's direction s: v - x = al a + be b + t s.
                 a0, a1, a2 = axes[p, 0, 0], axes[p, 0, 1], axes[p, 0, 2]
@@ -677,18 +767,19 @@ def _arrangement_kernel():
                 cab0, cab1, cab2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
                 det = a0 * cbs0 + a1 * cbs1 + a2 * cbs2
                 if det != 0.0:
+                    down = 0.0
                     flip = det < 0.0  # mirrored axes: swap them (as wedge.pixel_segments)
-                    for j in range(k):
+                    for j in range(kk):
                         w[j] = 0.0
                         lo[j], hi[j] = 1.0, 0.0
                         e = ids[p, j]
-                        if e < 0 or not near_pixel[j]:
+                        if e < 0 or not near_pixel[j] or not centre[e]:
                             continue
                         wa0, wa1, wa2 = a[e, 0] - x0, a[e, 1] - x1, a[e, 2] - x2
                         wb0, wb1, wb2 = b[e, 0] - x0, b[e, 1] - x1, b[e, 2] - x2
                         ta_ = (cab0 * wa0 + cab1 * wa1 + cab2 * wa2) / det
                         tb_ = (cab0 * wb0 + cab1 * wb1 + cab2 * wb2) / det
-                        if not (ta_ > 0.0 or tb_ > 0.0):
+                        if ta_ < 0.0 and tb_ < 0.0:
                             continue  # wholly on the far side of the pixel's plane from the sun
                         pa_ = (cbs0 * wa0 + cbs1 * wa1 + cbs2 * wa2) / det
                         pb_ = (csa0 * wa0 + csa1 * wa1 + csa2 * wa2) / det
@@ -701,11 +792,18 @@ def _arrangement_kernel():
                             t_hi = ta_ / (ta_ - tb_)
                         px, py = pa_ + t_lo * (qa_ - pa_), pb_ + t_lo * (qb_ - pb_)
                         qx, qy = pa_ + t_hi * (qa_ - pa_), pb_ + t_hi * (qb_ - pb_)
-                        n1 = (cbs0 * outward[e, 0] + cbs1 * outward[e, 1] + cbs2 * outward[e, 2]) / det
-                        n2 = (csa0 * outward[e, 0] + csa1 * outward[e, 1] + csa2 * outward[e, 2]) / det
+                        # The covered side: the inward direction of the face less edge-on to the
+                        # sun (a silhouette's two faces project to the same side along it).
+                        g = 6
+                        if faces[e, 12] > 1.5 and abs(faces[e, 3] * s0 + faces[e, 4] * s1 + faces[e, 5] * s2) > abs(
+                                faces[e, 0] * s0 + faces[e, 1] * s1 + faces[e, 2] * s2):
+                            g = 9
+                        gx = (cbs0 * faces[e, g] + cbs1 * faces[e, g + 1] + cbs2 * faces[e, g + 2]) / det
+                        gy = (csa0 * faces[e, g] + csa1 * faces[e, g + 1] + csa2 * faces[e, g + 2]) / det
                         if flip:
-                            px, py, qx, qy, n1, n2 = py, px, qy, qx, n2, n1
-                        if (qx - px) * n2 - (qy - py) * n1 > 0:
+                            px, py, qx, qy, gx, gy = py, px, qy, qx, gy, gx
+                        flip_p[j] = (qx - px) * gy - (qy - py) * gx < 0.0
+                        if flip_p[j]:
                             px, py, qx, qy = qx, qy, px, py
                         ax[j], ay[j], bx[j], by[j] = px, py, qx, qy
                         w[j] = jump[e]
@@ -716,11 +814,15 @@ def _arrangement_kernel():
                             if c0 < c1:
                                 ya = (px * dx + py * dy) / ln
                                 lo[j], hi[j] = ya + c0 * ln, ya + c1 * ln
-                    npc, _, dropped = walk(ax, ay, bx, by, w, lo, hi, W0, pst, pen, pj, pi_, pd, ys, js, who, box, False)
-                    overflow[chunk] += dropped
+                                if py * dx - px * dy < 0.0:
+                                    down += w[j]
+                    if not (W0 >= 0.5 and down < W0):
+                        npc, _, dropped = walk(kk, ax, ay, bx, by, w, lo, hi, W0, pst, pen, pj, pi_, pd, ys, js, who,
+                                               box, False)
+                        overflow[chunk] += dropped
             # The pairs: the segments on the boundary somewhere, or crossing it.
             any_on = False
-            for j in range(k):
+            for j in range(kk):
                 need[j] = st[j] > 0.0 or en[j] > 0.0 or pst[j] > 0.0 or pen[j] > 0.0
                 any_on = any_on or need[j]
             for q in range(nc):
@@ -733,12 +835,13 @@ def _arrangement_kernel():
                 any_on = True
             boundary[p] = any_on
             m = 0
-            for j in range(k):
+            for j in range(kk):
                 if need[j]:
                     slot[j] = m
                     pair_edge[p, m] = ids[p, j]
                     p_st[p, m], p_en[p, m] = st[j], en[j]
                     p_pst[p, m], p_pen[p, m] = pst[j], pen[j]
+                    p_flip[p, m], p_pflip[p, m] = flip_d[j], flip_p[j]
                     m += 1
             n_pairs[p] = m
             for q in range(nc):
@@ -752,15 +855,16 @@ def _arrangement_kernel():
 
 
     @numba.njit(cache=True, nogil=True)
-    def kernel(points, ids, a, b, outward, jump, frame, radius, reach, axes, with_pixel, offset,
-               pair_edge, p_st, p_en, p_pst, p_pen, n_pairs, cross, cross_change, n_cross, pcross, pcross_change,
-               n_pcross, boundary, overflow):
+    def kernel(points, ids, a, b, faces, centre, jump, frame, radius, reach, axes, with_pixel, offset,
+               pair_edge, p_st, p_en, p_pst, p_pen, p_flip, p_pflip, n_pairs, cross, cross_change, n_cross, pcross,
+               pcross_change, n_pcross, boundary, overflow):
         n, k = ids.shape
         c_max = cross.shape[1]
         n_chunks = min(64, max(1, n // 256))
         for chunk in range(n_chunks):
-            point_range(chunk * n // n_chunks, (chunk + 1) * n // n_chunks, chunk, points, ids, a, b, outward,
-                        jump, frame, radius, reach, axes, with_pixel, offset, pair_edge, p_st, p_en, p_pst, p_pen,
-                        n_pairs, cross, cross_change, n_cross, pcross, pcross_change, n_pcross, boundary, overflow)
+            point_range(chunk * n // n_chunks, (chunk + 1) * n // n_chunks, chunk, points, ids, a, b, faces,
+                        centre, jump, frame, radius, reach, axes, with_pixel, offset, pair_edge, p_st, p_en, p_pst,
+                        p_pen, p_flip, p_pflip, n_pairs, cross, cross_change, n_cross, pcross, pcross_change,
+                        n_pcross, boundary, overflow)
 
     return kernel
