@@ -178,9 +178,10 @@ def plan_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k
     dtype: the float type of the light-space depth test (float32 to measure precision).
     receiver_tolerance_m: the receiver points' own depth error (a range image's
     quantisation), added to the depth test's bias (``softshadow.shadowmap``).
-    pixel_axes (2, 3) or (N, 2, 3): the ``wedge`` rule's pixel footprints (its pixel means need
-    them in the plan: the hard shadow's area in each pixel); the other rules take them at the
-    evaluation only. The ``wedge`` rule needs no raster for points and tests depth by ray
+    pixel_axes (2, 3) or (N, 2, 3): the points' pixel footprints, for pixel means: the plan then
+    holds the hard shadow's pieces in each pixel (its exact area there), which the ``wedge``
+    rule's means need and the other rules' use (without, their means take the chosen edge's
+    profile alone). The ``wedge`` rule needs no raster for points and tests depth by ray
     casting, not a shadow map (pixel_m, margin_px, dtype and receiver_tolerance_m do not apply).
     """
     if backend not in BACKENDS:
@@ -198,8 +199,13 @@ def plan_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k
         return _plan_points_wedge(occ, pose, sun, points, range_k_max, pad_to, normals, backend == "ground",
                                   pixel_axes)
     if backend == "light":
-        return _plan_points_light(occ, pose, sun, points, range_k_max, rule, pixel_m, margin_px, pad_to,
+        plan = _plan_points_light(occ, pose, sun, points, range_k_max, rule, pixel_m, margin_px, pad_to,
                                   normals, dtype, receiver_tolerance_m)
+        return plan if pixel_axes is None else _with_pixel_area(plan, occ, pose, sun, points, pixel_axes, False)
+    if pixel_axes is not None:
+        plan = plan_points(occ, pose, sun, points, range_k_max, rule, pixel_m, margin_px, pad_to, normals,
+                           backend, dtype, receiver_tolerance_m)
+        return _with_pixel_area(plan, occ, pose, sun, points, pixel_axes, True)
     posed = PosedOccluder.make(occ, pose, sun)
     sil, light = posed.silhouette, posed.light
     a, b, direction = posed.edge_geometry(rule)
@@ -422,12 +428,13 @@ class GridPlan:
 
 
 def plan_grid(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, range_k_max: float,
-              rule: str = "edge", margin_px: float = 2.5, dtype=np.float64, footprint: bool = True) -> GridPlan:
+              rule: str = "edge", margin_px: float = 2.5, dtype=np.float64, footprint: bool = False) -> GridPlan:
     """Discrete choices for every pixel of a ground map; only band pixels go to JAX.
 
     dtype: the float type of the plan's arrays (the evaluation's, so a jitted call takes
-    them without a conversion). footprint: the ``wedge`` rule plans the pixel means too (the
-    hard shadow's area in each pixel); without it the map can only be point-sampled.
+    them without a conversion). footprint: plan the pixel means too (the hard shadow's exact
+    area in each band pixel, ``PointPlan.wedge``'s pixel part); without it the map can only be
+    point-sampled.
     """
     if rule == "wedge":
         return _plan_grid_wedge(occ, pose, sun, grid, range_k_max, dtype, footprint)
@@ -494,9 +501,24 @@ def plan_grid(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, range_k_max
     hard_band[:m] = hard.ravel()[band_idx]
     near = np.zeros(size, ftype)
     near[:m] = near_b
+    wedge = None
+    if footprint:  # the pixel means take the hard shadow's exact area in each pixel
+        if m:
+            # Only pixels near the outline can hold part of it (a raster pixel is the map's).
+            near_outline = np.flatnonzero(raster.boundary_dist_px.reshape(-1)[index_w] <= 2.0)
+            rows_g, cols_g = np.divmod(band_idx[near_outline], w)
+            band_pts = grid.to_world(cols_g, rows_g).reshape(-1, 3)
+            part = _pixel_area_choices(posed, band_pts, raster.depth_count.reshape(-1)[index_w[near_outline]]
+                                       .astype(np.float64), np.eye(2, 3) * grid.pixel_m, len(near_outline))
+            default = np.zeros(size)
+            default[:m] = hard_band[:m]
+            wedge = part.select(np.arange(len(near_outline)), pad_points=size, place=near_outline,
+                                default_offset=default).astype(ftype)
+        else:
+            wedge = _no_wedge(size, True).astype(ftype)
     # NumPy arrays, not device arrays: a jitted call takes them far more cheaply than
     # jax.device_put or jnp.asarray would.
-    plan = PointPlan(_pack_edges(occ, sil, ftype, raster), edge_id, hard_band, active, near)
+    plan = PointPlan(_pack_edges(occ, sil, ftype, raster), edge_id, hard_band, active, near, wedge)
     return GridPlan(grid, hard, index, plan, raster, m, len(sil.vertex_ids))
 
 
@@ -509,10 +531,13 @@ def grid_bucket_size(n: int, minimum: int = 256) -> int:
 
 
 def concatenate_plans(plans: list[PointPlan], counts: list[int], pad_to: int | None = None,
-                      edge_pad_to: int | None = None) -> PointPlan:
+                      edge_pad_to: int | None = None, pairs_to: int | None = None,
+                      cross_to: int | None = None) -> PointPlan:
     """One plan for several point sets (each with its own sun): edges stacked, ids offset.
 
-    counts: how many leading points of each plan are real (the rest is padding).
+    counts: how many leading points of each plan are real (the rest is padding). pairs_to,
+    cross_to: the ``wedge`` rule's pairs and crossings padded to these sizes (at least), for
+    a fixed compiled shape.
     """
     verts, signs, papers, ids, hards, actives, nears, neighbours = [], [], [], [], [], [], [], []
     edge_offsets = []
@@ -550,7 +575,7 @@ def concatenate_plans(plans: list[PointPlan], counts: list[int], pad_to: int | N
     if plans and all(p.wedge is not None for p in plans):
         # Each plan's pairs point at its own edges: offset them as the edge ids are.
         shifted = [_shift_edges(p.wedge, off) for p, off in zip(plans, edge_offsets)]
-        wedge = concatenate_wedge(shifted, counts, size)
+        wedge = concatenate_wedge(shifted, counts, size, pairs_to, cross_to)
     return PointPlan(edges, pad(np.concatenate(ids), size, 0), pad(np.concatenate(hards), size, 0.0),
                      pad(np.concatenate(actives), size, False), pad(np.concatenate(nears), size, 0.0), wedge)
 
@@ -558,6 +583,52 @@ def concatenate_plans(plans: list[PointPlan], counts: list[int], pad_to: int | N
 def _shift_edges(arrays: WedgeArrays, offset: int) -> WedgeArrays:
     """The choices with their pairs' edge ids moved by ``offset`` (plans concatenated)."""
     return WedgeArrays(**{**arrays.fields(), "pair_edge": np.asarray(arrays.pair_edge) + offset})
+
+
+def _with_pixel_area(plan: PointPlan, occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, pixel_axes,
+                     ground: bool) -> PointPlan:
+    """``plan`` with the hard shadow's pieces in the pixels of its active points (``_pixel_area_choices``)."""
+    posed = PosedOccluder.make(occ, pose, sun)
+    n = len(points)
+    size = len(plan.hard)
+    act = np.flatnonzero(np.asarray(plan.active)[:n])
+    if ground:
+        winding = posed.winding_count_at(points[act, :2])
+    else:
+        winding = np.asarray(plan.hard)[act].astype(np.float64)
+        cast = np.flatnonzero(winding > 0)
+        winding[cast] = _layers_in_front(posed, points[act[cast]])
+    axes = np.asarray(pixel_axes, np.float64)
+    axes = axes[act] if axes.ndim == 3 else axes
+    part = _pixel_area_choices(posed, points[act], winding, axes, len(act))
+    default = np.zeros(size)
+    default[:n] = np.asarray(plan.hard)[:n]
+    wedge = part.select(np.arange(len(act)), pad_points=size, place=act, default_offset=default)
+    return dataclasses.replace(plan, wedge=wedge)
+
+
+def _pixel_area_choices(posed: PosedOccluder, points: np.ndarray, winding: np.ndarray, pixel_axes: np.ndarray,
+                        size: int) -> WedgeArrays:
+    """The hard shadow's pieces in each point's pixel (the pixel part of ``WedgeArrays``, for the
+    ``edge`` and ``paper`` rules' pixel means), for points (m, 3) with depth complexity winding
+    (m,) and pixel axes (2, 3) or (m, 2, 3), padded to ``size`` points. The pairs index the
+    silhouette edges in their order (``_pack_edges``)."""
+    m = len(points)
+    hard = (np.asarray(winding) >= 0.5).astype(np.float64)
+    edges = wedge_edges(posed.occluder, posed.silhouette, posed.world, posed.rotation, posed.light, 0.0)
+    centre = np.flatnonzero(edges.centre)  # the silhouette from the sun's centre, first
+    reach_px = np.broadcast_to(_pixel_reach(np.asarray(pixel_axes, np.float64), posed.light), (m,))
+    cand = gather_candidates(points, edges.a[centre], edges.b[centre],
+                             np.full(len(centre), float(reach_px.max(initial=0.0))), posed.light, 0.0, reach_px)
+    axes = np.asarray(pixel_axes, np.float64)
+    axes = axes[cand.index] if axes.ndim == 3 else axes
+    ids = cand.ids[:, :max(1, int(cand.count.max(initial=0)))]
+    arrays, boundary, _ = arrangement(points[cand.index], ids, edges, posed.light, winding[cand.index], -1.0,
+                                      reach_px[cand.index], axes)
+    on = np.flatnonzero(boundary)
+    default = np.zeros(size)
+    default[:m] = hard
+    return arrays.select(on, pad_points=size, place=cand.index[on], default_offset=default)
 
 
 # -- the ``wedge`` rule -------------------------------------------------------------------------
@@ -638,7 +709,8 @@ def _no_wedge(size: int, pixel: bool) -> WedgeArrays:
     none = dict(pair_point=np.zeros(0, np.int32), pair_edge=np.zeros(0, np.int32), flip=np.zeros(0),
                 side_start=np.zeros(0), side_end=np.zeros(0), cross=np.zeros((0, 2), np.int32), cross_change=np.zeros(0))
     if pixel:
-        none.update(pixel_flip=np.zeros(0), pixel_side_start=np.zeros(0), pixel_side_end=np.zeros(0),
+        none.update(pixel_hard_offset=np.zeros(0), pixel_flip=np.zeros(0), pixel_side_start=np.zeros(0),
+                    pixel_side_end=np.zeros(0),
                     pixel_cross=np.zeros((0, 2), np.int32), pixel_cross_change=np.zeros(0))
     return WedgeArrays(hard_offset=np.zeros(0), **none).select(np.zeros(0, np.int64), pad_points=size)
 

@@ -56,6 +56,7 @@ class ShadowRaster:
     boundary_dist_px: np.ndarray
     edge_neighbours: np.ndarray | None = None  # (S, 2) outline edges sharing each end vertex, -1: none
     edge_outline_fraction: np.ndarray | None = None  # (S,) how much of each edge is on the outline
+    depth_count: np.ndarray | None = None  # (H, W) float32: how many layers of the mesh each pixel's ray crosses
 
     def lookup(self, xy: np.ndarray):
         """(hard, edge_label, boundary distance in metres) at world points (N, 2+), nearest pixel.
@@ -198,11 +199,10 @@ def rasterise_shadow(grid: GroundGrid, world_vertices: np.ndarray, light: np.nda
     """
     h, w = grid.height, grid.width
     px = grid.to_pixel(project_to_ground(world_vertices, light) if ground is None else ground)
-    hard = None
+    count = np.zeros((h, w), np.float32)
     for edges, weights in silhouette.fill_edges:
-        layer = winding_fill((h, w), px[edges[:, 0]], px[edges[:, 1]], weights)
-        hard = layer if hard is None else hard | layer
-    hard = np.zeros((h, w), np.uint8) if hard is None else hard.view(np.uint8)
+        count += np.abs(winding_count_fill((h, w), px[edges[:, 0]], px[edges[:, 1]], weights))
+    hard = (count > 0.5).view(np.uint8)
 
     ids = silhouette.vertex_ids
     start, end = px[ids[:, 0]], px[ids[:, 1]]
@@ -223,7 +223,7 @@ def rasterise_shadow(grid: GroundGrid, world_vertices: np.ndarray, light: np.nda
     seed_index = np.flatnonzero(src.reshape(-1) == 0)  # row-major, as OpenCV numbers them
     if not len(seed_index):
         return ShadowRaster(grid, hard, -np.ones((h, w), np.int32),
-                            np.full((h, w), np.inf, np.float32))
+                            np.full((h, w), np.inf, np.float32), depth_count=count)
     dist, nearest = cv2.distanceTransformWithLabels(src, cv2.DIST_L2, cv2.DIST_MASK_5,
                                                     labelType=cv2.DIST_LABEL_PIXEL)
     # DT label l > 0 is the l-th seed; the lookup table maps it to its edge index.
@@ -231,7 +231,7 @@ def rasterise_shadow(grid: GroundGrid, world_vertices: np.ndarray, light: np.nda
     lut[0] = -1
     lut[1:] = label_img.reshape(-1)[seed_index] - 1
     edge_label = lut[nearest]
-    return ShadowRaster(grid, hard, edge_label, dist, _end_neighbours(ids, on_outline), outline_fraction)
+    return ShadowRaster(grid, hard, edge_label, dist, _end_neighbours(ids, on_outline), outline_fraction, count)
 
 
 def _end_neighbours(ids: np.ndarray, keep: np.ndarray) -> np.ndarray:

@@ -256,7 +256,7 @@ class SoftShadowModel:
             pixel_axes = np.asarray(pixel_axes, np.float64)
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         if plan is None:
-            if self.rule == "wedge" and pixel_axes is not None:  # its pixel means are planned
+            if pixel_axes is not None:  # pixel means are planned (the hard shadow's area in each)
                 plan_kwargs = {**plan_kwargs, "pixel_axes": pixel_axes}
             plan = self.plan_points(sun, pose, points, _band_k(params, range_k_max), normals=normals,
                                     **plan_kwargs)
@@ -307,7 +307,7 @@ class SoftShadowModel:
         if len(pts):
             axes = _camera_pixel_axes(ground, camera.height, camera.width)[use] if self.footprint else None
             plan = self.plan_points(sun, pose, pts, _band_k(params, range_k_max), pixel_m=max(pixel_m, 1e-4),
-                                    **({"pixel_axes": axes} if self.rule == "wedge" and axes is not None else {}))
+                                    pixel_axes=axes)
             values = self.at_points(params, sun, pose, pts, plan=plan, pixel_axes=axes)
             if self.hidden_sky:
                 sky = self.sky_nodes(pose, max(pixel_m, 1e-4)).at(pts)

@@ -46,6 +46,7 @@ turn (a move of much less than a penumbra).
 
 from __future__ import annotations
 
+import dataclasses
 from typing import NamedTuple
 
 import jax
@@ -54,7 +55,7 @@ import numpy as np
 
 from .penumbra import _fan, footprint_bump, profile_alpha
 
-__all__ = ["gnomonic_segments", "pixel_hard_area", "pixel_segments", "wedge_alpha"]
+__all__ = ["gnomonic_segments", "pixel_hard_area", "pixel_mean_alpha", "pixel_segments", "wedge_alpha"]
 
 _DEPTH_MIN = 1e-7       # metres in front of the receiver at which segments are clipped
 _DEPTH_REL = 1e-6       # ... plus this fraction of the vertex's offset (L1 norm)
@@ -205,14 +206,17 @@ def _per_point(values, index, n):
     return jax.ops.segment_sum(values, index, num_segments=n)
 
 
-def _hard_term(ax, ay, lines: _Lines, choices, y_cross, n, dtype):
-    """[W(0) >= 1] per point (n,), from the plan's offset and the boundary pieces' angles."""
-    sg = jax.lax.stop_gradient
-    pp, cj = choices.pair_point, choices.cross[:, 0]
-    ends = choices.side_end * _angle_along(ax, ay, lines, lines.yb)
-    crossings = choices.cross_change * _angle_along(ax, ay, lines, y_cross, cj)
-    turns = choices.hard_offset + (_per_point(ends, pp, n) - _per_point(crossings, pp[cj], n)) / (2.0 * np.pi)
-    return jnp.clip(jnp.round(sg(turns)), 0.0, 1.0).astype(dtype)
+def _hard_term(ax, ay, lines: _Lines, offset, side_end, cross, cross_change, pair_point, n, dtype, y_cross=None,
+               bx=None, by=None):
+    """[W(0) >= 1] per point (n,), from the plan's offset and the angles the boundary's pieces
+    (statuses, crossings) subtend at the origin."""
+    if y_cross is None:
+        y_cross = _crossing_along(ax, ay, bx, by, lines, cross)
+    cj = cross[:, 0]
+    ends = side_end * _angle_along(ax, ay, lines, lines.yb)
+    crossings = cross_change * _angle_along(ax, ay, lines, y_cross, cj)
+    turns = offset + (_per_point(ends, pair_point, n) - _per_point(crossings, pair_point[cj], n)) / (2.0 * np.pi)
+    return jnp.clip(jnp.round(jax.lax.stop_gradient(turns)), 0.0, 1.0).astype(dtype)
 
 
 def _disk_mass(lines: _Lines, choices, y_cross, hard, n, profile):
@@ -256,14 +260,16 @@ def _square_span(ax, ay, lines: _Lines):
     return lines.ya + jnp.where(misses, 0.0, lo), lines.ya + jnp.where(misses, 0.0, hi)
 
 
-def pixel_hard_area(ax, ay, bx, by, choices, hard, n):
+def pixel_hard_area(ax, ay, bx, by, choices, n):
     """The area of {W >= 1} within each point's pixel (n,), from the boundary's pieces the plan
     found there (``WedgeArrays.pixel_*``); ax.. (P,) the pairs' segments in pixel units (the
-    pixel is the unit square about the origin), covered side on the left; hard (n,) [W(0) >= 1].
-    By Green's theorem about the pixel's centre: [W(0) >= 1] plus, for each piece from q0 to q1
-    (clipped to the square), its swept triangle q0 x q1 / 2 less the square's sector over the
-    same angle."""
+    pixel is the unit square about the origin), covered side on the left. By Green's theorem
+    about the pixel's centre: [W(0) >= 1] (from the pieces' angles, as ``_hard_term``) plus, for
+    each piece from q0 to q1 (clipped to the square), its swept triangle q0 x q1 / 2 less the
+    square's sector over the same angle."""
     lines = _lines(ax, ay, bx, by)
+    hard = _hard_term(ax, ay, lines, choices.pixel_hard_offset, choices.pixel_side_end, choices.pixel_cross,
+                      choices.pixel_cross_change, choices.pair_point, n, ax.dtype, bx=bx, by=by)
     y_in, y_out = _square_span(ax, ay, lines)
     fx, fy = -lines.u * lines.ty, lines.u * lines.tx   # the foot of the perpendicular
 
@@ -296,6 +302,27 @@ def _line_share(lines: _Lines, choices, y_cross, scale, profile):
     return jnp.where(ok, parts / jnp.where(ok, whole, 1.0), 0.0)
 
 
+def pixel_mean_alpha(points, edge_vertices_world, light, choices, pixel_axes):
+    """The hard shadow's area in each point's pixel (n,), from the plan's pixel pieces
+    (``WedgeArrays.pixel_*``); pixel_axes (2, 3) or (n, 2, 3)."""
+    dtype = points.dtype
+    n = points.shape[0]
+    pp = choices.pair_point
+    ev = edge_vertices_world[choices.pair_edge]
+    light = jnp.asarray(light, dtype)
+    lt = light if light.ndim == 1 else light[jnp.maximum(pp, 0)]
+    axes = jnp.broadcast_to(jnp.asarray(pixel_axes, dtype), (n, 2, 3))[jnp.maximum(pp, 0)]
+    choices = _cast(choices, dtype)
+    return pixel_hard_area(*pixel_segments(points[jnp.maximum(pp, 0)], ev[:, 0], ev[:, 1], choices.pixel_flip, lt,
+                                           axes), choices, n)
+
+
+def _cast(choices, dtype):
+    """The choices' per-pair and per-crossing flags in ``dtype`` (offsets and indices as they are)."""
+    return jax.tree_util.tree_map(lambda x: x.astype(dtype) if jnp.issubdtype(x.dtype, jnp.floating)
+                                  else x, choices)
+
+
 def wedge_alpha(points, edge_vertices_world, light, range_k, choices, profile: str = "disk", pixel_axes=None):
     """Alpha (n,) at points (n, 3): the light's mass behind the mesh (module docstring).
 
@@ -317,8 +344,9 @@ def wedge_alpha(points, edge_vertices_world, light, range_k, choices, profile: s
     n = points.shape[0]
     k = jnp.maximum(jnp.asarray(range_k, dtype), _K_MIN)
     pp, pe = choices.pair_point, choices.pair_edge  # padding pairs: point -1 (their sums are dropped)
-    choices = jax.tree_util.tree_map(lambda x: x.astype(dtype) if jnp.issubdtype(x.dtype, jnp.floating)
-                                     and x.ndim == 1 and x.shape[0] == pp.shape[0] else x, choices)
+    offsets = (choices.hard_offset, choices.pixel_hard_offset)  # kept in float64: rounded to integers
+    choices = _cast(choices, dtype)
+    choices = dataclasses.replace(choices, hard_offset=offsets[0], pixel_hard_offset=offsets[1])
     ev = edge_vertices_world[pe]
     a, b = ev[:, 0], ev[:, 1]
     light = jnp.asarray(light, dtype)
@@ -339,10 +367,11 @@ def wedge_alpha(points, edge_vertices_world, light, range_k, choices, profile: s
         u, lin, (ax, ay, bx, by, lines) = jax.linearize(geometry, x, has_aux=True)
         du_a, du_b = lin(axes[:, 0]), lin(axes[:, 1])
     y_cross = _crossing_along(ax, ay, bx, by, lines, choices.cross)
-    hard = _hard_term(ax, ay, lines, choices, y_cross, n, dtype)
     if pixel_axes is None:
+        hard = _hard_term(ax, ay, lines, choices.hard_offset, choices.side_end, choices.cross, choices.cross_change,
+                          pp, n, dtype, y_cross)
         return _disk_mass(lines, choices, y_cross, hard, n, profile)
-    area = pixel_hard_area(*pixel_segments(x, a, b, choices.pixel_flip, lt, axes), choices, hard, n)
+    area = pixel_hard_area(*pixel_segments(x, a, b, choices.pixel_flip, lt, axes), choices, n)
     scale = 1.0 + 0.5 * (jnp.abs(du_a) + jnp.abs(du_b))
     share = _line_share(lines, choices, y_cross, scale, profile)
     bump = footprint_bump(u, du_a, du_b, profile)

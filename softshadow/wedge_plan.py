@@ -33,6 +33,7 @@ __all__ = ["K_MAX", "REACH_MARGIN", "WEDGE_FIELDS", "WedgeArrays", "WedgeCandida
 
 K_MAX = 32           # candidate edges kept per point
 REACH_MARGIN = 0.05  # the cone's radius is k_max (1 + REACH_MARGIN)
+BACK_REACH = 20.0    # pixel reaches behind the point a candidate may lie at (in the receiver's plane)
 _DEPTH_MIN = 1e-7    # as ``wedge._DEPTH_MIN`` and ``_DEPTH_REL``: where segments are clipped
 _DEPTH_REL = 1e-6   # times the L1 norm of the offset
 
@@ -71,7 +72,8 @@ class WedgeArrays(eqx.Module):
     cross (C, 2) int32: the pairs (j, i) of the crossings of segment j by segment i along which
     that changes (the same point), cross_change (C,) by how much (+-1; 0 in padding). pixel_*:
     the same in the point's pixel (the segments' shadows along the sun on the pixel's plane, for
-    the hard shadow's area in it), None when the plan was made without pixel axes.
+    the hard shadow's area in it; pixel_hard_offset from the pieces in the pixel), None when the
+    plan was made without pixel axes.
     """
 
     hard_offset: Float[np.ndarray, " n"]
@@ -82,6 +84,7 @@ class WedgeArrays(eqx.Module):
     side_end: Float[np.ndarray, " P"]
     cross: Int[np.ndarray, "C 2"]
     cross_change: Float[np.ndarray, " C"]
+    pixel_hard_offset: Float[np.ndarray, " n"] | None = None
     pixel_flip: Float[np.ndarray, " P"] | None = None
     pixel_side_start: Float[np.ndarray, " P"] | None = None
     pixel_side_end: Float[np.ndarray, " P"] | None = None
@@ -96,10 +99,12 @@ class WedgeArrays(eqx.Module):
         return {f: getattr(self, f) for f in WEDGE_FIELDS}
 
     def select(self, keep: np.ndarray, pad_points: int | None = None, place: np.ndarray | None = None,
-               default_offset: np.ndarray | None = None) -> "WedgeArrays":
+               default_offset: np.ndarray | None = None, pairs_to: int | None = None,
+               cross_to: int | None = None) -> "WedgeArrays":
         """The choices of the points ``keep`` (m,) (indices), renumbered 0..m-1 (or to ``place``
         (m,)) among ``pad_points`` points (default m), whose other offsets are default_offset
-        (default 0); pairs and crossings padded to buckets (``bucket``)."""
+        (default 0); pairs and crossings padded to buckets (``bucket``), or to pairs_to and
+        cross_to (at least what they hold)."""
         keep = np.asarray(keep, np.int64)
         target = np.arange(len(keep)) if place is None else np.asarray(place, np.int64)
         n_new = pad_points or len(keep)
@@ -109,9 +114,13 @@ class WedgeArrays(eqx.Module):
         real = np.flatnonzero((pair_point >= 0) & (where[np.maximum(pair_point, 0)] >= 0))
         remap = -np.ones(self.n_pairs, np.int64)
         remap[real] = np.arange(len(real))
-        offset = np.zeros(n_new) if default_offset is None else np.array(default_offset, np.float64)
-        offset[target] = np.asarray(self.hard_offset)[keep]
-        p_size = bucket(len(real))
+        def per_point(values):
+            out = np.zeros(n_new) if default_offset is None else np.array(default_offset, np.float64)
+            out[target] = np.asarray(values)[keep]
+            return out
+
+        offset = per_point(self.hard_offset)
+        p_size = max(pairs_to or 0, bucket(len(real)) if pairs_to is None else len(real))
         ftype = np.asarray(self.side_start).dtype
 
         def pairs(x, dtype=None):
@@ -122,7 +131,7 @@ class WedgeArrays(eqx.Module):
         def crossings(cr, ch):
             cr, ch = np.asarray(cr), np.asarray(ch)
             ok = np.flatnonzero((remap[cr[:, 0]] >= 0) & (ch != 0)) if len(cr) else np.zeros(0, np.int64)
-            size = bucket(len(ok))
+            size = max(cross_to or 0, bucket(len(ok)) if cross_to is None else len(ok))
             out, out_ch = np.zeros((size, 2), np.int32), np.zeros(size, ch.dtype)
             out[:len(ok)] = remap[cr[ok]]
             out_ch[:len(ok)] = ch[ok]
@@ -134,8 +143,8 @@ class WedgeArrays(eqx.Module):
                    flip=pairs(self.flip), side_start=pairs(self.side_start), side_end=pairs(self.side_end))
         out["cross"], out["cross_change"] = crossings(self.cross, self.cross_change)
         if self.pixel_side_start is not None:
-            out.update(pixel_flip=pairs(self.pixel_flip), pixel_side_start=pairs(self.pixel_side_start),
-                       pixel_side_end=pairs(self.pixel_side_end))
+            out.update(pixel_hard_offset=per_point(self.pixel_hard_offset), pixel_flip=pairs(self.pixel_flip),
+                       pixel_side_start=pairs(self.pixel_side_start), pixel_side_end=pairs(self.pixel_side_end))
             out["pixel_cross"], out["pixel_cross_change"] = crossings(self.pixel_cross, self.pixel_cross_change)
         return WedgeArrays(**out)
 
@@ -148,7 +157,8 @@ class WedgeArrays(eqx.Module):
 
 
 WEDGE_FIELDS = ("hard_offset", "pair_point", "pair_edge", "flip", "side_start", "side_end", "cross", "cross_change",
-                "pixel_flip", "pixel_side_start", "pixel_side_end", "pixel_cross", "pixel_cross_change")
+                "pixel_hard_offset", "pixel_flip", "pixel_side_start", "pixel_side_end", "pixel_cross",
+                "pixel_cross_change")
 
 
 def bucket(n: int, minimum: int = 64) -> int:
@@ -159,9 +169,10 @@ def bucket(n: int, minimum: int = 64) -> int:
     return -(-n // step) * step
 
 
-def concatenate_wedge(parts: list[WedgeArrays], counts: list[int], pad_points: int) -> WedgeArrays:
+def concatenate_wedge(parts: list[WedgeArrays], counts: list[int], pad_points: int, pairs_to: int | None = None,
+                      cross_to: int | None = None) -> WedgeArrays:
     """One WedgeArrays for several point sets (their first ``counts`` points each), pairs
-    renumbered, padded to ``pad_points`` points."""
+    renumbered, padded to ``pad_points`` points (and pairs_to, cross_to: ``select``)."""
     trimmed = [p.select(np.arange(c)) for p, c in zip(parts, counts)]
     offsets = np.cumsum([0] + list(counts))
     pair_base = np.cumsum([0] + [t.n_pairs for t in trimmed])
@@ -171,10 +182,12 @@ def concatenate_wedge(parts: list[WedgeArrays], counts: list[int], pad_points: i
                                         for t, o in zip(trimmed, offsets)]).astype(np.int32)
     out["cross"] = np.concatenate([np.asarray(t.cross) + base for t, base in zip(trimmed, pair_base)]).astype(np.int32)
     if all(t.pixel_side_start is not None for t in trimmed):
-        out.update({f: cat(f) for f in ("pixel_flip", "pixel_side_start", "pixel_side_end", "pixel_cross_change")})
+        out.update({f: cat(f) for f in ("pixel_hard_offset", "pixel_flip", "pixel_side_start", "pixel_side_end",
+                                        "pixel_cross_change")})
         out["pixel_cross"] = np.concatenate([np.asarray(t.pixel_cross) + base
                                              for t, base in zip(trimmed, pair_base)]).astype(np.int32)
-    return WedgeArrays(**out).select(np.arange(int(offsets[-1])), pad_points=pad_points)
+    return WedgeArrays(**out).select(np.arange(int(offsets[-1])), pad_points=pad_points, pairs_to=pairs_to,
+                                     cross_to=cross_to)
 
 
 class WedgeEdges(eqx.Module):
@@ -197,18 +210,18 @@ class WedgeEdges(eqx.Module):
 def wedge_edges(occ, sil, world: np.ndarray, rotation: np.ndarray, light: np.ndarray, range_k: float) -> WedgeEdges:
     """The ``WedgeEdges`` of a posed occluder (world vertices, rotation) with silhouette ``sil``
     under ``light``, for disks up to tan r = range_k."""
-    light_local = rotation.T @ np.asarray(light, np.float64)
-    ndotl = occ.face_normals @ light_local
     ef = occ.edge_faces
     valid = ef >= 0
-    # Pre-merge silhouette edges (as ``occluder.silhouette``), to leave out of the extras.
-    lit = sil.lit
-    lit_e = valid & lit[np.maximum(ef, 0)]
-    on_sil = ((lit_e.sum(1) > 0) & (lit_e.sum(1) < valid.sum(1))) | (valid.sum(1) == 1)
-    # A face within the cone's angle of edge-on: from some point it may face the sun or not.
-    band = np.abs(ndotl) <= 1.5 * range_k * (1.0 + REACH_MARGIN) + 1e-9
-    near = (valid & band[np.maximum(ef, 0)]).any(1) & ~on_sil
-    extra = np.flatnonzero(near)
+    extra = np.zeros(0, np.int64)
+    if range_k > 0:  # (0: the sun's centre alone, the silhouette)
+        light_local = rotation.T @ np.asarray(light, np.float64)
+        ndotl = occ.face_normals @ light_local
+        # Pre-merge silhouette edges (as ``occluder.silhouette``), to leave out of the extras.
+        lit_e = valid & sil.lit[np.maximum(ef, 0)]
+        on_sil = ((lit_e.sum(1) > 0) & (lit_e.sum(1) < valid.sum(1))) | (valid.sum(1) == 1)
+        # A face within the cone's angle of edge-on: from some point it may face the sun or not.
+        band = np.abs(ndotl) <= 1.5 * range_k * (1.0 + REACH_MARGIN) + 1e-9
+        extra = np.flatnonzero((valid & band[np.maximum(ef, 0)]).any(1) & ~on_sil)
     sil_ids = np.asarray(sil.vertex_ids)
     edge_index = np.asarray(sil.edge_index) if sil.edge_index is not None else np.zeros(len(sil_ids), np.int64)
     vids = np.concatenate([sil_ids, occ.edges[extra]]).astype(np.int64)
@@ -230,7 +243,8 @@ def arrangement(points: np.ndarray, ids: np.ndarray, edges: WedgeEdges, light: n
                 radius: float, pixel_reach=0.0, pixel_axes: np.ndarray | None = None, max_crossings: int = 8):
     """The boundary of {W >= 1} among each point's candidates (``softshadow.wedge``), in the
     sun's view from the point within ``radius`` (tan) of the sun's centre, widened for each
-    segment by pixel_reach over its depth, and, with pixel_axes, in the pixel's square.
+    segment by pixel_reach over its depth (radius < 0: not at all), and, with pixel_axes, in the
+    pixel's square.
 
     points (n, 3); ids (n, K) candidates (-1: none) into ``edges``; winding (n,) W(0);
     pixel_reach: scalar or (n,), metres; pixel_axes (2, 3) or (n, 2, 3): the offsets across the
@@ -246,6 +260,7 @@ def arrangement(points: np.ndarray, ids: np.ndarray, edges: WedgeEdges, light: n
         np.broadcast_to(np.asarray(pixel_axes, np.float64), (n, 2, 3)))
     reach = np.ascontiguousarray(np.broadcast_to(np.asarray(pixel_reach, np.float64), (n,)))
     offset = np.asarray(winding, np.float64).copy()
+    pixel_offset = np.zeros(n)
     # Per point and slot; filled only up to each point's counts (np.empty: no zeroing pass).
     pair_edge = np.empty((n, k), np.int32)
     flags = [np.empty((n, k), np.int8) for _ in range(6)]  # start, end, pixel start, pixel end, flips
@@ -257,7 +272,8 @@ def arrangement(points: np.ndarray, ids: np.ndarray, edges: WedgeEdges, light: n
     _arrangement_kernel()(np.ascontiguousarray(points, np.float64), np.ascontiguousarray(ids, np.int64),
                           np.ascontiguousarray(edges.a, np.float64), np.ascontiguousarray(edges.b, np.float64),
                           edges.faces, np.asarray(edges.centre, np.bool_), np.asarray(edges.jump, np.float64), frame,
-                          float(radius), reach, axes, with_pixel, offset, pair_edge, *flags, n_pairs, cross, change,
+                          float(radius), reach, axes, with_pixel, offset, pixel_offset, pair_edge, *flags, n_pairs,
+                          cross, change,
                           n_cross, pcross, pchange, n_pcross, boundary, overflow)
     # Compact: the pairs in point order, the crossings' slots renumbered to pairs.
     pair_of = np.arange(k)[None, :] < n_pairs[:, None]
@@ -274,7 +290,8 @@ def arrangement(points: np.ndarray, ids: np.ndarray, edges: WedgeEdges, light: n
                flip=flag(flags[4]), side_start=flag(flags[0]), side_end=flag(flags[1]))
     out["cross"], out["cross_change"] = crossings(cross, change, n_cross)
     if with_pixel:
-        out.update(pixel_flip=flag(flags[5]), pixel_side_start=flag(flags[2]), pixel_side_end=flag(flags[3]))
+        out.update(pixel_hard_offset=pixel_offset, pixel_flip=flag(flags[5]), pixel_side_start=flag(flags[2]),
+                   pixel_side_end=flag(flags[3]))
         out["pixel_cross"], out["pixel_cross_change"] = crossings(pcross, pchange, n_pcross)
     return WedgeArrays(**out), boundary, int(overflow.sum())
 
@@ -410,41 +427,51 @@ def _kernels():
 
     @numba.njit(cache=True, nogil=True)
     def cone_gap(px, py, pd, e, ends, kappa, r):
-        """min over edge e's part in front of the point (px, py) (across the light), pd (along s)
-        of |p_perp| - kappa d - r (<= 0: a candidate), and kappa d + r there (for the score);
-        ends (S, 6): each edge's ends across the light and along s."""
+        """min over edge e of |p_perp| - kappa max(d, 0) - r (<= 0: a candidate), over its part in
+        front of the point (px, py) (across the light), pd (along s), or behind it by at most
+        BACK_REACH r (a pixel's box reaches there: an edge lying in the receiver's own plane); and
+        kappa max(d, 0) + r there (for the score). ends (S, 6): each edge's ends across the light
+        and along s."""
         pa0, pa1, da = ends[e, 0] - px, ends[e, 1] - py, ends[e, 2] - pd
         pb0, pb1, db = ends[e, 3] - px, ends[e, 4] - py, ends[e, 5] - pd
         C = pa0 * pa0 + pa1 * pa1
-        dmin = 1e-7 + 2e-6 * np.sqrt(max(C + da * da, pb0 * pb0 + pb1 * pb1 + db * db))  # >= the L1 rule's
-        if da < dmin and db < dmin:
-            return 1e300, 1.0
-        step = db - da
-        t_lo, t_hi = 0.0, 1.0
-        if da < dmin:
-            t_lo = (dmin - da) / step
-        elif db < dmin:
-            t_hi = (dmin - da) / step
         d0, d1 = pb0 - pa0, pb1 - pa1
         A = d0 * d0 + d1 * d1
         B = pa0 * d0 + pa1 * d1
-        m = kappa * step
-        best, best_t = 1e300, t_lo
-        for k in range(3):
-            if k == 0:
-                t = t_lo
-            elif k == 1:
-                t = t_hi
-            else:
-                # f'(t) = (A t + B) / |P + t D| - m = 0
-                if A <= m * m:
-                    continue
-                t = (-B + m * np.sqrt(max((A * C - B * B) / (A - m * m), 0.0))) / A
-                t = min(max(t, t_lo), t_hi)
-            f = np.sqrt(max(A * t * t + 2.0 * B * t + C, 0.0)) - kappa * (da + t * step) - r
-            if f < best:
-                best, best_t = f, t
-        return best, kappa * (da + best_t * step) + r
+        step = db - da
+        best, best_t = 1e300, 0.0
+        # Two stretches of t in [0, 1]: depth >= 0 (the cone) and -back <= depth < 0 (the pixel's
+        # tube alone); on each, f is convex: its minimum at an end or where f' = 0.
+        back = BACK_REACH * r
+        for part in range(2):
+            lo_d, hi_d = (0.0, 1e300) if part == 0 else (-back, 0.0)
+            if part == 1 and back <= 0.0:
+                continue
+            t_lo, t_hi = 0.0, 1.0
+            if step != 0.0:
+                ta, tb = (lo_d - da) / step, (hi_d - da) / step
+                t_lo, t_hi = max(t_lo, min(ta, tb)), min(t_hi, max(ta, tb))
+            elif not (lo_d <= da <= hi_d):
+                continue
+            if t_lo > t_hi:
+                continue
+            m = kappa * step if part == 0 else 0.0
+            kap = kappa if part == 0 else 0.0
+            for k in range(3):
+                if k == 0:
+                    t = t_lo
+                elif k == 1:
+                    t = t_hi
+                else:
+                    # f'(t) = (A t + B) / |P + t D| - m = 0
+                    if A <= m * m:
+                        continue
+                    t = (-B + m * np.sqrt(max((A * C - B * B) / (A - m * m), 0.0))) / A
+                    t = min(max(t, t_lo), t_hi)
+                f = np.sqrt(max(A * t * t + 2.0 * B * t + C, 0.0)) - kap * (da + t * step) - r
+                if f < best:
+                    best, best_t = f, t
+        return best, kappa * max(da + best_t * step, 0.0) + r
 
     @numba.njit(cache=True, nogil=True)
     def query(is_grid, width, n, geometry, points, plane, rpix, e1, e2, ends, s, kappa, x0, y0, cell, n_cols,
@@ -632,7 +659,7 @@ def _arrangement_kernel():
 
     @numba.njit(cache=True, nogil=True)
     def point_range(first, last, chunk, points, ids, a, b, faces, centre, jump, frame, radius, reach, axes,
-                    with_pixel, offset, pair_edge, p_st, p_en, p_pst, p_pen, p_flip, p_pflip, n_pairs, cross,
+                    with_pixel, offset, pixel_offset, pair_edge, p_st, p_en, p_pst, p_pen, p_flip, p_pflip, n_pairs, cross,
                     cross_change, n_cross, pcross, pcross_change, n_pcross, boundary, overflow):
         n, k = ids.shape
         c_max = cross.shape[1]
@@ -685,9 +712,22 @@ def _arrangement_kernel():
                 wb0, wb1, wb2 = b[e, 0] - x0, b[e, 1] - x1, b[e, 2] - x2
                 da = wa0 * s0 + wa1 * s1 + wa2 * s2
                 db = wb0 * s0 + wb1 * s1 + wb2 * s2
+                # Whether its shadow along the sun may cross the pixel: the segment across the light
+                # within the pixel's reach of the point (in front of it or, in the receiver's plane,
+                # behind), as the gather's tube.
+                ua0 = wa0 * frame[1, 0] + wa1 * frame[1, 1] + wa2 * frame[1, 2]
+                ua1 = wa0 * frame[2, 0] + wa1 * frame[2, 1] + wa2 * frame[2, 2]
+                ub0 = wb0 * frame[1, 0] + wb1 * frame[1, 1] + wb2 * frame[1, 2]
+                ub1 = wb0 * frame[2, 0] + wb1 * frame[2, 1] + wb2 * frame[2, 2]
+                du0, du1 = ub0 - ua0, ub1 - ua1
+                dd = du0 * du0 + du1 * du1
+                tt = min(max(-(ua0 * du0 + ua1 * du1) / dd, 0.0), 1.0) if dd > 0.0 else 0.0
+                c0, c1 = ua0 + tt * du0, ua1 + tt * du1
+                near_pixel[j] = (c0 * c0 + c1 * c1 <= reach[p] * reach[p]
+                                 and max(da, db) >= -BACK_REACH * reach[p])
                 dmin = 1e-7 + 1e-6 * max(abs(wa0) + abs(wa1) + abs(wa2), abs(wb0) + abs(wb1) + abs(wb2))
                 if not (da > dmin or db > dmin):
-                    continue
+                    continue  # no part in the sun's view (its shadow may still cross the pixel)
                 step = db - da
                 t = (dmin - da) / step if step != 0.0 else 0.0
                 t = min(max(t, 0.0), 1.0)
@@ -727,7 +767,6 @@ def _arrangement_kernel():
                 # The part within the disk, widened by the pixel's reach at the segment's depth.
                 dx, dy = qx - px, qy - py
                 ln = np.sqrt(dx * dx + dy * dy)
-                near_pixel[j] = False
                 if ln > 0.0:
                     u = (py * dx - px * dy) / ln
                     rad = radius + reach[p] / max(dpa, dpb)
@@ -737,11 +776,8 @@ def _arrangement_kernel():
                         lo[j], hi[j] = max(ya, -chord), min(ya + ln, chord)
                         if u < 0.0 and lo[j] < hi[j]:
                             down += w[j]
-                    # Whether its shadow may cross the pixel: within the pixel's reach across the
-                    # light at its shallower end (the segment's nearest point to the centre).
-                    yc = min(max(0.0, ya), ya + ln)
-                    near_pixel[j] = u * u + yc * yc <= (reach[p] / min(dpa, dpb)) ** 2
-            if W0 >= 0.5 and down < W0:
+
+            if (W0 >= 0.5 and down < W0) or radius < 0.0:  # (radius < 0: no disk, the pixel alone)
                 nc, angle, dropped = 0, 0.0, 0
                 for j in range(kk):
                     st[j] = 0.0
@@ -750,6 +786,7 @@ def _arrangement_kernel():
                 nc, angle, dropped = walk(kk, ax, ay, bx, by, w, lo, hi, W0, st, en, cj, ci, cd, ys, js, who, box, True)
             overflow[chunk] += dropped
             offset[p] = (1.0 if W0 >= 0.5 else 0.0) - angle / (2.0 * np.pi)
+            pixel_offset[p] = 1.0 if W0 >= 0.5 else 0.0
             npc = 0
             for j in range(kk):
                 pst[j] = 0.0
@@ -817,9 +854,10 @@ def _arrangement_kernel():
                                 if py * dx - px * dy < 0.0:
                                     down += w[j]
                     if not (W0 >= 0.5 and down < W0):
-                        npc, _, dropped = walk(kk, ax, ay, bx, by, w, lo, hi, W0, pst, pen, pj, pi_, pd, ys, js, who,
-                                               box, False)
+                        npc, angle, dropped = walk(kk, ax, ay, bx, by, w, lo, hi, W0, pst, pen, pj, pi_, pd, ys, js,
+                                                   who, box, True)
                         overflow[chunk] += dropped
+                        pixel_offset[p] -= angle / (2.0 * np.pi)
             # The pairs: the segments on the boundary somewhere, or crossing it.
             any_on = False
             for j in range(kk):
@@ -855,7 +893,7 @@ def _arrangement_kernel():
 
 
     @numba.njit(cache=True, nogil=True)
-    def kernel(points, ids, a, b, faces, centre, jump, frame, radius, reach, axes, with_pixel, offset,
+    def kernel(points, ids, a, b, faces, centre, jump, frame, radius, reach, axes, with_pixel, offset, pixel_offset,
                pair_edge, p_st, p_en, p_pst, p_pen, p_flip, p_pflip, n_pairs, cross, cross_change, n_cross, pcross,
                pcross_change, n_pcross, boundary, overflow):
         n, k = ids.shape
@@ -863,7 +901,8 @@ def _arrangement_kernel():
         n_chunks = min(64, max(1, n // 256))
         for chunk in range(n_chunks):
             point_range(chunk * n // n_chunks, (chunk + 1) * n // n_chunks, chunk, points, ids, a, b, faces,
-                        centre, jump, frame, radius, reach, axes, with_pixel, offset, pair_edge, p_st, p_en, p_pst,
+                        centre, jump, frame, radius, reach, axes, with_pixel, offset, pixel_offset, pair_edge,
+                        p_st, p_en, p_pst,
                         p_pen, p_flip, p_pflip, n_pairs, cross, cross_change, n_cross, pcross, pcross_change,
                         n_pcross, boundary, overflow)
 
