@@ -2,7 +2,7 @@
 
 - JPEG: 8-bit sRGB, quality settable, EXIF DateTimeOriginal, OffsetTimeOriginal and GPS
   (written with piexif, encoded with Pillow).
-- TIFF (tifffile) and PNG (OpenCV): 16-bit linear RGB, no gamma (CONVENTIONS).
+- TIFF (tifffile) and PNG (OpenCV): 16-bit linear RGB, no gamma (docs/formats.md).
 - DNG: an RGGB Bayer mosaic of the linear image, 16-bit, written with PiDNG (pidng on
   PyPI), which rawpy reads back; the camera colour matrix is the XYZ -> linear sRGB
   matrix, so the camera's RGB is linear sRGB and LibRaw's sRGB output is the input.

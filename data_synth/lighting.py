@@ -1,6 +1,6 @@
 """The light of a synthetic scene: a sun disk of finite angular radius plus a uniform sky.
 
-Frames follow CONVENTIONS: azimuth clockwise from north (+y) towards east
+Frames as in docs/formats.md: azimuth clockwise from north (+y) towards east
 (+x), elevation above the horizon, direction to the sun
 s = (sin A cos E, cos A cos E, sin E). Irradiances are in arbitrary linear
 units (the sun's normal irradiance defaults to 1); only ratios matter.

@@ -38,6 +38,7 @@ from scene import solar_position
 
 from .camera_pipeline import SensorSettings
 from .lighting import SunSky
+from .misdescription import Misdescription
 from .textures import BoardSpec, PaperSheet
 
 __all__ = ["PRESETS", "DEFAULT_SIZE", "ViewSpec", "PhotoPlan", "PresetPlan", "build_preset", "IWATE"]
@@ -96,12 +97,16 @@ class PresetPlan:
     position: tuple[float, float, float] = (0.0, 0.0, 0.0)
     rotation_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
     scale: float = 1.0
-    receiver: str = "plane"  # "bank" (a height field, written as receiver kind "depth"), "steps" or "wall"
+    # "plane", "bank" (a height field, written as receiver kind "depth"), "steps", "wall", or a
+    # receiver object (data_synth.receivers: PlaneReceiver, HeightfieldReceiver, MeshReceiver).
+    receiver: object = "plane"
     receiver_azimuth_deg: float = 0.0  # steps / wall: the compass direction they climb or stand across
     board: BoardSpec | None = None
-    site: dict | None = None
+    site: dict | None = None  # where the photos were taken (their suns come from it)
     write_sun: bool = False
     fmt: str = "jpg"
+    write_site: bool = True  # False: [site] and the EXIF GPS are left out (the sun is given or fitted)
+    description: Misdescription = Misdescription()  # what scene.toml and the EXIF get wrong
 
 
 def _time(y, mo, d, h, mi, s=0) -> _dt.datetime:

@@ -14,13 +14,13 @@ dense mesh. ``MeshReceiver`` is any mesh (steps, a kerb, a wall), flat-shaded.
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 import trimesh
 
-__all__ = ["PlaneReceiver", "HeightfieldReceiver", "MeshReceiver", "bank_terrain", "steps_receiver",
-           "wall_receiver", "texture_coordinates"]
+__all__ = ["PlaneReceiver", "HeightfieldReceiver", "MeshReceiver", "bank_terrain", "rising_bank",
+           "steps_receiver", "wall_receiver", "texture_coordinates"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -120,6 +120,44 @@ def bank_terrain(bounds=(-4.0, -4.0, 4.0, 8.0), rise_m: float = 0.6, start_y: fl
         return fx, fy
 
     return HeightfieldReceiver(f, grad, tuple(bounds), spacing)
+
+
+def rising_bank(azimuth_deg: float, start_m: float, rise_m: float, width_m: float = 1.6, bump_m: float = 0.02,
+                centre_xy=(0.0, 0.0), half_extent_m: float = 8.0, spacing: float = 0.04) -> HeightfieldReceiver:
+    """Flat ground that rises smoothly by ``rise_m`` towards the compass azimuth, with gentle bumps.
+
+    t = (x, y) . (sin a, cos a) is the distance towards the azimuth from the origin: height =
+    rise * S((t - start_m) / width_m) + bump * sin(2.1 x) sin(1.7 y) (1 - 0.8 S'), S the
+    smoothstep 3u^2 - 2u^3 on [0, 1] (so the bumps fade on the slope). The steepest slope is
+    at most 1.5 rise / width + 2.8 bump (``max_slope`` measures it). The mesh covers the square
+    ``centre_xy`` +- ``half_extent_m``.
+    """
+    a = np.radians(azimuth_deg)
+    ax, ay = float(np.sin(a)), float(np.cos(a))
+
+    def smooth(x, y):
+        t = (x * ax + y * ay - start_m) / width_m
+        inside = (t > 0) & (t < 1)
+        u = np.clip(t, 0.0, 1.0)
+        return u, inside
+
+    def f(x, y):
+        u, _ = smooth(x, y)
+        return rise_m * (3 * u ** 2 - 2 * u ** 3) + bump_m * np.sin(2.1 * x) * np.sin(1.7 * y) * (1 - 0.8 * u)
+
+    def grad(x, y):
+        u, inside = smooth(x, y)
+        ds = np.where(inside, 6 * u * (1 - u) / width_m, 0.0)  # d S / d t
+        du = np.where(inside, 1.0 / width_m, 0.0)
+        sx, sy = np.sin(2.1 * x), np.sin(1.7 * y)
+        damp = 1 - 0.8 * u
+        fx = rise_m * ds * ax + bump_m * (2.1 * np.cos(2.1 * x) * sy * damp - 0.8 * sx * sy * du * ax)
+        fy = rise_m * ds * ay + bump_m * (1.7 * sx * np.cos(1.7 * y) * damp - 0.8 * sx * sy * du * ay)
+        return fx, fy
+
+    cx, cy = float(centre_xy[0]), float(centre_xy[1])
+    h = float(half_extent_m)
+    return HeightfieldReceiver(f, grad, (cx - h, cy - h, cx + h, cy + h), spacing)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

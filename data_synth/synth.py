@@ -1,6 +1,6 @@
 """``synthesize``: render a preset into a photo folder (images, scene.toml, truth.json).
 
-Folder format per CONVENTIONS ("Photo folders", "scene.toml",
+Folder format as in docs/formats.md ("Photo folders", "scene.toml",
 "softshadow synth"). truth.json holds, per group, the physical truth of the
 light (range_k = tan(sun radius), rho = E_sky / (E_sun_h + E_sky) on open
 ground), the group's sun, and its photos; plus per-photo details (exact time
@@ -20,18 +20,19 @@ import numpy as np
 import trimesh
 
 from scene import CameraSpec, ObjectSpec, PhotoSpec, ReceiverSpec, SceneSpec, SiteSpec, dump_scene
-from softshadow import (GroundGrid, PinholeCamera, brightness_to_paper, builtin_mesh, load_mesh, one_blas_thread,
-                        pose_matrix)
+from softshadow import GroundGrid, PinholeCamera, brightness_to_paper, builtin_mesh, load_mesh
+from softshadow import one_blas_thread
+from softshadow.internal import pose_matrix
 
 from .camera_pipeline import camera_pipeline, fit_handheld_camera, topdown_grid
 from .image_io import EXTENSIONS, FORMATS, PhotoMetadata, write_corrupt_jpeg, write_photo
 from .presets import PresetPlan, PhotoPlan, build_preset
-from .receivers import MeshReceiver, PlaneReceiver, bank_terrain, steps_receiver, wall_receiver
+from .receivers import HeightfieldReceiver, MeshReceiver, PlaneReceiver, bank_terrain, steps_receiver, wall_receiver
 from .renderers import RENDERERS, RenderQuality, SynthScene, make_renderer
 from .textures import GroundAppearance, procedural_texture
 from .tracing import pinhole_rays, topdown_rays
 
-__all__ = ["synthesize", "posed_mesh", "OutputExistsError"]
+__all__ = ["synthesize", "synthesize_plan", "posed_mesh", "OutputExistsError"]
 
 
 class OutputExistsError(FileExistsError):
@@ -53,7 +54,10 @@ OBJECT_MESH_FILE = "object.ply"
 
 
 def _receiver(plan: PresetPlan):
-    """The preset's receiver: the plane, the bank (a height field) or a mesh (steps, wall)."""
+    """The preset's receiver: the plane, the bank (a height field), a mesh (steps, wall), or the
+    receiver object the plan carries."""
+    if not isinstance(plan.receiver, str):
+        return plan.receiver
     if plan.receiver == "bank":
         return bank_terrain()
     if plan.receiver == "steps":
@@ -124,13 +128,19 @@ def _depth_image(camera: PinholeCamera, render) -> np.ndarray:
     return z.reshape(render.receiver_valid.shape).astype(np.float32)
 
 
+def _mean_azimuth(azimuths_deg) -> float:
+    """The circular mean of compass azimuths in degrees, in [0, 360) (359 and 1 average to 0, not 180)."""
+    a = np.radians(np.asarray(azimuths_deg, dtype=np.float64))
+    return float(np.degrees(np.arctan2(np.sin(a).mean(), np.cos(a).mean())) % 360.0)
+
+
 def _group_truth(label: str, photos: list[PhotoPlan]) -> dict:
     light = photos[0].light
     truth = light.truth()
     truth.update(
         label=label,
         photos=[],
-        sun_azimuth_deg=float(np.mean([p.light.azimuth_deg for p in photos])),
+        sun_azimuth_deg=_mean_azimuth([p.light.azimuth_deg for p in photos]),
         sun_elevation_deg=float(np.mean([p.light.elevation_deg for p in photos])),
         range=100.0 * light.range_k,
         brightness=float(brightness_to_paper(light.rho)),
@@ -166,13 +176,7 @@ def synthesize(out_dir, preset: str = "table2", seed: int = 0, renderer: str = "
 
 def _synthesize(out_dir, preset, seed, renderer, size, fmt, quality, progress, force, write_sun, cameras,
                 render_quality, noise, object_mesh=None, sun_radius_deg=None) -> Path:
-    t_start = time.perf_counter()
-    if renderer not in RENDERERS:
-        raise ValueError(f"unknown renderer {renderer!r}; choose one of {RENDERERS}")
-    if cameras not in ("explicit", "markers"):
-        raise ValueError(f"cameras must be 'explicit' or 'markers', got {cameras!r}")
-    if not 1 <= int(quality) <= 100:
-        raise ValueError(f"JPEG quality must be 1..100, got {quality}")
+    _check_options(renderer, cameras, quality)
     if object_mesh is not None and not isinstance(object_mesh, trimesh.Trimesh):
         object_mesh = load_mesh(object_mesh)  # MeshError with the reason when it cannot be read
     if preset == "street":
@@ -188,12 +192,49 @@ def _synthesize(out_dir, preset, seed, renderer, size, fmt, quality, progress, f
         plan = dataclasses.replace(plan, photos=tuple(
             dataclasses.replace(p, light=dataclasses.replace(p.light, radius_deg=float(sun_radius_deg)))
             for p in plan.photos))
+    return _synthesize_plan(out_dir, plan, seed, renderer, fmt, quality, progress, force, write_sun, cameras,
+                            render_quality, noise, object_mesh)
+
+
+def synthesize_plan(out_dir, plan: PresetPlan, *, seed: int = 0, renderer: str = "physical",
+                    fmt: str | None = None, quality: int = 92, progress: bool = False, force: bool = False,
+                    write_sun: bool | None = None, cameras: str = "explicit",
+                    render_quality: RenderQuality | None = None, noise: bool = True,
+                    object_mesh: trimesh.Trimesh | str | Path | None = None) -> Path:
+    """Render a plan (a preset's, or one drawn at random: ``data_synth.draw``) into ``out_dir``.
+
+    The options are those of ``synthesize``; ``seed`` seeds the render's noise (sun
+    samples, sensor noise, ground texture). The plan's ``description`` is what
+    scene.toml and the EXIF say where it differs from the rendered truth.
+    """
+    with one_blas_thread():
+        return _synthesize_plan(out_dir, plan, seed, renderer, fmt, quality, progress, force, write_sun, cameras,
+                                render_quality, noise, object_mesh)
+
+
+def _check_options(renderer, cameras, quality) -> None:
+    if renderer not in RENDERERS:
+        raise ValueError(f"unknown renderer {renderer!r}; choose one of {RENDERERS}")
+    if cameras not in ("explicit", "markers"):
+        raise ValueError(f"cameras must be 'explicit' or 'markers', got {cameras!r}")
+    if not 1 <= int(quality) <= 100:
+        raise ValueError(f"JPEG quality must be 1..100, got {quality}")
+
+
+def _synthesize_plan(out_dir, plan: PresetPlan, seed, renderer, fmt, quality, progress, force, write_sun,
+                     cameras, render_quality, noise, object_mesh) -> Path:
+    t_start = time.perf_counter()
+    _check_options(renderer, cameras, quality)
+    if object_mesh is not None and not isinstance(object_mesh, trimesh.Trimesh):
+        object_mesh = load_mesh(object_mesh)  # MeshError with the reason when it cannot be read
+    preset = plan.name
     fmt = fmt or plan.fmt
     if fmt not in FORMATS:
         raise ValueError(f"unknown image format {fmt!r}; choose one of {FORMATS}")
     out = Path(out_dir)
     _prepare_out_dir(out, force)
     write_sun = plan.write_sun if write_sun is None else bool(write_sun)
+    told = plan.description
 
     mesh = posed_mesh(plan.mesh if object_mesh is None else object_mesh, plan.position, plan.rotation_deg,
                       plan.scale)
@@ -209,10 +250,13 @@ def _synthesize(out_dir, preset, seed, renderer, size, fmt, quality, progress, f
         object_file = OBJECT_MESH_FILE
         object_mesh.export(out / object_file)
         files.append(object_file)
-    spec = SceneSpec(object=ObjectSpec(object_file, tuple(plan.position), tuple(plan.rotation_deg), plan.scale))
-    if plan.site is not None:
+    spec = SceneSpec(object=ObjectSpec(object_file, told.position(plan.position), tuple(plan.rotation_deg),
+                                       told.scale(plan.scale)))
+    site_written = plan.site is not None and plan.write_site
+    if site_written:
         spec.site = SiteSpec(plan.site["latitude"], plan.site["longitude"], plan.site.get("timezone"))
-    if plan.receiver == "bank":
+    depth_receiver = isinstance(receiver, HeightfieldReceiver)
+    if depth_receiver:
         spec.receiver = ReceiverSpec(kind="depth")
     if isinstance(receiver, MeshReceiver):
         # The receiver's mesh goes into the folder (world metres, placed as is).
@@ -258,8 +302,9 @@ def _synthesize(out_dir, preset, seed, renderer, size, fmt, quality, progress, f
             files.append(name)
             skipped.append({"photo": name, "reason": photo.note or "corrupt file"})
             continue
-        exif_time = photo.time if (photo.exif_time and fmt == "jpg") else None
-        site = plan.site or {}
+        written_time = told.time(photo.time)
+        exif_time = written_time if (photo.exif_time and fmt == "jpg") else None
+        site = plan.site if site_written else {}
         focal = float(camera.K[0][0]) if isinstance(camera, PinholeCamera) else None
         meta = PhotoMetadata(exif_time, site.get("latitude"), site.get("longitude"), focal_px=focal,
                              size=tuple(plan.size))
@@ -267,14 +312,14 @@ def _synthesize(out_dir, preset, seed, renderer, size, fmt, quality, progress, f
         files.append(name)
         entry = PhotoSpec(camera=cam_spec if (cameras == "explicit" or cam_spec.kind == "topdown") else None)
         scene_time = photo.scene_time if photo.scene_time is not None else (fmt != "jpg" or not photo.exif_time)
-        if scene_time and photo.time is not None:
-            entry.time = photo.time.isoformat()
+        if scene_time and written_time is not None:
+            entry.time = written_time.isoformat()
         entry.group = photo.scene_group
         sun_written = write_sun if photo.write_sun is None else photo.write_sun
         if sun_written:
-            entry.sun_azimuth_deg = float(photo.light.azimuth_deg)
-            entry.sun_elevation_deg = float(photo.light.elevation_deg)
-        if plan.receiver == "bank" and isinstance(camera, PinholeCamera):
+            entry.sun_azimuth_deg, entry.sun_elevation_deg = told.sun(photo.light.azimuth_deg,
+                                                                      photo.light.elevation_deg)
+        if depth_receiver and isinstance(camera, PinholeCamera):
             # The range-image format of scene.toml: float32 metres along the optical axis, NaN = none.
             depth_name = photo.name + ".depth.npy"
             np.save(out / depth_name, _depth_image(camera, render))
@@ -285,6 +330,7 @@ def _synthesize(out_dir, preset, seed, renderer, size, fmt, quality, progress, f
         details[name] = {
             "group": photo.group,
             "time": photo.time.isoformat() if photo.time else None,
+            "time_written": written_time.isoformat() if written_time else None,
             "time_in_exif": exif_time is not None,
             "time_in_scene": entry.time is not None,
             "sun_in_scene": bool(sun_written),
@@ -311,10 +357,15 @@ def _synthesize(out_dir, preset, seed, renderer, size, fmt, quality, progress, f
         "seed": int(seed),
         "size": list(plan.size),
         "format": fmt,
+        "quality": int(quality),
         "render_quality": dataclasses.asdict(quality_settings),
         "truth_definition": {"range_k": "tan(sun angular radius), the edge rule's geometric value",
                              "rho": "E_sky / (E_sun_horizontal + E_sky) on open ground, direct light only",
                              "brightness": "255 rho^(1/2.2)", "range": "100 k"},
+        "object": {"mesh": object_file, "position": list(plan.position), "rotation_deg": list(plan.rotation_deg),
+                   "scale": plan.scale},
+        "site": dict(plan.site) if plan.site else None,
+        "misdescription": told.to_json(),
         "photos_detail": details,
         "expected_skipped": skipped,
         "files": files + ["scene.toml", "truth.json"],

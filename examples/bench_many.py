@@ -6,7 +6,7 @@ Synthesises ``--folders`` photo folders (``data_synth.synthesize``, the model re
 seeds 0..N-1) unless they exist, warms JAX's compilation cache with one fit, then times,
 each in a fresh process from its start to its end:
 - ``loop``: one Python process fitting the folders one after another
-  (``fitting.many.fit_one_folder``, what a Dask worker runs), no Dask;
+  (``fitting.folder.many.fit_one_folder``, what a Dask worker runs), no Dask;
 - ``dask_1``, ``dask_2``, ...: ``softshadow fit ROOT --out OUT --recursive --workers N``.
 Each folder's own fit time is known (the loop prints it; Dask's workers write it in each
 folder's done marker), so every run splits into time in fits and time outside them
@@ -36,7 +36,7 @@ LOOP = """
 import json, sys, time
 from pathlib import Path
 from fitting import find_photo_folders
-from fitting.many import fit_one_folder
+from fitting.folder.many import fit_one_folder
 root, out = Path(sys.argv[1]), Path(sys.argv[2])
 times = []
 for folder in find_photo_folders(root):

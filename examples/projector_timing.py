@@ -41,15 +41,15 @@ def main() -> None:
     model = ss.SoftShadowModel.from_mesh(spec.object.mesh)
     pose, sun = ss.Pose(), ss.Sun(200.0, 40.0)
     camera = ss.look_at_camera((3.0, -4.0, 2.6), (0.0, 0.0, 0.5), w, h, 50.0)
-    world, _ = ss.posed_vertices(model.occluder, pose)
-    surf = ss.Surface(world, model.occluder.faces)
+    world, _ = ss.internal.posed_vertices(model.occluder, pose)
+    surf = ss.internal.Surface(world, model.occluder.faces)
     out = {"mesh_faces": int(len(model.occluder.faces)), "size": args.size, "machine": platform.machine(),
            "repeats": args.repeats}
-    out["visibility_ms"], vis = _median_ms(lambda: ss.visible_surfaces(camera, [surf], 0.85), args.repeats)
+    out["visibility_ms"], vis = _median_ms(lambda: ss.internal.visible_surfaces(camera, [surf], 0.85), args.repeats)
     out["visible_points"] = int(len(vis.pixel))
     for i, proj in enumerate(projectors):
         out[f"projector{i}_shadow_map_ms"], smap = _median_ms(
-            lambda: ss.projector_shadow_map(proj, surf.vertices, surf.faces), args.repeats)
+            lambda: ss.internal.projector_shadow_map(proj, surf.vertices, surf.faces), args.repeats)
         out[f"projector{i}_light_ms"], _ = _median_ms(lambda: proj.irradiance(vis.points, vis.normals, smap),
                                                       args.repeats)
     out["sun_plan_ms"], _ = _median_ms(lambda: model.plan_points(sun, pose, vis.points, 0.03, normals=vis.normals),

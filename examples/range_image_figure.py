@@ -5,10 +5,10 @@ Usage: python examples/range_image_figure.py [--out docs/img/range_image.png] [-
 1. data_synth renders the ``depth-background`` preset (the 3 m pillar before a
    rising grassy bank, physical ray casting) and writes each photo's range image.
 2. The first photo's range image is back-projected through its camera to 3-D
-   receiver points and normals (``fitting.receiver_points``).
+   receiver points and normals (``fitting.samples.receiver_points``).
 3. The model's soft shadow is drawn on those points (k = tan(sun radius) and rho
    of the preset's truth): alpha from the expanded shadow volume, the lit level of
-   each point from its normal (``fitting.receiver_light``: sun incidence and the
+   each point from its normal (``fitting.samples.receiver_light``: sun incidence and the
    sky (1 + n_z) / 2 an open tilted plane sees).
 4. Four panels: the range image; the shadow on the range image without the
    background's colours (shading only); with them (the ground texture's albedo
@@ -30,13 +30,14 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from data_synth import GroundAppearance, RenderQuality, procedural_texture, synthesize, texture_coordinates
-from fitting.photos import read_photo
-from fitting.receiver_light import plane_sky_fraction, shadow_factor, sun_incidence
-from fitting.receiver_points import ReceiverSurface, read_depth
-from fitting.receiver_samples import receiver_plan
-from fitting.views import PhotoView
+from fitting.photos.read import read_photo
+from fitting.samples.receiver_light import plane_sky_fraction, shadow_factor, sun_incidence
+from fitting.samples.receiver_points import ReceiverSurface, read_depth
+from fitting.samples.receiver import receiver_plan
+from fitting.photos.views import PhotoView
 from scene import load_scene
-from softshadow import Pose, ShadowParams, SoftShadowModel, Sun, linear_to_srgb, object_mask
+from softshadow import Pose, ShadowParams, SoftShadowModel, Sun, linear_to_srgb
+from softshadow.internal import object_mask
 from softshadow_cli.synth_command import parse_size
 
 

@@ -41,7 +41,7 @@ DEFAULT_PAIRS = ("DSC_0569.jpg:DSC_0570.jpg", "p21_1.jpg:p21_n.jpg")
 
 def references(m, gray: np.ndarray, free_gray: np.ndarray, bands=()) -> tuple[float | None, float, dict]:
     """(reference at the kept profiles or None, umbra-wide reference, {band: umbra-wide reference in those rows})."""
-    from fitting import attenuation_image, reference_at_profiles
+    from benchmarks.pair_reference import attenuation_image, reference_at_profiles
     ratio = attenuation_image(gray, free_gray)
     at_profiles = reference_at_profiles(m, ratio)
     log_ratio = np.log(np.maximum(ratio, 1e-6))
@@ -61,7 +61,7 @@ def references(m, gray: np.ndarray, free_gray: np.ndarray, bands=()) -> tuple[fl
 
 def main(argv=None) -> None:
     from fitting import read_photo
-    from fitting.edge_measure import measure_shadow_edges
+    from fitting.edges.measure import measure_shadow_edges
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("pairs_dir")

@@ -15,7 +15,7 @@ truth rho lies within 2 stated rho_stderr, for all seeds and for the reliable on
 and with the statistical part alone. ``--mitsuba DIR`` adds the photos of the Mitsuba
 render folders there (each with truth.json), measured without geometry too (their
 scene.toml is not read). ``--calibrate`` fits the systematic floor
-(``fitting.uncertainty.EdgeFloor``) to the rows: the smallest floor on a grid that puts
+(``fitting.solve.uncertainty.EdgeFloor``) to the rows: the smallest floor on a grid that puts
 at least ``--target`` of the truths within 2 sigma. Calibrate on seeds that the
 coverage run does not use (docs/uncertainty.md: calibration 100-111, coverage 0-11).
 ``--from-records`` recomputes the summary from saved rows without measuring again.
@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fitting.uncertainty import CALIBRATED_EDGE_FLOOR, EdgeFloor, edge_rho_errors
+from fitting.solve.uncertainty import CALIBRATED_EDGE_FLOOR, EdgeFloor, edge_rho_errors
 
 TOLERANCE = 0.03
 
@@ -69,7 +69,7 @@ def measure_seed(root: Path, seed: int, size: tuple[int, int]) -> dict:
 
 def _measure(path: Path):
     from fitting import read_photo
-    from fitting.edge_measure import measure_shadow_edges
+    from fitting.edges.measure import measure_shadow_edges
 
     photo = read_photo(path)
     return measure_shadow_edges(photo.gray, mask=photo.excluded, linear_rgb=photo.linear)
@@ -78,7 +78,7 @@ def _measure(path: Path):
 def _spread(path: Path) -> float:
     """The kept profiles' log-rho spread of the photo (measured again, as `softshadow fit` does
     without geometry; results.json keeps only the errors it makes)."""
-    from fitting.uncertainty import profile_spread
+    from fitting.solve.uncertainty import profile_spread
 
     m = _measure(path)
     return profile_spread(np.log([p.rho for p in m.profiles if p.kept]))
@@ -86,7 +86,7 @@ def _spread(path: Path) -> float:
 
 def measure_mitsuba(folder: Path) -> list[dict]:
     """Rows for each photo of a Mitsuba render folder, measured without geometry."""
-    from fitting.uncertainty import profile_spread
+    from fitting.solve.uncertainty import profile_spread
 
     truth = json.loads((folder / "truth.json").read_text())["groups"][0]
     rows = []

@@ -1,35 +1,22 @@
 """fitting: range k and brightness rho of outdoor soft shadows, per time of day, from photos.
 
-Photos are read linearly (``photos``), timed and grouped (``exif``, ``grouping``),
-registered (scene cameras or a ChArUco board, ``markers``), sampled near the
-predicted shadow boundary (``samples``) and fitted with the differentiable
-renderer and optimistix (``model``, ``solve``); ``api`` runs whole folders, ``many``
-runs many folders on Dask, and
-``report``/``plots`` write the Table-2 report. Fits run in float64, scoped to
-the fitting call (``jax.enable_x64``), so the caller's own precision is kept.
+Its subpackages, one job each, top floor first (each imports only those below it):
+
+- ``folder``: the entry points: one folder (``fit_folder``, ``fit_and_report``), many folders on Dask
+  (``fit_many``), the resume store;
+- ``solve``: one time of day: the pixel model, optimistix least squares, errors, levels of detail;
+- ``verdict``: the rule book: reliable, identifiable, bounds and warnings from the fit's evidence;
+- ``samples``: which pixels a fit uses, on every kind of receiver;
+- ``edges``: the no-geometry path: shadow edges found and measured in one photo;
+- ``photos``: reading photos, their times, cameras (a ChArUco board), suns and groups;
+- ``report``: results.json, the paper's Table 2, plots and index.html.
+
+Fits run in float64, scoped to the fitting call (``jax.enable_x64``), so the caller's own precision is kept.
 """
 
 import lazy_loader as _lazy
 
-# The public names, by the module that defines them, each imported on first use (PEP 562,
+# The public names are listed in ``__init__.pyi``; each is imported on first use (PEP 562,
 # ``lazy_loader``): a folder of photos without geometry is measured without loading JAX,
 # optimistix or trimesh, whose imports take seconds.
-__getattr__, __dir__, __all__ = _lazy.attach(__name__, submod_attrs={
-    "api": ["FolderError", "fit_and_report", "fit_folder", "fit_photos"],
-    "edge_measure": ["EdgeMeasurement", "measure_shadow_edges"],
-    "exif": ["intrinsics_from_exif", "photo_time_from_exif", "read_exif"],
-    "grouping": ["NO_TIME_REASON", "PhotoGroup", "group_photos", "photo_time"],
-    "many": ["DONE_MARKER", "SUMMARY_COLUMNS", "find_photo_folders", "fit_many", "write_summary"],
-    "markers": ["Registration", "RegistrationError", "board_from_spec", "board_outline_world", "board_world_points",
-                "register_board"],
-    "options": ["FitOptions"],
-    "pair_reference": ["attenuation_image", "reference_at_profiles"],
-    "photos": ["IMAGE_EXTENSIONS", "RAW_EXTENSIONS", "Photo", "PhotoError", "linear_to_srgb", "list_photos",
-               "read_photo", "srgb_to_linear"],
-    "problem": ["GroupProblem", "SolveOutcome", "group_problem"],
-    "report": ["PAPER_TABLE2", "format_table", "write_report", "write_results_json", "write_table2"],
-    "results": ["FitResults", "GroupResult"],
-    "samples": ["NoShadowInView"],
-    "solve": ["fit_group"],
-    "views": ["PhotoView"],
-})
+__getattr__, __dir__, __all__ = _lazy.attach_stub(__name__, __file__)

@@ -1,4 +1,4 @@
-"""``scene.toml``: reading and writing the photo-folder scene description (CONVENTIONS).
+"""``scene.toml``: reading and writing the photo-folder scene description (docs/formats.md).
 
 Plain dataclasses, validated on load with messages that name the file and
 key. Unknown tables and keys are refused by name (with the nearest known
@@ -15,7 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from softshadow import FALLOFFS, GroundGrid, PinholeCamera, Projector, slide_from_text
+from softshadow import GroundGrid, PinholeCamera, Projector, slide_from_text
+from softshadow.internal import FALLOFFS
 
 __all__ = ["NO_GEOMETRY", "TABLES", "SceneError", "SiteSpec", "ObjectSpec", "ReceiverSpec", "CameraSpec", "PhotoSpec",
            "ProjectorSpec", "SceneSpec",
@@ -276,6 +277,7 @@ def _camera(table, where: str) -> CameraSpec:
             setattr(cam, key, _array(table[key], shape, f"{where}.{key}"))
         if abs(np.linalg.det(np.asarray(cam.R)) - 1) > 1e-3:
             raise SceneError(f"{where}.R is not a rotation matrix")
+        _check_K(cam.K, f"{where}.K")
         if "dist" in table:
             cam.dist = _array(table["dist"], None, f"{where}.dist")
     elif kind == "topdown":
@@ -296,9 +298,20 @@ def _camera(table, where: str) -> CameraSpec:
             cam.origin_m = _floats(table["origin_m"], 2, f"{where}.origin_m")
         if "K" in table:
             cam.K = _array(table["K"], (3, 3), f"{where}.K")
+            _check_K(cam.K, f"{where}.K")
         if "dist" in table:
             cam.dist = _array(table["dist"], None, f"{where}.dist")
     return cam
+
+
+def _check_K(K, where: str) -> None:
+    """An intrinsic matrix: positive focal lengths (pixels), last row (0, 0, 1)."""
+    K = np.asarray(K, dtype=float)
+    if not (K[0, 0] > 0 and K[1, 1] > 0):
+        raise SceneError(f"{where} must have positive focal lengths K[0][0] and K[1][1] (pixels), "
+                         f"got {K[0, 0]:g} and {K[1, 1]:g}")
+    if not (K[1, 0] == 0 and np.array_equal(K[2], [0.0, 0.0, 1.0])):
+        raise SceneError(f"{where} must look like [[fx, s, cx], [0, fy, cy], [0, 0, 1]], got {K.tolist()}")
 
 
 def _receiver(table, where: str) -> ReceiverSpec:
@@ -462,9 +475,13 @@ def scene_from_dict(data: dict, base_dir=None, source="scene.toml") -> SceneSpec
                 if not isinstance(value, (str, int, float, _dt.datetime)) or isinstance(value, bool):
                     raise SceneError(f"{where}.{key} must be text, got {value!r}")
                 setattr(photo, key, str(value))
-        for key in ("sun_azimuth_deg", "sun_elevation_deg"):
+        for key, low, high, what in (("sun_azimuth_deg", -360.0, 360.0, "degrees clockwise from north"),
+                                     ("sun_elevation_deg", -90.0, 90.0, "degrees above the horizon")):
             if key in p:
-                setattr(photo, key, _number(p.pop(key), f"{where}.{key}"))
+                angle = _number(p.pop(key), f"{where}.{key}")
+                if not low <= angle <= high:
+                    raise SceneError(f"{where}.{key} must be in [{low:g}, {high:g}] ({what}), got {angle:g}")
+                setattr(photo, key, angle)
         if "camera" in p:
             photo.camera = _camera(p.pop("camera"), f"{where}.camera")
         for key in ("depth", "ignore"):

@@ -1,6 +1,6 @@
 """Cameras: OpenCV pinhole cameras and top-down ground maps.
 
-Pinhole convention (CONVENTIONS): x_cam = R x_world + t, pixel (u, v) with
+Pinhole convention (docs/formats.md): x_cam = R x_world + t, pixel (u, v) with
 (0, 0) the centre of the top-left pixel, u to the right, v down. Ground maps:
 north up, pixel (col, row) centred at (origin_x + col * pixel_m,
 origin_y - row * pixel_m).

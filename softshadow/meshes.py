@@ -132,11 +132,6 @@ def builtin_mesh(name: str) -> trimesh.Trimesh:
     return _builtin_cached(name).copy()
 
 
-def _drop_degenerate(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
-    keep = mesh.area_faces > 1e-14
-    return trimesh.Trimesh(mesh.vertices, mesh.faces[keep], process=False)
-
-
 def clean_mesh(mesh: trimesh.Trimesh, source: str = "mesh") -> trimesh.Trimesh:
     """Validate a mesh for shadow casting; drop unusable faces, raise MeshError if none remain.
 

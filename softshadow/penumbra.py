@@ -201,7 +201,7 @@ def penumbra_coordinate(points: Float[Array, "n 3"], a: Float[Array, "n 3"], b: 
 
     u = +1 on the expanded silhouette, -1 on the contracted one, |u| > 1 outside
     the penumbra. Its size comes from the edge's plane where the point, seen
-    along the light, lies beside the segment (the CONVENTIONS definition), and
+    along the light, lies beside the segment (the documented definition), and
     from the angular distance to the end vertex beyond the ends (so convex
     corners are rounded); its sign comes from the edge's plane near the segment
     (within half a penumbra half-width, where the plan found the shadow's boundary:

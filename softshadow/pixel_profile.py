@@ -19,7 +19,7 @@ of 0.5-0.9 px, where it read the blur low and k 20-33 % high (docs/fitting.md).
 
 The renderer's own images average the profile over the pixel's exact footprint (a box in
 each of the pixel's two directions, ``penumbra.footprint_profile_alpha``) and add no camera
-blur; this Gaussian is the model of a photographed pixel, the fitter's (``fitting.model``).
+blur; this Gaussian is the model of a photographed pixel, the fitter's (``fitting.solve.model``).
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ _SHARP_TAU = 1e-6  # below this the linear ramp is its unblurred self (keeps 1/t
 _INV_SQRT_2PI = float(1.0 / np.sqrt(2.0 * np.pi))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _penumbra_nodes(profile: str, nodes: int) -> tuple[np.ndarray, np.ndarray]:
     """Nodes s (M,) in (-1, 1) and weights (M,) of the integral over the penumbra of the
     profile's density -d alpha/ds: the midpoint rule in theta, s = cos theta."""

@@ -38,11 +38,12 @@ import dataclasses
 import functools
 
 import numpy as np
-from scipy import ndimage
 
 from .camera import GroundGrid, PinholeCamera, look_at_camera
 from .clip import clip_near
-from .shadowmap import FACING_TOL, ShadowMap, depth_bias, shadow_map
+from .scratch import Scratch, scratch_array
+from .shadowmap import (_LOOKUP_OFFSETS, _NEAREST_OFFSETS, BIAS_PX, FACING_TOL, PRECISION_ULPS, SLOPE_PX, TAN_MAX,
+                        ShadowMap, shadow_map)
 
 __all__ = ["FALLOFFS", "NEAR_M", "Projector", "ProjectorShadowMap", "projector_shadow_map"]
 
@@ -109,7 +110,7 @@ class Projector:
         if not (int(self.shadow_px) >= 16):
             raise ValueError(f"projector shadow_px must be at least 16, got {self.shadow_px!r}")
 
-    @property
+    @functools.cached_property
     def camera(self) -> PinholeCamera:
         """The projector as a pinhole camera whose image is the slide (W x H pixels)."""
         h, w = self.slide.shape[:2]
@@ -132,33 +133,47 @@ class Projector:
     def slide_colour(self, points) -> np.ndarray:
         """The slide's transmittance (N, 3) at world points (N, 3): bilinear at their projection
         onto the slide, 0 outside it and behind the projector (projective texture mapping)."""
-        ab, z = self.image_coordinates(points)
-        K = self.camera.K
-        u = K[0, 0] * ab[:, 0] + K[0, 1] * ab[:, 1] + K[0, 2]
-        v = K[1, 1] * ab[:, 1] + K[1, 2]
-        h, w = self.slide.shape[:2]
-        # Inside the slide's outer pixel edges; bilinear with 0 beyond its border pixels' centres
-        # would darken a half pixel inside the edge, so clamp to the edge instead.
-        inside = (z > 0) & (u >= -0.5) & (u <= w - 0.5) & (v >= -0.5) & (v <= h - 0.5)
-        coords = np.stack([np.clip(v, 0, h - 1), np.clip(u, 0, w - 1)])
-        out = np.stack([ndimage.map_coordinates(self.slide[..., c], coords, order=1, mode="nearest")
-                        for c in range(3)], -1)
-        return np.where(inside[:, None], out, 0.0)
+        p = np.ascontiguousarray(points, np.float64).reshape(-1, 3)
+        out = np.zeros((len(p), 3))
+        _light_kernel()(p, np.zeros((0, 3)), *self._kernel_args(), *_NO_MAP, np.zeros(0, np.int64), 0, out,
+                        np.empty(0))
+        return out
 
     def irradiance(self, points, normals=None, shadow: "ProjectorShadowMap | None" = None) -> np.ndarray:
         """Irradiance (N, 3) the projector gives world points (N, 3) with unit normals (N, 3)
         (None: surfaces facing the projector), through ``shadow`` (None: no shadows)."""
-        p = np.asarray(points, np.float64).reshape(-1, 3)
-        to_light = self.position - p
-        d = np.linalg.norm(to_light, axis=1)
-        d_safe = np.maximum(d, 1e-12)
-        cos = np.ones(len(p)) if normals is None else np.maximum(
-            np.einsum("ij,ij->i", np.asarray(normals, np.float64).reshape(-1, 3), to_light) / d_safe, 0.0)
-        fall = (self.reference_distance_m / d_safe) ** 2 if self.falloff == "inverse-square" else np.ones(len(p))
-        scalar = float(self.intensity) * cos * fall
-        if shadow is not None:
-            scalar = scalar * shadow.lit(p, normals)
-        return self.slide_colour(p) * scalar[:, None]
+        p = np.ascontiguousarray(points, np.float64).reshape(-1, 3)
+        out = np.zeros((len(p), 3))
+        self.add_irradiance(p, normals, shadow, out)
+        return out
+
+    def add_irradiance(self, points: np.ndarray, normals, shadow: "ProjectorShadowMap | None",
+                       out: np.ndarray, faces: np.ndarray | None = None) -> None:
+        """``irradiance`` added to ``out`` (N, 3) in place (points (N, 3) float64, C order).
+
+        faces (N,) int, optional: the face of the shadow map's triangles each point lies on (-1:
+        none), as a camera's z-buffer knows it; a point whose face is the map's nearest at its
+        pixel is lit without the lookup (it would find that face and the point on it).
+        """
+        n = np.zeros((0, 3)) if normals is None else np.ascontiguousarray(normals, np.float64).reshape(-1, 3)
+        own = (np.zeros(0, np.int64) if faces is None or shadow is None or not shadow.faces_as_given
+               else np.ascontiguousarray(faces, np.int64))
+        _light_kernel()(points, n, *self._kernel_args(), *(_NO_MAP if shadow is None else shadow._kernel_args()),
+                        own, 1, out, np.empty(0))
+
+    def _kernel_args(self) -> tuple:
+        cam = self.camera
+        falloff = 1.0 if self.falloff == "inverse-square" else 0.0
+        frame = np.vstack([cam.R, cam.t, cam.K[:2], self.position])  # rows 0-2 R, 3 t, 4-5 K, 6 position
+        return frame, self._texture, float(self.intensity), falloff, self.reference_distance_m
+
+    @functools.cached_property
+    def _texture(self) -> np.ndarray:
+        """The slide as the light kernel reads it: float32 (its values to 6e-8, and half the memory
+        to fetch from), one channel when the slide is grey (H, W, 1), else (H, W, 3)."""
+        grey = np.array_equal(self.slide[..., 0], self.slide[..., 1]) and np.array_equal(
+            self.slide[..., 0], self.slide[..., 2])
+        return np.ascontiguousarray(self.slide[..., :1] if grey else self.slide, np.float32)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -168,79 +183,223 @@ class ProjectorShadowMap:
     projector; smap: the ``ShadowMap`` in (a, -b) coordinates with depth -1/z, its slopes
     replaced by each face's tan against the ray from the projector (for the bias);
     pixel_tan: the map's pixel in normalised image units; scale: the coordinates' magnitude
-    (metres) for the rounding allowance.
+    (metres) for the rounding allowance; faces_as_given: the map's face ids are the indices of
+    the faces it was made from (no face was cut at the near plane).
     """
 
     projector: Projector
     smap: ShadowMap | None
     pixel_tan: float
     scale: float
-
-    @functools.cached_property
-    def near_cover(self) -> np.ndarray:
-        """Map pixels (H, W) bool with a covered pixel among their 3 x 3."""
-        return ndimage.binary_dilation(self.smap.face_id >= 0, np.ones((3, 3), bool))
+    faces_as_given: bool = False
 
     def occluded(self, points, normals=None) -> np.ndarray:
         """Whether an occluder lies between the projector and each point (N,) bool, or (given unit
         normals (N, 3)) the point's surface faces away from the projector (attached shadow).
         Points behind the projector or outside the map: False (the slide gives them no light)."""
-        p = np.asarray(points, np.float64).reshape(-1, 3)
-        out = np.zeros(len(p), bool)
-        if normals is not None:
-            # Attached shadow, as for the sun: a surface turned away from the projector is unlit
-            # (near the terminator the depth test's slope-scaled bias could otherwise pass it).
-            ray = p - self.projector.position
-            ray /= np.maximum(np.linalg.norm(ray, axis=1, keepdims=True), 1e-300)
-            out = np.einsum("ij,ij->i", np.asarray(normals, np.float64).reshape(-1, 3), ray) >= -FACING_TOL
-        if self.smap is None or not len(p):
-            return out
-        ab, z = self.projector.image_coordinates(p)
-        g = self.smap.grid
-        uv = np.column_stack([ab[:, 0], -ab[:, 1]])
-        cr = g.to_pixel(uv)
-        test = np.flatnonzero((z > NEAR_M) & (cr[:, 0] >= -0.5) & (cr[:, 0] <= g.width - 0.5)
-                              & (cr[:, 1] >= -0.5) & (cr[:, 1] <= g.height - 0.5))
-        # Only points with a covered map pixel among their 3 x 3 can be occluded (the lookup's
-        # reach): the others (most of a lit floor) skip it.
-        rc = np.clip(np.rint(cr[test]).astype(np.int64), 0, [g.width - 1, g.height - 1])
-        test = test[self.near_cover[rc[:, 1], rc[:, 0]]]
-        if not len(test):
-            return out
-        best, face_slope, exact = self.smap.occluder_depth(uv[test])
-        # Unlike the sun's test, which runs only inside the occluder's silhouette region, this
-        # one sees every point: an extrapolated plane (no face among the 9 pixels contains the
-        # point) counts only where the point's own map pixel is covered, so the shadow's outline
-        # is the map's raster (within 0.71 map pixel), not grown by the 2-pixel search.
-        rc = np.clip(np.rint(cr[test]).astype(np.int64), 0, [g.width - 1, g.height - 1])
-        covered = np.isfinite(self.smap.depth[rc[:, 1], rc[:, 0]])
-        have = np.isfinite(best) & (best < 0) & (exact | covered)
-        z_occ = np.where(have, -1.0 / np.where(have, best, -1.0), np.inf)
-        recv_slope = 0.0
-        if normals is not None:
-            n = np.asarray(normals, np.float64).reshape(-1, 3)[test]
-            ray = p[test] - self.projector.position
-            ray /= np.maximum(np.linalg.norm(ray, axis=1, keepdims=True), 1e-300)
-            cos = np.abs(np.einsum("ij,ij->i", n, ray))
-            recv_slope = np.sqrt(np.maximum(1.0 - cos * cos, 0.0)) / np.maximum(cos, 1e-12)
-        scale = max(self.scale, float(np.abs(p[test]).max()))
-        bias = depth_bias(self.pixel_tan * z[test], face_slope, recv_slope, scale, np.float64, exact)
-        out[test] |= z[test] > z_occ + bias
-        return out
+        return self.lit(points, normals) == 0.0
 
     def lit(self, points, normals=None) -> np.ndarray:
         """1.0 where the projector sees the point, 0.0 where an occluder hides it (N,)."""
-        return (~self.occluded(points, normals)).astype(np.float64)
+        p = np.ascontiguousarray(points, np.float64).reshape(-1, 3)
+        n = np.zeros((0, 3)) if normals is None else np.ascontiguousarray(normals, np.float64).reshape(-1, 3)
+        lit = np.empty(len(p))
+        _light_kernel()(p, n, *self.projector._kernel_args(), *self._kernel_args(), np.zeros(0, np.int64), 2,
+                        np.zeros((0, 3)), lit)
+        return lit
+
+    @functools.cached_property
+    def near_cover(self) -> np.ndarray:
+        """Map pixels (H, W) uint8: 1 where a covered pixel lies among their 3 x 3 (only points
+        there can be occluded)."""
+        import cv2
+        covered = (self.smap.face_id >= 0).view(np.uint8)
+        return cv2.dilate(covered, np.ones((3, 3), np.uint8), borderType=cv2.BORDER_CONSTANT, borderValue=0)
+
+    def _kernel_args(self) -> tuple:
+        if self.smap is None:
+            return _NO_MAP
+        g = self.smap.grid
+        geometry = np.array([g.origin_m[0], g.origin_m[1], g.pixel_m, self.pixel_tan, self.scale])
+        return (True, self.smap.face_id, self.near_cover, self._packed_faces, np.ascontiguousarray(self.smap.slope),
+                geometry)
+
+    @functools.cached_property
+    def _packed_faces(self) -> np.ndarray:
+        """Per face (F, 9), what a lookup reads, together: its first corner (u0, v0), the
+        barycentric coordinates' gradients (b1 = (u - u0) g1u + (v - v0) g1v, b2 alike) and its
+        depth plane (A, B, d0)."""
+        tri, plane = self.smap.triangle, self.smap.plane
+        e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+        area = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+        area = np.where(area == 0, 1.0, area)
+        return np.ascontiguousarray(np.column_stack([tri[:, 0], e2[:, 1] / area, -e2[:, 0] / area,
+                                                     -e1[:, 1] / area, e1[:, 0] / area, plane]))
 
 
-def projector_shadow_map(projector: Projector, vertices, faces) -> ProjectorShadowMap:
+# A projector without a shadow map, as the light kernel takes it.
+_NO_MAP = (False, np.zeros((1, 1), np.int32), np.zeros((1, 1), np.uint8), np.zeros((1, 9)), np.zeros(1),
+           np.array([0.0, 0.0, 1.0, 1.0, 0.0]))
+
+
+@functools.cache
+def _light_kernel():
+    """The compiled projector (numba): per point, projective texture mapping (the slide,
+    bilinear, clamped at its edge pixels' centres), the cosine and the falloff, and the shadow
+    map's test (``ProjectorShadowMap``'s rules: attached shadow; only points with a covered map
+    pixel among their 3 x 3 are looked up; the exact face among the point's pixel and its 8
+    neighbours, else the nearest covered pixel's within 2, extrapolated, counting only where the
+    point's own pixel is covered; the bias of ``shadowmap.depth_bias`` with the map pixel's
+    footprint pixel_tan z). mode 0: the slide's colour into out (N, 3); 1: the irradiance added
+    to out; 2: lit (N,) 1.0 / 0.0."""
+    import numba
+
+    @numba.njit(cache=True, nogil=True)
+    def kernel(points, normals, frame, slide, intensity, falloff, reference, has_map, face_id, near_cover, packed,
+               face_slope, geometry, own_face, mode, out, lit):
+        n_pts = points.shape[0]
+        has_normals = normals.shape[0] > 0
+        sh, sw, channels = slide.shape[0], slide.shape[1], slide.shape[2]
+        px, py, pz = frame[6, 0], frame[6, 1], frame[6, 2]
+        mh, mw = face_id.shape
+        ox, oy, inv_pt, pixel_tan = geometry[0], geometry[1], 1.0 / geometry[2], geometry[3]
+        # The rounding allowance's scale: the largest coordinate of the map's faces and the points.
+        scale = geometry[4]
+        if has_map and mode != 0:
+            for i in range(n_pts):
+                scale = max(scale, abs(points[i, 0]), abs(points[i, 1]), abs(points[i, 2]))
+        rounding = PRECISION_ULPS * np.finfo(np.float64).eps * scale
+        for i in range(n_pts):
+            p0, p1, p2 = points[i, 0], points[i, 1], points[i, 2]
+            x = frame[0, 0] * p0 + frame[0, 1] * p1 + frame[0, 2] * p2 + frame[3, 0]
+            y = frame[1, 0] * p0 + frame[1, 1] * p1 + frame[1, 2] * p2 + frame[3, 1]
+            z = frame[2, 0] * p0 + frame[2, 1] * p1 + frame[2, 2] * p2 + frame[3, 2]
+            if mode == 2:
+                lit[i] = 1.0
+            u, v, inv_z = 0.0, 0.0, 1.0
+            if mode != 2:
+                # On the slide or no light at all: nothing else to do.
+                inv_z = 1.0 / z if z > 0 else 1.0
+                u = frame[4, 0] * (x * inv_z) + frame[4, 1] * (y * inv_z) + frame[4, 2]
+                v = frame[5, 1] * (y * inv_z) + frame[5, 2]
+                if not (z > 0 and -0.5 <= u <= sw - 0.5 and -0.5 <= v <= sh - 0.5):
+                    continue
+            scalar = 1.0
+            cos_r = 1.0
+            if mode != 0:
+                lx, ly, lz = px - p0, py - p1, pz - p2
+                d = np.sqrt(lx * lx + ly * ly + lz * lz)
+                inv_d = 1.0 / max(d, 1e-12)
+                if has_normals:
+                    dot = normals[i, 0] * lx + normals[i, 1] * ly + normals[i, 2] * lz
+                    # Attached shadow: the normal against the ray from the projector.
+                    cos_r = -dot / max(d, 1e-300)
+                    if cos_r >= -FACING_TOL:
+                        if mode == 2:
+                            lit[i] = 0.0
+                        continue
+                    scalar = max(dot * inv_d, 0.0)
+                if mode == 1:
+                    fall = 1.0
+                    if falloff > 0.0:
+                        q = reference * inv_d
+                        fall = q * q
+                    scalar = intensity * scalar * fall
+                    if scalar == 0.0:
+                        continue
+            if mode != 0 and has_map and z > NEAR_M:
+                inv = 1.0 / z if mode == 2 else inv_z
+                a, b = x * inv, -(y * inv)
+                col, row = (a - ox) * inv_pt, (oy - b) * inv_pt
+                if -0.5 <= col <= mw - 0.5 and -0.5 <= row <= mh - 0.5:
+                    r = int(min(max(np.rint(row), 0.0), mh - 1.0))
+                    c = int(min(max(np.rint(col), 0.0), mw - 1.0))
+                    # Only points with a covered pixel among their 3 x 3 can be occluded; a point on
+                    # the face nearest the projector at its pixel is not.
+                    if near_cover[r, c] and not (own_face.shape[0] and own_face[i] >= 0
+                                                 and face_id[r, c] == own_face[i]):
+                        # The face's plane at the point: exact from the first of the 9 pixels whose
+                        # face contains it, else extrapolated from the nearest covered pixel's
+                        # within 2.
+                        best, fs, exact = np.inf, 0.0, False
+                        for k in range(_LOOKUP_OFFSETS.shape[0]):
+                            rr, cc = r + _LOOKUP_OFFSETS[k, 0], c + _LOOKUP_OFFSETS[k, 1]
+                            if rr < 0 or rr >= mh or cc < 0 or cc >= mw:
+                                continue
+                            f = face_id[rr, cc]
+                            if f < 0:
+                                continue
+                            qx, qy = a - packed[f, 0], b - packed[f, 1]
+                            b1 = qx * packed[f, 2] + qy * packed[f, 3]
+                            b2 = qx * packed[f, 4] + qy * packed[f, 5]
+                            if b1 >= -1e-7 and b2 >= -1e-7 and b1 + b2 <= 1.0 + 1e-7:
+                                best, exact = packed[f, 8] + packed[f, 6] * qx + packed[f, 7] * qy, True
+                                break
+                        if not exact:
+                            for k in range(_NEAREST_OFFSETS.shape[0]):
+                                rr, cc = r + _NEAREST_OFFSETS[k, 0], c + _NEAREST_OFFSETS[k, 1]
+                                if rr < 0 or rr >= mh or cc < 0 or cc >= mw:
+                                    continue
+                                f = face_id[rr, cc]
+                                if f >= 0:
+                                    best = packed[f, 8] + packed[f, 6] * (a - packed[f, 0]) + packed[f, 7] * (
+                                        b - packed[f, 1])
+                                    fs = face_slope[f]
+                                    break
+                        if np.isfinite(best) and best < 0 and (exact or face_id[r, c] >= 0):
+                            recv = 0.0
+                            if has_normals:
+                                cr = abs(cos_r)
+                                recv = np.sqrt(max(1.0 - cr * cr, 0.0)) / max(cr, 1e-12)
+                            pixel_m = pixel_tan * z
+                            bias = BIAS_PX * pixel_m + rounding
+                            if not exact:
+                                bias += SLOPE_PX * pixel_m * (min(fs, TAN_MAX) + min(recv, TAN_MAX))
+                            if z > -1.0 / best + bias:
+                                if mode == 2:
+                                    lit[i] = 0.0
+                                continue
+            if mode == 2:
+                continue
+            # Bilinear on the slide, its coordinates clamped to the edge pixels' centres; a grey
+            # slide is one channel.
+            vv, uu = min(max(v, 0.0), sh - 1.0), min(max(u, 0.0), sw - 1.0)
+            r0, c0 = int(vv), int(uu)
+            r1, c1 = min(r0 + 1, sh - 1), min(c0 + 1, sw - 1)
+            fr, fc = vv - r0, uu - c0
+            for k in range(channels):
+                top = slide[r0, c0, k] * (1.0 - fc) + slide[r0, c1, k] * fc
+                bottom = slide[r1, c0, k] * (1.0 - fc) + slide[r1, c1, k] * fc
+                value = scalar * (top * (1.0 - fr) + bottom * fr)
+                if channels == 1:
+                    out[i, 0] += value
+                    out[i, 1] += value
+                    out[i, 2] += value
+                else:
+                    out[i, k] += value
+
+    return kernel
+
+
+def projector_shadow_map(projector: Projector, vertices, faces, *, facing=None, scratch: Scratch | None = None,
+                         name: str = "projector") -> ProjectorShadowMap:
     """The perspective shadow map of the occluding triangles (world vertices (V, 3), faces (F, 3))
-    seen from ``projector``; ``shadow_px`` pixels across the slide's larger side."""
-    world = np.asarray(vertices, np.float64).reshape(-1, 3)
-    faces = np.asarray(faces, np.int64).reshape(-1, 3)
-    # Faces cut at the near plane: the part of a face in front of the projector still casts.
+    seen from ``projector``; ``shadow_px`` pixels across the slide's larger side.
+
+    facing (F,) int8, optional: -1 for the faces of closed, outward-wound meshes, whose faces
+    turned away from the projector are then not drawn (``rasterise_depth``); 0 otherwise.
+    scratch, name: keep the map's pixels in these buffers under this name (``softshadow.scratch``).
+    """
+    world = np.ascontiguousarray(vertices, np.float64).reshape(-1, 3)
+    faces = np.ascontiguousarray(faces, np.int64).reshape(-1, 3)
+    facing = None if facing is None else np.asarray(facing, np.int8).reshape(len(faces))
+    # Faces cut at the near plane: the part of a face in front of the projector still casts. A
+    # closed mesh cut open shows its inside, so nothing is culled then.
     _, z_world = projector.image_coordinates(world)
-    world, faces, _ = clip_near(world, z_world, faces, NEAR_M)
+    as_given = True
+    if len(world) and z_world.min() <= NEAR_M:
+        world, faces, _ = clip_near(world, z_world, faces, NEAR_M)
+        facing, as_given = None, False
     ab, z = projector.image_coordinates(world)
     h, w = projector.slide.shape[:2]
     K = projector.camera.K
@@ -249,22 +408,42 @@ def projector_shadow_map(projector: Projector, vertices, faces) -> ProjectorShad
     width = int(np.ceil(2 * half[0] / pixel_tan)) + 2 * MAP_MARGIN_PX
     height = int(np.ceil(2 * half[1] / pixel_tan)) + 2 * MAP_MARGIN_PX
     # Map pixel (0, 0) centred at the slide's top-left corner less the margin; the map's "y" is
-    # -b so that rows grow downwards along the slide as GroundGrid's rows do.
+    # -b so that rows grow downwards along the slide as GroundGrid's rows do (in its pixels a
+    # face seen from its front winds with a negative signed area, as in a camera's).
     origin = (-(width - 1) / 2 * pixel_tan, (height - 1) / 2 * pixel_tan)
     grid = GroundGrid(pixel_tan, origin, width, height)
     scale = float(np.abs(world).max(initial=1.0))
-    keep = faces
-    if not len(keep):
+    if not len(faces):
         return ProjectorShadowMap(projector, None, pixel_tan, scale)
     uv = np.column_stack([ab[:, 0], -ab[:, 1]])
-    smap = shadow_map(grid, uv, -1.0 / np.maximum(z, NEAR_M), keep)  # originals behind: unused
+    out = (scratch_array(scratch, f"{name}.zbuf", (height, width)),
+           scratch_array(scratch, f"{name}.face_id", (height, width), np.int32))
+    smap = shadow_map(grid, uv, -1.0 / np.maximum(z, NEAR_M), faces, facing=facing, out=out)  # originals behind: unused
     # The bias's slope term in metric terms: tan of the angle between each face's normal and the
     # ray from the projector to its centroid.
-    tri = world[keep]
-    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
-    ray = tri.mean(1) - projector.position
-    ray /= np.linalg.norm(ray, axis=1, keepdims=True)
-    cos = np.abs(np.einsum("ij,ij->i", normal, ray))
-    slope = np.sqrt(np.maximum(1.0 - cos * cos, 0.0)) / np.maximum(cos, 1e-12)
-    return ProjectorShadowMap(projector, dataclasses.replace(smap, slope=slope), pixel_tan, scale)
+    slope = np.empty(len(faces))
+    _slope_kernel()(world, faces, projector.position, slope)
+    return ProjectorShadowMap(projector, dataclasses.replace(smap, slope=slope), pixel_tan, scale, as_given)
+
+
+@functools.cache
+def _slope_kernel():
+    """Per face, tan of the angle between its normal and the ray from the projector to its
+    centroid (numba)."""
+    import numba
+
+    @numba.njit(cache=True, nogil=True)
+    def kernel(world, faces, position, slope):
+        for f in range(faces.shape[0]):
+            i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
+            ux, uy, uz = world[i1, 0] - world[i0, 0], world[i1, 1] - world[i0, 1], world[i1, 2] - world[i0, 2]
+            vx, vy, vz = world[i2, 0] - world[i0, 0], world[i2, 1] - world[i0, 1], world[i2, 2] - world[i0, 2]
+            nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+            rx = (world[i0, 0] + world[i1, 0] + world[i2, 0]) / 3.0 - position[0]
+            ry = (world[i0, 1] + world[i1, 1] + world[i2, 1]) / 3.0 - position[1]
+            rz = (world[i0, 2] + world[i1, 2] + world[i2, 2]) / 3.0 - position[2]
+            norm = max(np.sqrt(nx * nx + ny * ny + nz * nz), 1e-300) * np.sqrt(rx * rx + ry * ry + rz * rz)
+            cos = abs(nx * rx + ny * ry + nz * rz) / norm
+            slope[f] = np.sqrt(max(1.0 - cos * cos, 0.0)) / max(cos, 1e-12)
+
+    return kernel

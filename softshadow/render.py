@@ -127,7 +127,7 @@ def object_mask(occ: Occluder, pose: Pose, camera: PinholeCamera | GroundGrid) -
 class SoftShadowModel:
     """The expanded-shadow-volume soft shadow of one occluder.
 
-    rule: "edge" (default, CONVENTIONS), "paper" (the seed's vertex normals), or "wedge" (the
+    rule: "edge" (default, docs/formats.md), "paper" (the seed's vertex normals), or "wedge" (the
     fraction of the sun's disk the mesh hides, from every silhouette edge near the point, the
     overlaps of the mesh's parts counted once: ``softshadow.wedge``; the same k as ``edge``).
     profile: "linear" (the seed's ramp) or "disk" (occluded fraction of a disk); for ``wedge``,

@@ -27,6 +27,7 @@ hold). ``render_scene`` runs both.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Sequence
 
 import equinox as eqx
@@ -36,14 +37,17 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .camera import GroundGrid, PinholeCamera
+from .occluder import Occluder
 from .params import Pose, ShadowParams, Sun, _leaf
 from .plan import PointPlan
 from .posed import posed_vertices
 from .projector import Projector, projector_shadow_map
 from .render import SoftShadowModel
+from .scratch import Scratch, scratch_array
 from .visibility import Surface, VisibleSurfaces, visible_surfaces
 
-__all__ = ["SceneLights", "SceneSetup", "SceneRender", "prepare_scene", "shade_scene", "render_scene"]
+__all__ = ["SceneLights", "SceneSetup", "SceneRender", "prepare_scene", "projector_light", "shade_scene",
+           "render_scene"]
 
 
 class SceneLights(eqx.Module):
@@ -91,8 +95,21 @@ class SceneRender:
 
 
 def _object_surface(model: SoftShadowModel, pose: Pose, albedo) -> Surface:
-    world, _ = posed_vertices(model.occluder, pose)
-    return Surface(world, model.occluder.faces, albedo, "object")
+    """The posed object as a ``Surface``: closed when its mesh is (its back faces are then not
+    drawn), with the occluder's face normals turned by the pose."""
+    occ = model.occluder
+    world, rotation = posed_vertices(occ, pose)
+    closed = _outward(occ) if float(pose.scale) > 0 else False
+    return Surface(world, occ.faces, albedo, "object", closed=closed, normals=occ.face_normals @ rotation.T)
+
+
+@functools.lru_cache(maxsize=64)
+def _outward(occ: Occluder) -> bool:
+    """Whether the occluder is closed with outward normals (its signed volume positive)."""
+    if not occ.watertight:
+        return False
+    t = occ.vertices[occ.faces]
+    return bool(np.einsum("ij,ij->i", t[:, 0], np.cross(t[:, 1], t[:, 2])).sum() > 0)
 
 
 def prepare_scene(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pose: Pose,
@@ -109,20 +126,46 @@ def prepare_scene(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, po
     """
     surfaces = [_object_surface(model, pose, object_albedo), *receivers]
     visible = visible_surfaces(camera, surfaces, ground_albedo, smooth)
-    light = np.zeros((len(visible.pixel), 3))
+    light = projector_light(visible, surfaces, projectors)
+    plan = None
+    if sun is not None and len(visible.pixel):
+        plan = model.plan_points(sun, pose, visible.points, float(range_k_max), normals=visible.normals,
+                                 backend="light")
+    return SceneSetup(visible, light, plan, float(range_k_max))
+
+
+def projector_light(visible: VisibleSurfaces, surfaces: Sequence[Surface],
+                    projectors: Sequence[Projector], *, scratch: Scratch | None = None) -> np.ndarray:
+    """The projectors' irradiance (N, 3) at the visible points, each through its shadow map of
+    the surfaces that cast shadows (NumPy); scratch: buffers for the maps and the result. The
+    points' own faces (from ``visible``) spare the lookups of points on the nearest face."""
+    light = scratch_array(scratch, "projectors.light", (len(visible.pixel), 3))
+    light.fill(0.0)
+    if not projectors:
+        return light
     casters = [s for s in surfaces if s.casts_shadows]
-    if projectors and casters:
+    if casters:
         start = np.cumsum([0] + [len(s.vertices) for s in casters])
         verts = np.vstack([s.vertices for s in casters])
         faces = np.vstack([s.faces + start[i] for i, s in enumerate(casters)])
+        facing = np.concatenate([np.full(len(s.faces), -1 if s.closed else 0, np.int8) for s in casters])
     else:
-        verts, faces = np.zeros((0, 3)), np.zeros((0, 3), np.int64)
-    for proj in projectors:
-        light += proj.irradiance(visible.points, visible.normals, projector_shadow_map(proj, verts, faces))
-    plan = None
-    if sun is not None and len(visible.pixel):
-        plan = model.plan_points(sun, pose, visible.points, float(range_k_max), normals=visible.normals)
-    return SceneSetup(visible, light, plan, float(range_k_max))
+        verts, faces, facing = np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int8)
+    points = np.ascontiguousarray(visible.points, np.float64)
+    # Each point's face among the casters' faces (-1: the ground, a surface that casts nothing).
+    offset = np.full(len(surfaces) + 1, -1, np.int64)
+    start = 0
+    for i, s in enumerate(surfaces):
+        if s.casts_shadows:
+            offset[i] = start
+            start += len(s.faces)
+    surface = visible.surface.reshape(-1)[visible.pixel]
+    own = offset[surface]  # surface -1 (the ground) takes the last entry, -1
+    own = np.where(own >= 0, own + visible.face.reshape(-1)[visible.pixel], -1)
+    for j, proj in enumerate(projectors):
+        smap = projector_shadow_map(proj, verts, faces, facing=facing, scratch=scratch, name=f"projector{j}")
+        proj.add_irradiance(points, visible.normals, smap, light, faces=own)
+    return light
 
 
 def shade_scene(setup: SceneSetup, model: SoftShadowModel, lights: SceneLights, sun: Sun | None = None,

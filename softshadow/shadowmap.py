@@ -131,7 +131,8 @@ def _facing_kernel():
 
 
 def rasterise_depth(xy: np.ndarray, depth: np.ndarray, faces: np.ndarray,
-                    shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+                    shape: tuple[int, int], *, facing: np.ndarray | None = None,
+                    out: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Nearest-face depth buffer of triangles, generic over the projection.
 
     xy (V, 2) pixel coordinates (col, row; pixel centres at integers); depth (V,) any
@@ -140,16 +141,30 @@ def rasterise_depth(xy: np.ndarray, depth: np.ndarray, faces: np.ndarray,
     pixel centre) and face_id (H, W) int32 (the index into ``faces`` of the nearest face,
     -1 where none). A pixel centre on a shared edge belongs to both faces (no cracks).
 
+    facing (F,) int8, optional: back-face culling. A face with facing s != 0 is drawn only
+    where its signed area in pixel coordinates, (p1 - p0) x (p2 - p0), has the sign of s
+    (a closed mesh's faces turned away from the viewer are never the nearest: skipping them
+    halves the work and changes no pixel); 0 draws the face either way. out: the (H, W) depth
+    (float64, or float32 for float32 depths) and face_id (int32) arrays to fill and return.
+
     Scanline: each face's rows, each row's span of columns from the face's edges, then the
     depth from the face's plane at those pixel centres; O(covered pixels + face rows).
     """
     h, w = shape
     dtype = np.result_type(depth.dtype, np.float32)
-    zbuf = np.full(h * w, np.inf, dtype)
-    fid = np.full(h * w, -1, np.int32)
+    if out is None:
+        zbuf, fid = np.empty(h * w, dtype), np.empty(h * w, np.int32)
+    else:
+        zbuf, fid = out[0].reshape(-1), out[1].reshape(-1)
+        if zbuf.dtype != dtype or fid.dtype != np.int32 or zbuf.size != h * w or fid.size != h * w:
+            raise ValueError(f"rasterise_depth out needs ({h}, {w}) arrays of {dtype} and int32")
+    zbuf.fill(np.inf)
+    fid.fill(-1)
     if len(faces):
+        cull = (np.zeros(len(faces), np.int8) if facing is None
+                else np.ascontiguousarray(facing, np.int8).reshape(len(faces)))
         _zbuffer_kernel()(np.ascontiguousarray(xy, np.float64), np.ascontiguousarray(depth, np.float64),
-                          np.ascontiguousarray(faces, np.int64), zbuf, fid, h, w, dtype == np.float32)
+                          np.ascontiguousarray(faces, np.int64), cull, zbuf, fid, h, w, dtype == np.float32)
     return zbuf.reshape(h, w), fid.reshape(h, w)
 
 
@@ -157,60 +172,103 @@ def rasterise_depth(xy: np.ndarray, depth: np.ndarray, faces: np.ndarray,
 def _zbuffer_kernel():
     """The compiled loop of ``rasterise_depth`` (numba, compiled on first use and cached on
     disk): as array operations its many short spans cost several times the ground back end's
-    whole render."""
+    whole render.
+
+    A small face's bounding box's pixel centres are tested against its three edges (edge
+    functions, stepped along each row); a large face's rows are spanned from where they cross
+    its edges. A centre within 1e-9 pixel of an edge, or on it, is inside, so a centre on a
+    shared edge belongs to both faces."""
     import numba
 
     @numba.njit(cache=True, nogil=True)
-    def kernel(xy, depth, faces, zbuf, fid, h, w, single):
-        tri = np.empty((3, 2))
-        tz = np.empty(3)
+    def kernel(xy, depth, faces, facing, zbuf, fid, h, w, single):
         for i in range(faces.shape[0]):
-            ok = True
-            for k in range(3):
-                tri[k, 0], tri[k, 1], tz[k] = xy[faces[i, k], 0], xy[faces[i, k], 1], depth[faces[i, k]]
-                ok &= np.isfinite(tri[k, 0]) and np.isfinite(tri[k, 1]) and np.isfinite(tz[k])
-            x0, y0 = tri[0, 0], tri[0, 1]
-            e1x, e1y = tri[1, 0] - x0, tri[1, 1] - y0
-            e2x, e2y = tri[2, 0] - x0, tri[2, 1] - y0
+            a, b, c = faces[i, 0], faces[i, 1], faces[i, 2]
+            x0, y0, z0 = xy[a, 0], xy[a, 1], depth[a]
+            x1, y1, z1 = xy[b, 0], xy[b, 1], depth[b]
+            x2, y2, z2 = xy[c, 0], xy[c, 1], depth[c]
+            if not (np.isfinite(x0) and np.isfinite(y0) and np.isfinite(z0) and np.isfinite(x1)
+                    and np.isfinite(y1) and np.isfinite(z1) and np.isfinite(x2) and np.isfinite(y2)
+                    and np.isfinite(z2)):
+                continue
+            e1x, e1y = x1 - x0, y1 - y0
+            e2x, e2y = x2 - x0, y2 - y0
             area = e1x * e2y - e1y * e2x
-            if not ok or abs(area) <= 1e-12:
+            if abs(area) <= 1e-12 or area * facing[i] < 0:
                 continue
-            if max(tri[0, 0], tri[1, 0], tri[2, 0]) < -0.5 or min(tri[0, 0], tri[1, 0], tri[2, 0]) > w - 0.5:
+            xmin, xmax = min(x0, x1, x2), max(x0, x1, x2)
+            ymin, ymax = min(y0, y1, y2), max(y0, y1, y2)
+            if xmax < -0.5 or xmin > w - 0.5 or ymax < -0.5 or ymin > h - 0.5:
                 continue
-            r0 = int(min(max(np.ceil(min(tri[0, 1], tri[1, 1], tri[2, 1]) - 1e-9), 0.0), h))
-            r1 = int(min(max(np.floor(max(tri[0, 1], tri[1, 1], tri[2, 1]) + 1e-9), -1.0), h - 1))
+            c0 = int(min(max(np.ceil(xmin - 1e-9), 0.0), w))  # clipped as floats: no overflow
+            c1 = int(min(max(np.floor(xmax + 1e-9), -1.0), w - 1))
+            r0 = int(min(max(np.ceil(ymin - 1e-9), 0.0), h))
+            r1 = int(min(max(np.floor(ymax + 1e-9), -1.0), h - 1))
             # Depth plane in pixel coordinates: z = z0 + gx (x - x0) + gy (y - y0).
-            dz1, dz2 = tz[1] - tz[0], tz[2] - tz[0]
+            dz1, dz2 = z1 - z0, z2 - z0
             gx = (dz1 * e2y - dz2 * e1y) / area
             gy = (dz2 * e1x - dz1 * e2x) / area
+            # Edge functions, positive inside whatever the winding: E(x, y) = A x + B y + C for
+            # the edges (0, 1), (1, 2), (2, 0); tolerances of 1e-9 pixel times each edge's length.
+            sgn = 1.0 if area > 0 else -1.0
+            ax, bx, cx = -(y1 - y0) * sgn, (x1 - x0) * sgn, 0.0
+            ay, by = -(y2 - y1) * sgn, (x2 - x1) * sgn
+            az, bz = -(y0 - y2) * sgn, (x0 - x2) * sgn
+            cx = -(ax * x0 + bx * y0)
+            cy = -(ay * x1 + by * y1)
+            cz = -(az * x2 + bz * y2)
+            tx = -1e-9 * (abs(ax) + abs(bx))
+            ty = -1e-9 * (abs(ay) + abs(by))
+            tz = -1e-9 * (abs(az) + abs(bz))
+            if (c1 - c0 + 1) * (r1 - r0 + 1) > 64:
+                # A large face: each row's span from where the row crosses its edges (no pixel
+                # of the box outside the face is visited).
+                for row in range(r0, r1 + 1):
+                    lo, hi = np.inf, -np.inf
+                    for e in range(3):
+                        if e == 0:
+                            xa, ya, xb, yb = x0, y0, x1, y1
+                        elif e == 1:
+                            xa, ya, xb, yb = x1, y1, x2, y2
+                        else:
+                            xa, ya, xb, yb = x2, y2, x0, y0
+                        if row < min(ya, yb) - 1e-9 or row > max(ya, yb) + 1e-9:
+                            continue
+                        dy = yb - ya
+                        if abs(dy) <= 1e-12:
+                            lo, hi = min(lo, min(xa, xb)), max(hi, max(xa, xb))
+                        else:
+                            xc = xa + min(max((row - ya) / dy, 0.0), 1.0) * (xb - xa)
+                            lo, hi = min(lo, xc), max(hi, xc)
+                    s0 = int(min(max(np.ceil(lo - 1e-9), 0.0), w))
+                    s1 = int(min(max(np.floor(hi + 1e-9), -1.0), w - 1))
+                    base = row * w
+                    z_row = z0 + gy * (row - y0)
+                    for col in range(s0, s1 + 1):
+                        z = z_row + gx * (col - x0)
+                        if single:
+                            z = np.float64(np.float32(z))
+                        if z < zbuf[base + col]:
+                            zbuf[base + col] = z
+                            fid[base + col] = i
+                continue
             for row in range(r0, r1 + 1):
-                # The row's span: where its line crosses the face's three edges (both ends of an
-                # edge lying on the row).
-                lo, hi = np.inf, -np.inf
-                for a in range(3):
-                    b = (a + 1) % 3
-                    xa, ya, xb, yb = tri[a, 0], tri[a, 1], tri[b, 0], tri[b, 1]
-                    if row < min(ya, yb) - 1e-9 or row > max(ya, yb) + 1e-9:
-                        continue
-                    dy = yb - ya
-                    if abs(dy) <= 1e-12:
-                        lo = min(lo, min(xa, xb))
-                        hi = max(hi, max(xa, xb))
-                    else:
-                        xc = xa + min(max((row - ya) / dy, 0.0), 1.0) * (xb - xa)
-                        lo = min(lo, xc)
-                        hi = max(hi, xc)
-                c0 = int(min(max(np.ceil(lo - 1e-9), 0.0), w))  # clipped as floats: no overflow
-                c1 = int(min(max(np.floor(hi + 1e-9), -1.0), w - 1))
+                fx = ax * c0 + bx * row + cx
+                fy = ay * c0 + by * row + cy
+                fz = az * c0 + bz * row + cz
                 base = row * w
-                z_row = tz[0] + gy * (row - y0)
+                z_row = z0 + gy * (row - y0)
                 for col in range(c0, c1 + 1):
-                    z = z_row + gx * (col - x0)
-                    if single:  # round as the buffer's float type would
-                        z = np.float64(np.float32(z))
-                    if z < zbuf[base + col]:
-                        zbuf[base + col] = z
-                        fid[base + col] = i
+                    if fx >= tx and fy >= ty and fz >= tz:
+                        z = z_row + gx * (col - x0)
+                        if single:  # round as the buffer's float type would
+                            z = np.float64(np.float32(z))
+                        if z < zbuf[base + col]:
+                            zbuf[base + col] = z
+                            fid[base + col] = i
+                    fx += ax
+                    fy += ay
+                    fz += az
 
     return kernel
 
@@ -245,66 +303,53 @@ class ShadowMap:
         smaller than a pixel, missed by every pixel centre), the nearest covered pixel's
         face within 2 pixels, its plane extrapolated, with its slope for the bias.
         """
-        cr = np.rint(self.grid.to_pixel(uv)).astype(np.int64)
-        rows, cols = cr[:, 1], cr[:, 0]
         dtype = self.plane.dtype
         uv = np.ascontiguousarray(uv, dtype)
-        best = np.full(len(uv), np.inf, dtype)
+        best = np.empty(len(uv), dtype)
+        slope = np.empty(len(uv), dtype)
+        exact = np.empty(len(uv), bool)
         tol = -1e-7  # barycentric tolerance: a point on a shared edge is in both faces
+        g = self.grid
         # Constants in the map's own float type, so a float32 map is tested in float32 throughout.
-        _lookup_kernel()(rows, cols, uv, self.face_id, np.ascontiguousarray(self.triangle),
-                         np.ascontiguousarray(self.plane), np.array([tol, 1.0 - tol, 1.0], dtype), best)
-        slope = np.zeros(len(uv), self.plane.dtype)
-        exact = np.isfinite(best)
-        miss = np.flatnonzero(~exact)
-        if len(miss):
-            face = self._nearest_face(rows[miss], cols[miss])
-            has = face >= 0
-            best[miss] = np.where(has, self._plane_at(np.maximum(face, 0), uv[miss, 0], uv[miss, 1]), np.inf)
-            slope[miss] = np.where(has, self.slope[np.maximum(face, 0)], 0.0)
+        _depth_kernel()(uv, float(g.origin_m[0]), float(g.origin_m[1]), float(g.pixel_m), self.face_id,
+                        np.ascontiguousarray(self.triangle), np.ascontiguousarray(self.plane),
+                        np.ascontiguousarray(self.slope, dtype), np.array([tol, 1.0 - tol, 1.0], dtype),
+                        best, slope, exact)
         return best, slope, exact
 
-    def _plane_at(self, face: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """Depth of faces' planes (N,) at light-space points (u, v) (N,)."""
-        p, corner = self.plane[face], self.triangle[face, 0]
-        return p[:, 2] + p[:, 0] * (u - corner[:, 0]) + p[:, 1] * (v - corner[:, 1])
 
-    def _nearest_face(self, rows: np.ndarray, cols: np.ndarray, reach: int = 2) -> np.ndarray:
-        """The face id (N,) of the covered pixel nearest each pixel, within ``reach`` (-1: none)."""
-        h, w = self.face_id.shape
-        face = np.full(len(rows), -1, np.int64)
-        offsets = sorted(((dr, dc) for dr in range(-reach, reach + 1) for dc in range(-reach, reach + 1)),
-                         key=lambda o: o[0] ** 2 + o[1] ** 2)
-        todo = np.arange(len(rows))
-        for dr, dc in offsets:
-            r, c = rows[todo] + dr, cols[todo] + dc
-            ok = (r >= 0) & (r < h) & (c >= 0) & (c < w)
-            face[todo] = np.where(ok, self.face_id[np.clip(r, 0, h - 1), np.clip(c, 0, w - 1)], -1)
-            todo = todo[face[todo] < 0]
-            if not len(todo):
-                break
-        return face
-
-
-# The point's own pixel first, then its 4 and its 4 diagonal neighbours.
 _LOOKUP_OFFSETS = np.array([(0, 0), (-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (-1, 1), (1, -1), (1, 1)])
 
 
+# The point's own pixel first, then its 4 and its 4 diagonal neighbours (the exact lookup); the
+# pixels within 2 of it nearest first (the extrapolated one; a stable sort keeps row-major order
+# among equal distances).
+_NEAREST_OFFSETS = np.array(sorted(((dr, dc) for dr in range(-2, 3) for dc in range(-2, 3)),
+                                   key=lambda o: o[0] ** 2 + o[1] ** 2))
+
+
 @functools.cache
-def _lookup_kernel():
-    """The compiled exact lookup of ``ShadowMap.occluder_depth`` (numba): per point, the first
-    face among its pixel's and its 8 neighbours' whose triangle contains it, its plane at the
-    point (``best`` stays +inf where none does). Arithmetic in the map's float type."""
+def _depth_kernel():
+    """The compiled lookup of ``ShadowMap.occluder_depth`` (numba): per point, its pixel (the
+    nearest centre), then the first face among that pixel's and its 8 neighbours' whose
+    triangle contains it (its plane at the point, exact), else the face of the nearest covered
+    pixel within 2 (its plane extrapolated, with its slope), else +inf. Arithmetic on the
+    depths in the map's float type."""
     import numba
 
     @numba.njit(cache=True, nogil=True)
-    def kernel(rows, cols, uv, face_id, triangle, plane, const, best):
+    def kernel(uv, ox, oy, pixel_m, face_id, triangle, plane, face_slope, const, best, slope, exact):
         h, w = face_id.shape
         tol, upper, one = const[0], const[1], const[2]
         for i in range(uv.shape[0]):
             u, v = uv[i, 0], uv[i, 1]
+            col = int(np.rint((np.float64(u) - ox) / pixel_m))
+            row = int(np.rint((oy - np.float64(v)) / pixel_m))
+            best[i] = np.inf
+            slope[i] = 0.0
+            exact[i] = False
             for k in range(_LOOKUP_OFFSETS.shape[0]):
-                r, c = rows[i] + _LOOKUP_OFFSETS[k, 0], cols[i] + _LOOKUP_OFFSETS[k, 1]
+                r, c = row + _LOOKUP_OFFSETS[k, 0], col + _LOOKUP_OFFSETS[k, 1]
                 if r < 0 or r >= h or c < 0 or c >= w:
                     continue
                 f = face_id[r, c]
@@ -321,6 +366,18 @@ def _lookup_kernel():
                 b2 = (ex1 * py - ey1 * px) / area
                 if b1 >= tol and b2 >= tol and b1 + b2 <= upper:
                     best[i] = plane[f, 2] + plane[f, 0] * (u - t0u) + plane[f, 1] * (v - t0v)
+                    exact[i] = True
+                    break
+            if exact[i]:
+                continue
+            for k in range(_NEAREST_OFFSETS.shape[0]):
+                r, c = row + _NEAREST_OFFSETS[k, 0], col + _NEAREST_OFFSETS[k, 1]
+                if r < 0 or r >= h or c < 0 or c >= w:
+                    continue
+                f = face_id[r, c]
+                if f >= 0:
+                    best[i] = plane[f, 2] + plane[f, 0] * (u - triangle[f, 0, 0]) + plane[f, 1] * (v - triangle[f, 0, 1])
+                    slope[i] = face_slope[f]
                     break
 
     return kernel
@@ -347,28 +404,50 @@ def _face_planes(uvd: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.nda
     A plane is (A, B, d0): d = d0 + A (u - u0) + B (v - v0) about the face's first corner
     (u0, v0, d0). Relative to the corner, not as A u + B v + C: a face nearly edge-on to the
     light has large A, B, and C = d0 - A u0 - B v0 cancels catastrophically in float32.
+    One compiled pass in uvd's float type (numba).
     """
-    p0, p1, p2 = uvd[faces[:, 0]], uvd[faces[:, 1]], uvd[faces[:, 2]]
-    ux, uy, uz = (p1 - p0).T
-    vx, vy, vz = (p2 - p0).T
-    # The normal (u x v) by components: np.cross costs several times more on short rows.
-    nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
-    nd = np.where(np.abs(nz) > 1e-300, nz, 1e-300)
-    a, b = -nx / nd, -ny / nd
-    return np.stack([a, b, p0[:, 2]], 1), np.hypot(a, b)
+    uvd = np.ascontiguousarray(uvd)
+    plane = np.empty((len(faces), 3), uvd.dtype)
+    slope = np.empty(len(faces), uvd.dtype)
+    # 1e-300 in the float type (0 in float32, as NumPy rounds it): a face edge-on to the light
+    # then gets an infinite slope there, as before.
+    _planes_kernel()(uvd, np.ascontiguousarray(faces, np.int64), np.array([1e-300], uvd.dtype), plane, slope)
+    return plane, slope
+
+
+@functools.cache
+def _planes_kernel():
+    import numba
+
+    @numba.njit(cache=True, nogil=True, error_model="numpy")
+    def kernel(uvd, faces, tiny, plane, slope):
+        for f in range(faces.shape[0]):
+            i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
+            ux, uy, uz = uvd[i1, 0] - uvd[i0, 0], uvd[i1, 1] - uvd[i0, 1], uvd[i1, 2] - uvd[i0, 2]
+            vx, vy, vz = uvd[i2, 0] - uvd[i0, 0], uvd[i2, 1] - uvd[i0, 1], uvd[i2, 2] - uvd[i0, 2]
+            nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+            nd = nz if abs(nz) > tiny[0] else tiny[0]
+            a, b = -nx / nd, -ny / nd
+            plane[f, 0], plane[f, 1], plane[f, 2] = a, b, uvd[i0, 2]
+            slope[f] = np.hypot(a, b)
+
+    return kernel
 
 
 def shadow_map(grid: GroundGrid, uv: np.ndarray, depth: np.ndarray, faces: np.ndarray,
-               dtype=np.float64) -> ShadowMap:
+               dtype=np.float64, *, facing: np.ndarray | None = None,
+               out: tuple[np.ndarray, np.ndarray] | None = None) -> ShadowMap:
     """The shadow map of faces (F, 3) with light-space vertices uv (V, 2) and depths (V,) on grid.
 
-    dtype: the float type of the depth buffer and the planes (float32 to measure precision).
+    dtype: the float type of the depth buffer and the planes (float32 to measure precision);
+    facing: back-face culling per face, out: the depth and face-id arrays to fill
+    (``rasterise_depth``).
     """
     uv = np.asarray(uv, dtype)
     depth = np.asarray(depth, dtype)
     zbuf, fid = rasterise_depth(grid.to_pixel(uv).astype(dtype), depth, faces,
-                                (grid.height, grid.width))
+                                (grid.height, grid.width), facing=facing, out=out)
     uvd = np.column_stack([uv, depth])
     plane, slope = _face_planes(uvd, faces)
     scale = float(np.abs(uvd).max(initial=1.0))
-    return ShadowMap(grid, zbuf, fid, plane.astype(dtype), slope.astype(dtype), uv[faces], scale)
+    return ShadowMap(grid, zbuf, fid, plane, slope, uv[faces], scale)

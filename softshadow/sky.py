@@ -1,5 +1,5 @@
 """The sky an occluder hides from receiver points (NumPy, trimesh ray casting): one implementation
-for the renderer (``SoftShadowModel(hidden_sky=True)``) and the fitter (``fitting.samples``).
+for the renderer (``SoftShadowModel(hidden_sky=True)``) and the fitter (``fitting.samples.ground``).
 
 Under a sky of uniform radiance, a ground point whose cosine-weighted
 hemisphere is hidden by the object in the fraction h receives (1 - h) of the
@@ -13,7 +13,7 @@ On a receiver of any orientation (``open_sky_fraction``) the sky a point sees
 is the part of the cosine-weighted hemisphere around its normal that points
 up (d_z > 0) and is not blocked by the object or the receiver itself, over the
 open ground's whole sky: (1 + n_z) / 2 for an unobstructed plane; the fit uses
-h = 1 - that (``fitting.receiver_light``).
+h = 1 - that (``fitting.samples.receiver_light``).
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Sun direction: the light the renderer casts shadows with (JAX, or NumPy for the discrete steps).
 
-Frames follow CONVENTIONS: world x east, y north, z up; azimuth A clockwise
+Frames as in docs/formats.md: world x east, y north, z up; azimuth A clockwise
 from north towards east, elevation E above the horizon, direction *to* the
 sun s = (sin A cos E, cos A cos E, sin E); light travels along L = -s.
 """

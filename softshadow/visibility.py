@@ -19,6 +19,7 @@ each pixel takes the face at its undistorted position (nearest). Faces are cut a
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numpy as np
 import trimesh
@@ -26,6 +27,7 @@ import trimesh
 from .camera import GroundGrid, PinholeCamera
 from .clip import clip_near
 from .posed import pose_matrix
+from .scratch import Scratch, scratch_array
 from .shadowmap import rasterise_depth
 
 __all__ = ["GROUND", "NOTHING", "Surface", "VisibleSurfaces", "visible_surfaces"]
@@ -47,13 +49,18 @@ def _albedo(value) -> np.ndarray:
 @dataclasses.dataclass(frozen=True, eq=False)
 class Surface:
     """A triangle mesh in the world: vertices (V, 3) metres, faces (F, 3), albedo (3,) linear RGB
-    (a single number is grey); casts_shadows: drawn in projectors' shadow maps."""
+    (a single number is grey); casts_shadows: drawn in projectors' shadow maps; closed: the
+    mesh is closed with its faces wound counter-clockwise seen from outside (outward normals),
+    so faces turned away from a viewer outside it are never seen and are not drawn; normals:
+    the unit face normals (F, 3) when already known (a posed occluder's), else from the winding."""
 
     vertices: np.ndarray
     faces: np.ndarray
     albedo: np.ndarray = (0.8, 0.8, 0.8)
     name: str = "mesh"
     casts_shadows: bool = True
+    closed: bool = False
+    normals: np.ndarray | None = None
 
     def __post_init__(self):
         v = np.asarray(self.vertices, np.float64)
@@ -65,6 +72,11 @@ class Surface:
         object.__setattr__(self, "vertices", v)
         object.__setattr__(self, "faces", f)
         object.__setattr__(self, "albedo", _albedo(self.albedo))
+        if self.normals is not None:
+            n = np.asarray(self.normals, np.float64)
+            if n.shape != f.shape:
+                raise ValueError(f"surface {self.name!r} needs one normal per face, got shape {n.shape}")
+            object.__setattr__(self, "normals", n)
 
     @classmethod
     def from_trimesh(cls, mesh: trimesh.Trimesh, position=(0.0, 0.0, 0.0), rotation_deg=(0.0, 0.0, 0.0),
@@ -86,7 +98,9 @@ class Surface:
 
     @property
     def face_normals(self) -> np.ndarray:
-        """Unit normals (F, 3) from the winding (zero for degenerate faces)."""
+        """Unit normals (F, 3): ``normals`` if given, else from the winding (zero for degenerate faces)."""
+        if self.normals is not None:
+            return self.normals
         t = self.vertices[self.faces]
         n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
         return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
@@ -97,7 +111,8 @@ class VisibleSurfaces:
     """The surface each pixel sees.
 
     shape (H, W); pixel (N,) flat indices of the pixels that see something; points (N, 3)
-    world metres; normals (N, 3) unit, on the camera's side of their face; albedo (N, 3); surface (H, W)
+    world metres; normals (N, 3) unit, on the camera's side of their face; albedo (N, 3) (None
+    when not asked for); surface (H, W)
     int: index into the surfaces, ``GROUND`` or ``NOTHING``; face (H, W) int: the face
     within its surface (-1 for the ground and nothing).
     """
@@ -106,45 +121,52 @@ class VisibleSurfaces:
     pixel: np.ndarray
     points: np.ndarray
     normals: np.ndarray
-    albedo: np.ndarray
+    albedo: np.ndarray | None
     surface: np.ndarray
     face: np.ndarray
 
 
-def _camera_rays(camera, h: int, w: int, top: float) -> tuple[np.ndarray, np.ndarray]:
-    """Ray origins and directions (H*W, 3) of every pixel centre (row order)."""
-    rows, cols = np.mgrid[0:h, 0:w]
-    if isinstance(camera, GroundGrid):
-        origin = camera.to_world(cols, rows).reshape(-1, 3)
-        origin[:, 2] = top  # above everything, looking straight down
-        return origin, np.tile([0.0, 0.0, -1.0], (len(origin), 1))
-    d = camera.pixel_rays(cols, rows)
-    return np.broadcast_to(camera.centre, d.shape), d
-
-
 def visible_surfaces(camera: PinholeCamera | GroundGrid, surfaces=(), ground_albedo=None,
-                     smooth: bool = False) -> VisibleSurfaces:
+                     smooth: bool = False, *, scratch: Scratch | None = None, albedo: bool = True) -> VisibleSurfaces:
     """The nearest surface at every pixel of ``camera`` (see the module docstring).
 
     surfaces: a sequence of ``Surface``; ground_albedo: the ground plane z = 0's albedo (one or
     three numbers), None for no ground; smooth: normals interpolated from the vertex normals
-    (Gouraud/Phong-like, barycentric at the point) instead of the faces' own (flat, the default).
+    (Gouraud/Phong-like, barycentric at the point) instead of the faces' own (flat, the default);
+    scratch: keep the per-pixel arrays in these buffers (``softshadow.scratch``; the result is
+    then overwritten by the next call with the same scratch); albedo: False leaves the points'
+    albedos out (``albedo`` None: a caller that has the surfaces' albedos by ``surface``).
     """
     h, w = camera.height, camera.width
     surfaces = list(surfaces)
     offsets = np.cumsum([0] + [len(s.faces) for s in surfaces])
-    verts = np.vstack([s.vertices for s in surfaces]) if surfaces else np.zeros((0, 3))
-    vstart = np.cumsum([0] + [len(s.vertices) for s in surfaces])
-    faces = (np.vstack([s.faces + vstart[i] for i, s in enumerate(surfaces)]) if surfaces
-             else np.zeros((0, 3), np.int64))
-    origin, direction = _camera_rays(camera, h, w, float(max(verts[:, 2].max(initial=0.0), 0.0)) + 1.0)
+    if len(surfaces) == 1:
+        verts, faces = surfaces[0].vertices, surfaces[0].faces
+    else:
+        verts = np.vstack([s.vertices for s in surfaces]) if surfaces else np.zeros((0, 3))
+        vstart = np.cumsum([0] + [len(s.vertices) for s in surfaces])
+        faces = (np.vstack([s.faces + vstart[i] for i, s in enumerate(surfaces)]) if surfaces
+                 else np.zeros((0, 3), np.int64))
+    # Closed, outward-wound surfaces: their faces turned away from the camera are never the
+    # nearest, so the z-buffer skips them (in pixel coordinates, rows down, a face seen from
+    # its front winds with a negative signed area).
+    facing = np.concatenate([np.full(len(s.faces), -1 if s.closed else 0, np.int8) for s in surfaces]) \
+        if surfaces else np.zeros(0, np.int8)
+    top = float(max(verts[:, 2].max(initial=0.0), 0.0)) + 1.0
+    directions = np.zeros((0, 3))
+    lookup = np.zeros(0, np.int64)  # the identity
     if isinstance(camera, GroundGrid):
         xy, depth = camera.to_pixel(verts), -verts[:, 2]
-        drawn, source = faces, np.arange(len(faces))
-        lookup = np.arange(h * w)
+        drawn, source = faces, np.zeros(0, np.int64)
     else:
-        # Faces cut at the near plane (a floor passing under and behind the camera stays whole in view).
-        cut, drawn, source = clip_near(verts, verts @ camera.R[2] + camera.t[2], faces, NEAR_M)
+        z_cam = verts @ camera.R[2] + camera.t[2]
+        if len(verts) and z_cam.min() > NEAR_M:  # nothing to cut
+            cut, drawn, source = verts, faces, np.zeros(0, np.int64)
+        else:
+            # Faces cut at the near plane (a floor passing under and behind the camera stays whole
+            # in view); a closed surface cut open shows its inside, so nothing is culled then.
+            cut, drawn, source = clip_near(verts, z_cam, faces, NEAR_M)
+            facing = np.zeros(len(drawn), np.int8)
         pc = cut @ camera.R.T + camera.t
         zs = np.maximum(pc[:, 2], NEAR_M)  # the originals behind the plane are no longer used
         K = camera.K
@@ -159,59 +181,125 @@ def visible_surfaces(camera: PinholeCamera | GroundGrid, surfaces=(), ground_alb
             c, r = np.rint(und[:, 0]).astype(np.int64), np.rint(und[:, 1]).astype(np.int64)
             inside = (c >= 0) & (c < w) & (r >= 0) & (r < h)
             lookup = np.where(inside, np.clip(r, 0, h - 1) * w + np.clip(c, 0, w - 1), -1)
-        else:
-            lookup = np.arange(h * w)
-    fid = np.full(h * w, -1, np.int64)
-    if len(drawn):
-        _, f_img = rasterise_depth(xy, depth, drawn, (h, w))
-        f_img = f_img.ravel()
-        ok = lookup >= 0
-        fid[ok] = np.where(f_img[lookup[ok]] >= 0, source[np.maximum(f_img[lookup[ok]], 0)], -1)
-    # The ray's distance to the face's plane (exact), and to the ground.
-    all_normals = (np.vstack([s.face_normals for s in surfaces]) if surfaces else np.zeros((0, 3)))
-    t_mesh = np.full(h * w, np.inf)
-    hit = np.flatnonzero(fid >= 0)
-    if len(hit):
-        n = all_normals[fid[hit]]
-        v0 = verts[faces[fid[hit], 0]]
-        denom = np.einsum("ij,ij->i", n, direction[hit])
-        ok = np.abs(denom) > 1e-12
-        t = np.einsum("ij,ij->i", n, v0 - origin[hit]) / np.where(ok, denom, 1.0)
-        t_mesh[hit] = np.where(ok & (t > 0), t, np.inf)
-    t_ground = np.full(h * w, np.inf)
-    if ground_albedo is not None:
-        dz = direction[:, 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = -origin[:, 2] / dz
-        t_ground = np.where((np.abs(dz) > 1e-12) & (t > 0), t, np.inf)
-    mesh_wins = t_mesh <= t_ground
-    t_best = np.minimum(t_mesh, t_ground)
-    pixel = np.flatnonzero(np.isfinite(t_best))
-    points = origin[pixel] + t_best[pixel, None] * direction[pixel]
-    on_mesh = mesh_wins[pixel]
-    normals = np.tile([0.0, 0.0, 1.0], (len(pixel), 1))
-    normals[on_mesh] = all_normals[fid[pixel[on_mesh]]]
-    # Towards the camera: the side the camera sees is the lit side of an open surface.
-    flip = np.einsum("ij,ij->i", normals, direction[pixel]) > 0
-    normals[flip] *= -1
-    if smooth and on_mesh.any():
-        # Turned as the face is (by the face's side, not the interpolated normal's: near an outline
-        # that one may lean away from the camera while the face does not).
-        vn = np.vstack([s.vertex_normals for s in surfaces])
-        f = faces[fid[pixel[on_mesh]]]
-        sign = np.where(flip[on_mesh], -1.0, 1.0)[:, None]
-        normals[on_mesh] = sign * _interpolate(points[on_mesh], verts[f], vn[f])
-    surface = np.full(h * w, NOTHING, np.int64)
-    face = np.full(h * w, -1, np.int64)
-    which = np.searchsorted(offsets, fid[pixel[on_mesh]], side="right") - 1
-    surface[pixel[on_mesh]] = which
-    face[pixel[on_mesh]] = fid[pixel[on_mesh]] - offsets[which]
-    surface[pixel[~on_mesh]] = GROUND
-    albedos = np.array([s.albedo for s in surfaces]).reshape(-1, 3)
-    albedo = np.empty((len(pixel), 3))
-    albedo[on_mesh] = albedos[which] if len(which) else np.zeros((0, 3))
-    albedo[~on_mesh] = _albedo(ground_albedo) if ground_albedo is not None else 0.0
-    return VisibleSurfaces((h, w), pixel, points, normals, albedo, surface.reshape(h, w), face.reshape(h, w))
+            directions = camera.pixel_rays(cols, rows)
+    zbuf = scratch_array(scratch, "visible.zbuf", (h, w), np.float64)
+    f_img = scratch_array(scratch, "visible.face_id", (h, w), np.int32)
+    rasterise_depth(xy, depth, drawn, (h, w), facing=facing, out=(zbuf, f_img))
+    all_normals = surfaces[0].face_normals if len(surfaces) == 1 else (
+        np.vstack([s.face_normals for s in surfaces]) if surfaces else np.zeros((0, 3)))
+    face_surface = np.repeat(np.arange(len(surfaces)), np.diff(offsets)) if surfaces else np.zeros(0, np.int64)
+    albedos = np.array([s.albedo for s in surfaces], np.float64).reshape(-1, 3)
+    ground = _albedo(ground_albedo) if ground_albedo is not None else np.zeros(3)
+    if isinstance(camera, GroundGrid):
+        view = np.array([0.0, camera.origin_m[0], camera.origin_m[1], camera.pixel_m, top])
+        rays = np.zeros((6, 3))
+    else:
+        view = np.array([1.0, *camera.centre])
+        Kinv = np.linalg.inv(camera.K)
+        rays = np.vstack([Kinv[0], Kinv[1], np.zeros(3), camera.R])  # rows 0-1: K^-1's, rows 3-5: R
+    surface = scratch_array(scratch, "visible.surface", (h, w), np.int64)
+    face = scratch_array(scratch, "visible.face", (h, w), np.int64)
+    pixel = scratch_array(scratch, "visible.pixel", h * w, np.int64)
+    points = scratch_array(scratch, "visible.points", (h * w, 3))
+    normals = scratch_array(scratch, "visible.normals", (h * w, 3))
+    with_albedo = albedo
+    albedo = scratch_array(scratch, "visible.albedo", (h * w if with_albedo else 0, 3))
+    n = _visible_kernel()(f_img.reshape(-1), lookup, source, verts, np.ascontiguousarray(faces, np.int64),
+                          np.ascontiguousarray(all_normals), face_surface, np.ascontiguousarray(offsets, np.int64),
+                          albedos, ground, ground_albedo is not None, view, rays, directions, h, w,
+                          surface.reshape(-1), face.reshape(-1), pixel, points, normals, albedo)
+    pixel, points, normals, albedo = pixel[:n], points[:n], normals[:n], albedo[:n] if with_albedo else None
+    if smooth:
+        on_mesh = surface.reshape(-1)[pixel] >= 0
+        if on_mesh.any():
+            # Turned as the face is (by the face's side, not the interpolated normal's: near an
+            # outline that one may lean away from the camera while the face does not).
+            vn = np.vstack([s.vertex_normals for s in surfaces])
+            fid = face.reshape(-1)[pixel[on_mesh]] + offsets[surface.reshape(-1)[pixel[on_mesh]]]
+            f = faces[fid]
+            sign = np.where(np.einsum("ij,ij->i", normals[on_mesh], all_normals[fid]) < 0, -1.0, 1.0)[:, None]
+            normals[on_mesh] = sign * _interpolate(points[on_mesh], verts[f], vn[f])
+    return VisibleSurfaces((h, w), pixel, points, normals, albedo, surface, face)
+
+
+@functools.cache
+def _visible_kernel():
+    """The compiled pass of ``visible_surfaces`` (numba): per pixel, the ray's distance to its
+    z-buffer face's plane (exact) and to the ground, the nearer kept; the pixels that see
+    something get their point, normal (turned towards the camera) and albedo, in pixel order.
+    Returns how many do. ``surface``/``face`` get NOTHING, GROUND or a mesh's index and face."""
+    import numba
+
+    @numba.njit(cache=True, nogil=True)
+    def kernel(f_img, lookup, source, verts, faces, normals, face_surface, offsets, albedos, ground, has_ground,
+               view, rays, directions, h, w, surface, face, pixel, points, out_normals, albedo):
+        n = 0
+        row, col = 0, -1
+        for p in range(h * w):
+            col += 1  # row order, without a division per pixel
+            if col == w:
+                row, col = row + 1, 0
+            # The pixel's ray: a top-down map's (origin, pixel size, height in view[1:5]) or a
+            # pinhole camera's (centre in view[1:4]; K^-1's first two rows and R in rays;
+            # precomputed directions for a camera with lens distortion).
+            if view[0] == 0.0:
+                ox, oy, oz = view[1] + col * view[3], view[2] - row * view[3], view[4]
+                dx, dy, dz = 0.0, 0.0, -1.0
+            elif directions.shape[0]:
+                ox, oy, oz = view[1], view[2], view[3]
+                dx, dy, dz = directions[p, 0], directions[p, 1], directions[p, 2]
+            else:
+                ox, oy, oz = view[1], view[2], view[3]
+                nx = rays[0, 0] * col + rays[0, 1] * row + rays[0, 2]
+                ny = rays[1, 0] * col + rays[1, 1] * row + rays[1, 2]
+                dx = nx * rays[3, 0] + ny * rays[4, 0] + rays[5, 0]
+                dy = nx * rays[3, 1] + ny * rays[4, 1] + rays[5, 1]
+                dz = nx * rays[3, 2] + ny * rays[4, 2] + rays[5, 2]
+            t_mesh = np.inf
+            fid = -1
+            q = p if lookup.shape[0] == 0 else lookup[p]
+            if q >= 0 and f_img[q] >= 0:
+                fid = f_img[q] if source.shape[0] == 0 else source[f_img[q]]
+                nx, ny, nz = normals[fid, 0], normals[fid, 1], normals[fid, 2]
+                v0 = faces[fid, 0]
+                denom = nx * dx + ny * dy + nz * dz
+                if abs(denom) > 1e-12:
+                    t = (nx * (verts[v0, 0] - ox) + ny * (verts[v0, 1] - oy) + nz * (verts[v0, 2] - oz)) / denom
+                    if t > 0:
+                        t_mesh = t
+            t_ground = np.inf
+            if has_ground and abs(dz) > 1e-12:
+                t = -oz / dz
+                if t > 0:
+                    t_ground = t
+            if t_mesh <= t_ground and t_mesh < np.inf:
+                s = face_surface[fid]
+                surface[p] = s
+                face[p] = fid - offsets[s]
+                t = t_mesh
+                nx, ny, nz = normals[fid, 0], normals[fid, 1], normals[fid, 2]
+                a0, a1, a2 = albedos[s, 0], albedos[s, 1], albedos[s, 2]
+            elif t_ground < np.inf:
+                surface[p] = GROUND
+                face[p] = -1
+                t = t_ground
+                nx, ny, nz = 0.0, 0.0, 1.0
+                a0, a1, a2 = ground[0], ground[1], ground[2]
+            else:
+                surface[p] = NOTHING
+                face[p] = -1
+                continue
+            pixel[n] = p
+            points[n, 0], points[n, 1], points[n, 2] = ox + t * dx, oy + t * dy, oz + t * dz
+            if nx * dx + ny * dy + nz * dz > 0:  # towards the camera: the side it sees is lit
+                nx, ny, nz = -nx, -ny, -nz
+            out_normals[n, 0], out_normals[n, 1], out_normals[n, 2] = nx, ny, nz
+            if albedo.shape[0]:
+                albedo[n, 0], albedo[n, 1], albedo[n, 2] = a0, a1, a2
+            n += 1
+        return n
+
+    return kernel
 
 
 def _interpolate(points: np.ndarray, tri: np.ndarray, corner_normals: np.ndarray) -> np.ndarray:

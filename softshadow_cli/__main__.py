@@ -1,7 +1,6 @@
 """``python -m softshadow_cli``: the ``softshadow`` command."""
 
-import sys
 
-from .main import main
+from .main import run
 
-sys.exit(main())
+run()

@@ -8,9 +8,11 @@ import sys
 import numpy as np
 
 from scene import load_scene, parse_time, photo_sun
-from softshadow import (GroundGrid, PinholeCamera, Pose, PosedOccluder, Projector, SceneLights, ShadowParams,
-                        SoftShadowModel, Sun, Surface, linear_to_srgb, load_mesh, look_at_camera, paper_to_range_k,
-                        paper_to_rho, posed_vertices, render_scene, slide_from_text)
+from softshadow import (GroundGrid, PinholeCamera, Pose, Projector, SceneLights, ShadowParams, SoftShadowModel,
+    Sun, linear_to_srgb, load_mesh, look_at_camera, paper_to_range_k, paper_to_rho, render_scene, slide_from_text)
+from softshadow.internal import PosedOccluder, Surface, posed_vertices
+
+from .validate import OptionError
 
 __all__ = ["render_scene_file", "shading_to_srgb8", "draw_outlines", "DEFAULT_VIEW"]
 
@@ -43,6 +45,12 @@ def draw_outlines(image: np.ndarray, alpha: np.ndarray) -> np.ndarray:
 def render_scene_file(args):
     """(sRGB image (H, W, 3) uint8, linear shading (H, W)) for the render command's arguments."""
     scene = load_scene(args.scene)
+    if args.photo is not None and args.photo not in scene.photos:
+        import difflib
+        near = difflib.get_close_matches(args.photo, list(scene.photos), n=1)
+        raise OptionError(f"--photo {args.photo!r} is not a [photos] entry of {args.scene}"
+                          + (f"; did you mean {near[0]!r}?" if near else
+                             f" (its entries: {', '.join(scene.photos) or 'none'})"))
     if scene.object is None:
         raise ValueError(f"{args.scene} has no [object]")
     model = SoftShadowModel.from_mesh(load_mesh(scene.object.mesh, scene.base_dir), args.rule,
@@ -184,7 +192,7 @@ def _scene_camera(args, scene, name, model, pose):
 def _depth_surface(scene, name) -> Surface | None:
     """The photo's range image as a triangle mesh (every other pixel, no triangles across depth
     jumps), placed by the photo's explicit camera; None without one."""
-    from fitting.receiver_points import depth_mesh, depth_points, read_depth
+    from fitting.samples.receiver_points import depth_mesh, depth_points, read_depth
     path = (scene.photo(name).depth if name else None) or scene.receiver.depth
     cam = scene.camera_for(name) if name else scene.camera
     if path is None:

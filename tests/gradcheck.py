@@ -15,7 +15,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from softshadow import Pose, ShadowParams, Sun, concatenate_plans
+from softshadow import Pose, ShadowParams, Sun
+from softshadow.internal import concatenate_plans
 
 PARAM_NAMES = ("range_k", "rho", "azimuth", "elevation", "x", "y", "z", "rot_x", "rot_y", "rot_z")
 # Central-difference steps: small against the scales (k >= 0.01, penumbra widths >= ~5 mm).
@@ -44,7 +45,7 @@ def fixed_shape_plan(mdl, sun, pose, points, range_k_max, pixel_axes=None):
 
 
 def check_point_gradients(mdl, theta0: np.ndarray, points: np.ndarray, range_k_max: float,
-                          min_points: int = 8, keep=None, params=range(len(PARAM_NAMES)),
+                          min_points: int = 8, keep=None, params=None,
                           steps=None, smooth_fraction: float = 0.85, pixel_axes=None):
     """Autodiff Jacobian (N, 10) of shading at points vs central differences, plan held fixed.
 
@@ -71,7 +72,7 @@ def check_point_gradients(mdl, theta0: np.ndarray, points: np.ndarray, range_k_m
     jac = np.asarray(jax.jacfwd(shading)(jnp.asarray(theta0)))
     assert np.all(np.isfinite(jac)), "non-finite autodiff gradient"
     steps = STEPS if steps is None else np.asarray(steps, np.float64)
-    for i in params:
+    for i in range(len(PARAM_NAMES)) if params is None else params:
         name = PARAM_NAMES[i]
         e = np.zeros(10)
         e[i] = steps[i]

@@ -29,8 +29,8 @@ def _timed_cases(node):
 
 
 def test_plain_bench_json_has_every_renderer_and_its_error(tmp_path, monkeypatch, capsys):
-    from softshadow_cli.bench import mitsuba_peer, overview
-    from softshadow_cli.bench.sweep import SweepSettings
+    from benchmarks import mitsuba_peer, overview
+    from benchmarks.scenes import SweepSettings
 
     def tiny(quick=False):  # the tiny sweep's sizes (its compiled programs are shared with its test)
         s = SweepSettings.tiny()
@@ -74,7 +74,7 @@ def test_peak_memory_sees_xla_cpu_buffers_after_a_warm_up():
     """A jitted function's 32 MB float32 output, run after a warm-up (which used to leave the
     heap pages in place, so the peak read 0): the peak above the resident set shows it; a
     reduction of the same input, whose output is 8 kB, shows next to nothing."""
-    from softshadow_cli.bench.measure import peak_memory, timed
+    from benchmarks.measure import peak_memory, timed
     x = jnp.ones((4096, 2048), jnp.float32)  # 32 MB, allocated before the measurement
     double = jax.jit(lambda x: x * 2.0 + 1.0)
     t = timed(lambda: double(x).block_until_ready(), repeats=2)

@@ -8,14 +8,14 @@ import pytest
 import trimesh
 
 from softshadow import GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun
-from softshadow_cli.bench.meshes import bench_mesh
-from softshadow_cli.bench.paper import fit_shoji, predicted_range_px
-from softshadow_cli.bench.shoji import ShojiRenderer
-from softshadow_cli.bench.sweep import scene_grid
+from benchmarks.meshes import bench_mesh
+from benchmarks.paper import fit_shoji, predicted_range_px
+from benchmarks.shoji import ShojiRenderer
+from benchmarks.scenes import scene_grid
 
 
 def _sun(az, el):
-    """Unit vector towards the sun (CONVENTIONS)."""
+    """Unit vector towards the sun (docs/formats.md)."""
     return -np.asarray(Sun(az, el).light_np)
 
 

@@ -14,13 +14,12 @@ import numpy as np
 import pytest
 
 from softshadow import GroundGrid
-from softshadow_cli.bench.meshes import bench_mesh, decimated, mit_dragon
-from softshadow_cli.bench.reference import PhysicalReference, block_mean
-from softshadow_cli.bench.speed_report import pareto_front
-from softshadow_cli.bench.sweep import image_error, linear_equivalent_k
-from softshadow_cli.bench.scaling import loglog_slope
-from softshadow_cli.bench.table1 import crossing_width
-from softshadow_cli.main import main
+from benchmarks.meshes import bench_mesh, decimated, mit_dragon
+from benchmarks.reference import PhysicalReference, block_mean
+from benchmarks.speed_report import pareto_front
+from benchmarks.scenes import image_error, linear_equivalent_k
+from benchmarks.scaling import loglog_slope
+from benchmarks.table1 import crossing_width
 
 
 def test_pareto_front_keeps_only_undominated_points():
@@ -69,8 +68,8 @@ def test_loglog_slope():
 
 def test_naive_renderer_matches_the_renderer_on_the_pillar():
     from softshadow import Pose, ShadowParams, SoftShadowModel, Sun
-    from softshadow_cli.bench.naive import NaiveRenderer
-    from softshadow_cli.bench.sweep import scene_grid
+    from benchmarks.naive import NaiveRenderer
+    from benchmarks.scenes import scene_grid
     mesh = bench_mesh("pillar")
     s = -np.asarray(Sun(200.0, 40.0).light_np)
     grid = scene_grid(mesh, s, 48)
@@ -82,7 +81,7 @@ def test_naive_renderer_matches_the_renderer_on_the_pillar():
 
 
 def test_linear_ramp_closest_to_the_disk_profile():
-    # CONVENTIONS: the best-fitting linear ramp to a real disk is about 0.854 tan r.
+    # docs/formats.md: the best-fitting linear ramp to a real disk is about 0.854 tan r.
     assert linear_equivalent_k(0.01) == pytest.approx(0.00854, abs=3e-5)
 
 
@@ -97,8 +96,8 @@ def test_vendored_dragon_has_the_papers_face_count_and_stands_on_the_ground():
 def test_sweep_tiny_writes_json_report_and_plot(tmp_path, monkeypatch, capsys):
     """The whole sweep at its tiny size (the full one is behind ``softshadow bench --what sweep``),
     Mitsuba reported as skipped, the report made from the run's JSON."""
-    from softshadow_cli.bench import mitsuba_peer, sweep_and_report
-    from softshadow_cli.bench.sweep import SweepSettings
+    from benchmarks import mitsuba_peer, sweep_and_report
+    from benchmarks.scenes import SweepSettings
     monkeypatch.setenv("SOFTSHADOW_BENCH_CACHE", str(tmp_path / "cache"))
     monkeypatch.setattr(mitsuba_peer, "mitsuba_available", lambda: False)
     out, md = tmp_path / "bench.json", tmp_path / "docs" / "speed.md"
@@ -153,7 +152,7 @@ def test_sweep_tiny_writes_json_report_and_plot(tmp_path, monkeypatch, capsys):
 
 
 def test_cost_model_tells_a_sum_from_a_product():
-    from softshadow_cli.bench.scaling import cost_model
+    from benchmarks.scaling import cost_model
     rows = [{"pixels": p, "silhouette_edges": e, "softshadow": {"median_ms": 1.0 + 2e-5 * p + 3e-3 * e}}
             for p in (1e4, 4e4, 1.6e5) for e in (50, 500, 5000)]
     law = cost_model(rows)
@@ -164,7 +163,7 @@ def test_cost_model_tells_a_sum_from_a_product():
 
 
 def test_time_mitsuba_needs_is_interpolated_or_extrapolated():
-    from softshadow_cli.bench.mitsuba_peer import time_to_reach
+    from benchmarks.mitsuba_peer import time_to_reach
     t, e = [10.0, 40.0, 160.0], [0.04, 0.02, 0.01]
     assert time_to_reach(t, e, 0.02) == {"ms": pytest.approx(40.0), "how": "interpolated"}
     assert time_to_reach(t, e, 0.0283)["ms"] == pytest.approx(20.0, rel=0.01)
@@ -177,13 +176,13 @@ def test_mitsuba_peer_renders_the_bench_scene(tmp_path, monkeypatch):
     """Where Mitsuba is installed (the optional extra), its top-down render of the pillar agrees
     with the physical truth (the same scene) and its cases carry errors."""
     pytest.importorskip("mitsuba")
-    from softshadow_cli.bench.meshes import bench_mesh
-    from softshadow_cli.bench.mitsuba_peer import bench_mitsuba
-    from softshadow_cli.bench.sweep import SweepSettings, _Scene
+    from benchmarks.meshes import bench_mesh
+    from benchmarks.mitsuba_peer import bench_mitsuba
+    from benchmarks.scenes import BenchScene, SweepSettings
     monkeypatch.setenv("SOFTSHADOW_BENCH_CACHE", str(tmp_path / "cache"))
     s = SweepSettings.tiny()
     s.reference_pixels, s.reference_samples = 48, 64
-    scene = _Scene(bench_mesh("pillar"), s, name="pillar")
+    scene = BenchScene(bench_mesh("pillar"), s, name="pillar")
     run = bench_mitsuba(scene, (16, 64), targets={"x": {"median_ms": 1.0, "error": {"rms": 0.01, "rms_band": 0.05}}})
     errs = [c["error"]["rms"] for c in run["cases"]]
     assert run["variant"] in ("llvm_ad_rgb", "scalar_rgb") and [c["spp"] for c in run["cases"]] == [16, 64]
@@ -195,7 +194,7 @@ def test_truth_traces_the_sky_next_to_walls_where_the_sky_map_is_coarse():
     """Beside the pillar the sky map's bilinear cells mix nodes inside the post with nodes outside:
     there the truth traces each point (as Mitsuba does), elsewhere it keeps the map."""
     from data_synth import PlaneReceiver, sky_visibility, sky_visibility_map
-    from softshadow_cli.bench.reference import ground_sky
+    from benchmarks.reference import ground_sky
     mesh = bench_mesh("pillar")  # 0.2 x 0.2 m, centred on the origin
     n = 64
     pts = np.array([[0.11, 0.0, 0.0], [0.0, -0.12, 0.0], [1.9, 1.5, 0.0], [-2.5, 0.4, 0.0]])

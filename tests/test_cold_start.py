@@ -1,4 +1,4 @@
-"""A fresh process loads only what its path needs (docs/performance.md).
+"""A fresh process loads only what its path needs (docs/fitting.md, start-up and caches).
 
 JAX, equinox, optimistix and trimesh take seconds to import. ``softshadow`` and ``fitting``
 import their modules on first use (``lazy_loader``), so ``softshadow --help`` and the fit of
@@ -99,7 +99,7 @@ def test_every_public_name_resolves_to_its_module_object(package):
         if home and home.startswith(package + "."):
             assert getattr(sys.modules[home], name.split(".")[-1], value) is value
     with pytest.raises(AttributeError):
-        getattr(pkg, "no_such_name")
+        pkg.no_such_name  # noqa: B018 (the lookup is the test)
 
 
 def test_one_blas_thread_entered_first_still_limits_every_blas():
@@ -116,21 +116,21 @@ def test_one_blas_thread_entered_first_still_limits_every_blas():
     assert len(blas) >= 2 and set(blas) == {1}
 
 
-def test_no_plots_asks_the_fit_for_no_overlay(monkeypatch):
-    # The photo check needs the fit's profile data (plots=True inside), not its overlays (a render
-    # of the fitted shadow, 0.4-0.5 s a group): under --no-plots none is drawn.
+def test_no_plots_asks_the_fit_for_no_plot_data(monkeypatch):
+    # The rule book judges the fit's evidence, not its plot data: under --no-plots the fit builds
+    # neither the profiles nor the overlays (a render of the fitted shadow, 0.4-0.5 s a group).
     import types
 
-    import fitting.api as api
-    import fitting.solve as solve
+    import fitting.folder.checked as checked
+    import fitting.solve.group as solve
     from fitting import FitOptions, GroupResult, PhotoGroup
     asked = []
 
-    def fit_group(model, pose, views, label, time, options, *more):
-        asked.append((options.plots, options.overlays))
-        return GroupResult(label, time, [v.name for v in views], error="stopped here")
+    def fit_group(model, pose, views, label, time, options, *more, **kw):
+        asked.append(options.plots)
+        return GroupResult.failed(label, time, [v.name for v in views], "stopped here")
     monkeypatch.setattr(solve, "fit_group", fit_group)
     views = [types.SimpleNamespace(name="a.jpg", sun_source="scene")]
     for plots in (False, True):
-        api._fit_checked(None, None, views, PhotoGroup("10:30", "10:30", ["a.jpg"]), FitOptions(plots=plots))
-    assert asked == [(True, "none"), (True, "first")]
+        checked.fit_checked(None, None, views, PhotoGroup("10:30", "10:30", ["a.jpg"]), FitOptions(plots=plots))
+    assert asked == [False, True]

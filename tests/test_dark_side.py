@@ -1,12 +1,20 @@
-"""The dark side of a cast shadow is one connected region (fitting.shadow_cues.dark_side_regions,
-scattered_dark_sides), on tiny synthetic log images, and end to end on one synthetic shadow."""
+"""The dark side of a cast shadow is one connected region (fitting.edges.cues.dark_side_regions, and the
+rule book's fitting.verdict.edge_rules.scattered_dark_sides), on tiny synthetic log images, and end to end
+on one synthetic shadow."""
 
 from __future__ import annotations
 
 import numpy as np
 from scipy import ndimage
 
-from fitting.shadow_cues import dark_side_regions, scattered_dark_sides
+from fitting.edges.cues import dark_side_regions
+from fitting.verdict import edge_rules
+
+
+def scattered_dark_sides(labels):
+    """The rule book's warning on dark-region labels (0: in no dark region)."""
+    labels = np.asarray(labels, int)
+    return edge_rules.scattered_dark_sides(tuple(np.unique(labels[labels > 0], return_counts=True)[1]))
 
 H, W = 64, 80
 LIT, UMBRA = np.log(0.5), np.log(0.5 * 0.3)
@@ -72,14 +80,16 @@ def test_a_few_profiles_in_the_main_shadow_and_some_strays_are_not_flagged():
 
 
 def test_a_measured_shadow_is_not_warned_about_scattered_dark_sides(monkeypatch):
-    import fitting.edge_measure as edge_measure
+    import fitting.edges.measure as edge_measure
 
     seen = []
-    def spy(labels):
-        seen.append(labels)
-        return scattered_dark_sides(labels)
+    regions = edge_measure.dark_side_regions
 
-    monkeypatch.setattr(edge_measure, "scattered_dark_sides", spy)
+    def spy(*args):
+        seen.append(regions(*args))
+        return seen[-1]
+
+    monkeypatch.setattr(edge_measure, "dark_side_regions", spy)
     rng = np.random.default_rng(2)
     yy, xx = np.mgrid[0:96, 0:128]
     d = np.maximum(np.abs(xx - 64) - 30, np.abs(yy - 48) - 22)        # a rectangle, signed distance (px)

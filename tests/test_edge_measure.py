@@ -1,4 +1,4 @@
-"""Shadow brightness and penumbra width from one photo alone (fitting.edge_measure).
+"""Shadow brightness and penumbra width from one photo alone (fitting.edges.measure).
 
 Synthetic photos: a polygon shadow with a linear penumbra ramp of known full
 width, rendered at 4x4 supersampling (so pixels integrate the ramp as a camera
@@ -19,8 +19,8 @@ import pytest
 from scipy import ndimage
 
 from datapaths import MITSUBA, WORKSPACE
-from fitting import attenuation_image, reference_at_profiles
-from fitting.edge_measure import (NO_EDGE_REASON, EdgeMeasurement, fit_edge_profile, measure_shadow_edges,
+from benchmarks.pair_reference import attenuation_image, reference_at_profiles
+from fitting.edges.measure import (NO_EDGE_REASON, EdgeMeasurement, fit_edge_profile, measure_shadow_edges,
                                   ramp_alpha, ramp_log_model)
 
 PAIRS = WORKSPACE / "photos" / "pairs"
@@ -110,7 +110,7 @@ def _least_squares_fit(s, y, max_width_px):
     """The per-profile reference: scipy's least_squares (trf, soft-L1, finite-difference Jacobian) on the same
     objective, start and bounds as the batched fit."""
     from scipy import optimize
-    from fitting.edge_ramp import LOSS_SCALE_PER_NOISE, SAMPLING_BLUR_PX, SLOPE_SIGMA_PER_PX, _start
+    from fitting.edges.ramp import LOSS_SCALE_PER_NOISE, SAMPLING_BLUR_PX, SLOPE_SIGMA_PER_PX, _start
 
     ok, p0, lo, hi, noise = _start(s, y[None], np.ones((1, s.size), bool), np.array([max_width_px]))
     if not ok[0]:
@@ -127,7 +127,7 @@ def _least_squares_fit(s, y, max_width_px):
 def test_batched_profile_fit_matches_the_per_profile_least_squares_fit():
     """One batched fit of profiles of different lengths, widths, noise and specks lands where scipy's
     least_squares lands, profile by profile."""
-    from fitting.edge_ramp import fit_edge_profiles
+    from fitting.edges.ramp import fit_edge_profiles
 
     rng = np.random.default_rng(3)
     s = np.arange(-24.0, 24.01, 0.5)
@@ -241,7 +241,7 @@ def test_a_small_round_shadow_is_measured_all_round():
 
 def test_a_leaning_normal_is_straightened_by_the_ramp_shifts_across_the_strip():
     """Internal step: a normal 12 deg off on a straight edge is turned back by the tilt seen across the strip."""
-    from fitting.edge_measure import _Images, _refined_normals
+    from fitting.edges.measure import _Images, _refined_normals
 
     poly = [(-100, -100), (300, -100), (300, 70), (-100, 70)]         # one straight edge, v = 70, lit below
     rng = np.random.default_rng(11)

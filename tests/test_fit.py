@@ -30,8 +30,8 @@ def same_model_folder(tmp_path_factory):
 
 
 def test_same_model_fit_recovers_truth_with_honest_errors(same_model_folder):
-    from fitting.api import fit_folder
-    from fitting.solve import FitOptions
+    from fitting.folder.api import fit_folder
+    from fitting.solve.group import FitOptions
     # The data were rendered by the model alone, without the sky the pillar hides. Both profiles
     # are offered: the data were made with the disk profile, and BIC must see it.
     results = fit_folder(same_model_folder, options=FitOptions(sky_occlusion=False, profiles=("linear", "disk")))
@@ -74,8 +74,8 @@ def test_fit_called_from_float32_keeps_the_callers_precision(same_model_folder):
     import jax
     import jax.numpy as jnp
 
-    from fitting.api import fit_folder
-    from fitting.solve import FitOptions
+    from fitting.folder.api import fit_folder
+    from fitting.solve.group import FitOptions
     with jax.enable_x64(False):
         (g,) = fit_folder(same_model_folder, options=FitOptions(sky_occlusion=False, plots=False)).groups
         assert jnp.zeros(1).dtype == jnp.float32, "the fit must not switch its caller to float64"
@@ -93,8 +93,8 @@ def _shadow_centre(sun, fraction=0.5, height=3.0):
 @pytest.fixture(scope="module")
 def hard_fit(tmp_path_factory):
     """One folder, one group per hard case (each with its own sun), fitted once."""
-    from fitting.api import fit_folder
-    from fitting.solve import FitOptions
+    from fitting.folder.api import fit_folder
+    from fitting.solve.group import FitOptions
     import shutil
 
     from data_synth import model_topdown_folder
@@ -157,8 +157,8 @@ def hard_cases_preset(tmp_path_factory):
     """The hard-cases preset at 320 x 240, rendered by data_synth's model renderer, fitted once."""
     from data_synth import synthesize
     from data_synth.renderers import RenderQuality
-    from fitting.api import fit_folder
-    from fitting.solve import FitOptions
+    from fitting.folder.api import fit_folder
+    from fitting.solve.group import FitOptions
     quality = RenderQuality(sun_samples=16, sky_samples=256, sky_fine_nodes=48, object_sky_samples=16)
     folder = synthesize(tmp_path_factory.mktemp("hard_cases") / "h", "hard-cases", size=(320, 240),
                         renderer="model", progress=False, render_quality=quality)
@@ -178,7 +178,7 @@ def test_hard_cases_preset_reports_its_bad_photos(hard_cases_preset):
 # Groups of the preset at 320 x 240 that come back with a wrong value neither flagged as an upper
 # bound nor unreliable (strict expected failures with the measured symptom as the reason); none since
 # 2026-11-25 (low-sun, subpixel: the penumbra and umbra sample counts; zenith: those and the no-ramp
-# bound of k; out-of-frame, clutter: fitting.photo_check.fit_quality).
+# bound of k; out-of-frame, clutter: the rule book, fitting.verdict.rules).
 HARD_PRESET_FAILURES: dict[str, str] = {}
 
 
@@ -201,7 +201,7 @@ def test_hard_cases_preset_recovers_the_truth_or_says_it_cannot(hard_cases_prese
 
 
 def test_bad_files_are_skipped_with_reasons_and_do_not_stop_the_rest(tmp_path):
-    from fitting.api import fit_folder
+    from fitting.folder.api import fit_folder
     folder = _render_folder(tmp_path / "mixed", seed=3)
     (folder / "broken.jpg").write_bytes(b"\xff\xd8\xff\xe0 not really a jpeg")
     (folder / "notes.txt").write_text("hello")
@@ -212,7 +212,7 @@ def test_bad_files_are_skipped_with_reasons_and_do_not_stop_the_rest(tmp_path):
 
 
 def test_no_shadow_in_view_is_a_group_error_not_a_crash(tmp_path):
-    from fitting.api import fit_folder
+    from fitting.folder.api import fit_folder
     folder = _render_folder(tmp_path / "empty")
     # Move the map far from the shadow: nothing to fit there.
     text = (folder / "scene.toml").read_text().replace("origin_m = [", "origin_m = [50.0, 50.0, ")
@@ -228,8 +228,8 @@ def test_no_shadow_in_view_is_a_group_error_not_a_crash(tmp_path):
 def test_a_penumbra_under_a_pixel_is_reported_as_an_upper_bound(tmp_path):
     """k = 0.0005 throws a penumbra of about 0.2 px here: k is not identifiable, range_k is an
     upper bound above the truth, and the group says so."""
-    from fitting.api import fit_folder
-    from fitting.solve import FitOptions
+    from fitting.folder.api import fit_folder
+    from fitting.solve.group import FitOptions
     folder = _render_folder(tmp_path / "sharp", k=0.0005)
     (g,) = fit_folder(folder, options=FitOptions(sky_occlusion=False, plots=False)).groups
     assert g.error is None
@@ -245,13 +245,13 @@ def test_a_penumbra_under_a_pixel_is_reported_as_an_upper_bound(tmp_path):
 @pytest.mark.parametrize("name", ["pillar-yaw30-topdown", "ball-topdown", "pillar-sun1deg-photo"])
 def test_independent_mitsuba_renders(name):
     folder = MITSUBA / name
-    from fitting.api import fit_folder
+    from fitting.folder.api import fit_folder
     truth = json.loads((folder / "truth.json").read_text())["groups"][0]
     (g,) = fit_folder(folder).groups
     assert g.error is None
     assert abs(g.range_k - truth["range_k"]) / truth["range_k"] < 0.10
     assert abs(g.rho - truth["rho"]) < 0.012  # the sky the object hides darkens the umbra a little
-    # The stated one-sigma errors (systematic floor included, fitting.uncertainty) cover the truth
+    # The stated one-sigma errors (systematic floor included, fitting.solve.uncertainty) cover the truth
     # of these independent renders within two sigma; the statistical part alone did not for k.
     assert abs(g.range_k - truth["range_k"]) <= 2 * g.range_stderr
     assert abs(g.rho - truth["rho"]) <= 2 * g.rho_stderr
@@ -264,7 +264,7 @@ def test_board_registration_and_fitted_sun_from_a_synthetic_folder(tmp_path):
     import re
 
     from data_synth import synthesize
-    from fitting.api import fit_folder
+    from fitting.folder.api import fit_folder
     folder = synthesize(tmp_path / "markers", preset="pillar", seed=1, size=(800, 600),
                         cameras="markers", progress=False)
     text = (folder / "scene.toml").read_text()

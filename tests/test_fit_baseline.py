@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from fitting import FitOptions, fit_group, group_problem
-from softshadow_cli.bench.fit_baseline import TRUTH_K, compare_solvers, same_model_views
+from benchmarks.fit_baseline import TRUTH_K, compare_solvers, same_model_views
 
 
 @pytest.fixture(scope="module")

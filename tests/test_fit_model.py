@@ -8,14 +8,14 @@ import numpy as np
 
 from softshadow import Pose, ShadowParams, SoftShadowModel, Sun
 from softshadow.camera import look_at_camera
-from softshadow import plan_coordinate
+from softshadow.internal import plan_coordinate
 
 K = 0.01
 
 
 def _oblique_view():
     """A pillar's shadow seen obliquely (pixel footprints are neither square nor axis-aligned)."""
-    from fitting.views import PhotoView
+    from fitting.photos.views import PhotoView
     model = SoftShadowModel.from_mesh("pillar", profile="disk")
     sun = Sun(130.0, 35.0)
     camera = look_at_camera((2.0, 4.0, 2.5), (-1.5, 1.3, 0.0), 320, 240, 60.0)
@@ -30,9 +30,9 @@ def _oblique_view():
 def test_pixel_gradient_of_u_matches_finite_differences():
     """|du/dpixel| = du/dT * |dT/dpixel| (what sets the blur in u units) against central
     differences of u between neighbouring pixels, on an oblique camera."""
-    from fitting.model import angular_pixel_gradient
-    from fitting.samples import select_samples
-    from fitting.solve import _group_arrays
+    from fitting.solve.model import angular_pixel_gradient
+    from fitting.samples.ground import select_samples
+    from fitting.solve.group import _group_arrays
     model, sun, view = _oblique_view()
     samples = select_samples(model, Pose(), view, range_k_max=0.03, max_samples=4000, seed=0)
     group = _group_arrays([samples], [view])
@@ -71,9 +71,9 @@ def test_residual_jacobian_matches_finite_differences():
     loss switched on."""
     import dataclasses
 
-    from fitting.model import FitConfig, FitParams, raw_from_k, residuals
-    from fitting.samples import select_samples
-    from fitting.solve import _group_arrays, _prepare, initial_params
+    from fitting.solve.model import FitConfig, FitParams, raw_from_k, residuals
+    from fitting.samples.ground import select_samples
+    from fitting.solve.group import _group_arrays, _prepare, initial_params
     model, sun, view = _oblique_view()
     samples = select_samples(model, Pose(), view, range_k_max=0.03, max_samples=400, seed=0)
     group = _group_arrays([samples], [view])

@@ -1,5 +1,6 @@
-"""The fit's steps one by one (``fitting.solve``): parameter layout, covariance, the k/rho
-transform, penumbra widths, identifiability and the robust scale."""
+"""The fit's steps one by one (``fitting.solve.group``): parameter layout, covariance, the k/rho
+transform, penumbra widths, the sample counts the rule book judges, and the robust scale (the rules
+themselves: tests/test_verdict_rules.py)."""
 
 from __future__ import annotations
 
@@ -9,10 +10,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from fitting.model import FitParams, Prediction, k_from_raw, rho_from_raw
-from fitting.solve import (MAX_K_REL_STDERR, MIN_PENUMBRA_PX, MIN_PENUMBRA_SAMPLES, NARROW_PENUMBRA_PX, MIN_UMBRA_SAMPLES, UMBRA_ALPHA,
-                           SampleCounts, covariance, identifiability, k_rho_with_errors, penumbra_width_px,
-                           robust_delta, no_ramp_bound, sample_counts, umbra_warning)
+from fitting.solve.model import FitParams, Prediction, k_from_raw, rho_from_raw
+from fitting.solve.evidence import no_ramp_k
+from fitting.solve.group import (UMBRA_ALPHA, SampleCounts, covariance, k_rho_with_errors, penumbra_width_px,
+                                 robust_delta, sample_counts)
 
 
 def _params(n_photos=3, seed=0):
@@ -108,47 +109,13 @@ def test_penumbra_width_is_two_over_the_pixel_slope_inside_the_penumbra():
     assert penumbra_width_px([_Samples(2)], none) == (None, None)
 
 
-def test_no_sample_inside_the_penumbra_is_an_upper_bound_not_an_error():
-    """penumbra_px None (no sample inside the penumbra) with the sample count given: a bound."""
-    ident = identifiability(5e-4, 1e-5, None, 1e-4, 0)
-    assert not ident.identifiable and ident.range_k >= 5e-4 and "upper bound" in ident.warning
-
-
-def test_no_ramp_bound_is_the_k_whose_penumbra_reaches_the_nearest_sample():
+def test_no_ramp_k_is_the_k_whose_penumbra_reaches_the_nearest_sample():
     """No sample inside the penumbra: u scales as 1/k, so k * min |u| is the largest k the samples
-    allow; samples beyond the planned bands (u = +-1e6) and padding rows bound nothing."""
-    u = np.array([30.0, -17.0, 1e6, -1e6, 25.0, 0.0])  # the last row is padding
-    pred = Prediction(np.zeros(6), np.zeros(6), u, np.ones(6))
-    assert no_ramp_bound([_Samples(3), _Samples(2)], pred, 5e-4) == pytest.approx(17.0 * 5e-4)
-    far = Prediction(np.zeros(2), np.zeros(2), np.array([1e6, -1e6]), np.ones(2))
-    assert no_ramp_bound([_Samples(2)], far, 5e-4) is None
-
-
-def test_identifiable_when_the_penumbra_is_resolved_and_k_is_measured():
-    ident = identifiability(0.01, 0.001, 3.0)
-    assert ident.identifiable and ident.range_k == 0.01 and ident.warning is None
-
-
-@pytest.mark.parametrize("k, se, pen, upper", [
-    (0.01, 0.001, 0.5, 0.01 / 0.5),            # penumbra under a pixel: k at one pixel's width
-    (0.01, 0.004, 0.4, max(0.018, 0.01 / 0.4)),
-    (0.01, 0.006, 3.0, 0.01 + 2 * 0.006),      # k lost in its own noise: k + 2 sigma
-    (0.002, 0.0005, None, 0.002 + 2 * 0.0005),  # no sample inside the penumbra
-])
-def test_not_identifiable_gives_an_upper_bound_and_a_warning(k, se, pen, upper):
-    ident = identifiability(k, se, pen)
-    assert not ident.identifiable
-    assert ident.range_k == pytest.approx(upper)
-    assert ident.range_k >= k
-    assert "upper bound" in ident.warning
-
-
-def test_identifiability_thresholds():
-    k = 0.01
-    assert identifiability(k, 0.001, MIN_PENUMBRA_PX).identifiable
-    assert not identifiability(k, 0.001, MIN_PENUMBRA_PX * 0.99).identifiable
-    assert identifiability(k, MAX_K_REL_STDERR * k, 2.0).identifiable
-    assert not identifiability(k, MAX_K_REL_STDERR * k * 1.01, 2.0).identifiable
+    allow; samples beyond the planned bands (u = +-1e6) bound nothing, and a sample inside the
+    penumbra leaves nothing to bound."""
+    assert no_ramp_k(np.array([30.0, -17.0, 1e6, -1e6, 25.0]), 5e-4) == pytest.approx(17.0 * 5e-4)
+    assert no_ramp_k(np.array([1e6, -1e6]), 5e-4) is None
+    assert no_ramp_k(np.array([30.0, 0.5]), 5e-4) is None
 
 
 def test_sample_counts_inside_the_penumbra_and_in_the_umbra_leave_out_the_padding():
@@ -158,27 +125,6 @@ def test_sample_counts_inside_the_penumbra_and_in_the_umbra_leave_out_the_paddin
     # 6 real samples (4 + 2); the last two rows are padding.
     assert sample_counts([_Samples(4), _Samples(2)], pred) == SampleCounts(penumbra=3, umbra=1)
     assert sample_counts([_Samples(8)], pred) == SampleCounts(penumbra=4, umbra=3)
-
-
-def test_too_few_samples_inside_a_narrow_penumbra_make_k_an_upper_bound():
-    k, se, bound, narrow = 0.01, 0.001, 0.002, 0.99 * NARROW_PENUMBRA_PX
-    assert identifiability(k, se, narrow, bound, MIN_PENUMBRA_SAMPLES).identifiable
-    ident = identifiability(k, se, narrow, bound, MIN_PENUMBRA_SAMPLES - 1)
-    assert not ident.identifiable
-    assert ident.range_k == pytest.approx(k + 2 * bound)
-    assert f"only {MIN_PENUMBRA_SAMPLES - 1} samples" in ident.warning and "upper bound" in ident.warning
-    # A penumbra wider than a blur spot is measured by few samples too.
-    assert identifiability(k, se, NARROW_PENUMBRA_PX, bound, 3).identifiable
-    # A penumbra under the resolution, or not seen at all (no sample inside), keeps its own reason.
-    assert "narrower than the resolution" in identifiability(k, se, 0.5, bound, 3).warning
-    assert "narrower than the resolution" in identifiability(k, se, None, bound, 0).warning
-
-
-def test_umbra_warning_below_the_minimum_count_only():
-    assert umbra_warning(MIN_UMBRA_SAMPLES) is None
-    warning = umbra_warning(MIN_UMBRA_SAMPLES - 1)
-    assert warning.startswith("rho not measured") and f"only {MIN_UMBRA_SAMPLES - 1} samples" in warning
-    assert "\n" not in warning
 
 
 def test_robust_scale_is_three_normal_sigmas_and_ignores_padding():

@@ -31,7 +31,7 @@ SCENES = {
 PARAMS, POSE = ShadowParams(0.01, 0.3), Pose(position=(0.05, -0.03, 0.0), rotation_deg=(0.0, 0.0, 17.0))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def model(name: str, profile: str = "linear") -> SoftShadowModel:
     return SoftShadowModel.from_mesh(builtin_mesh(name), profile=profile)
 

@@ -166,54 +166,6 @@ def test_half_a_sun_and_an_unreadable_time_are_one_line_each(bad_photos):
     assert all(n not in g.photos for g in groups.values() for n in ("IMG_0011.jpg", "IMG_0012.jpg"))
 
 
-def test_judge_rules():
-    from fitting.photo_check import PhotoAgreement, judge
-    ok = [PhotoAgreement(f"{i}.jpg", 0.02 + 0.002 * i, 0.8, 0.8) for i in range(3)]
-    assert judge(ok).leave_out == [] and judge(ok).warnings == [] and judge(ok).no_shadow is None
-    lens_cap = ok[:2] + [PhotoAgreement("cap.jpg", 0.05, 0.01, 0.7)]
-    assert [n for n, _ in judge(lens_cap).leave_out] == ["cap.jpg"]
-    off = ok[:2] + [PhotoAgreement("off.jpg", 0.2, 0.75, 0.8)]
-    assert [n for n, _ in judge(off).leave_out] == ["off.jpg"]
-    # Two photos that disagree: neither can be blamed, so the group is unreliable.
-    verdict = judge([ok[0], PhotoAgreement("off.jpg", 0.2, 0.75, 0.8)])
-    assert verdict.leave_out == [] and "cannot be told" in verdict.warnings[0]
-    # But a photo without the shadow the other shows can be blamed even among two.
-    assert [n for n, _ in judge([ok[0], lens_cap[2]]).leave_out] == ["cap.jpg"]
-    assert judge([PhotoAgreement(f"{i}.jpg", 0.01, 0.01, 0.0) for i in range(3)]).no_shadow
-
-
-def test_fit_quality_rules():
-    """The umbra must be one level (its residual at most a few times the lit ground's), and the
-    ground's texture small beside the shadow's step; either failing makes the group unreliable,
-    the texture also makes k a bound. A clean photo (the demo's residuals) passes."""
-    import dataclasses
-
-    from fitting.photo_check import TEXTURE_DEPTH_RATIO, PhotoAgreement, fit_quality, judge
-    clean = PhotoAgreement("a.jpg", 0.02, 0.84, 0.84, 536, 312, 0.017, 0.004)
-    assert fit_quality([clean]) == ([], None) and judge([clean]).warnings == []
-    # An umbra that holds two levels (part of a sheet normalised as ground): 8 times the lit residual.
-    two_levels = PhotoAgreement("b.jpg", 0.08, 0.40, 0.60, 322, 173, 0.022, 0.177)
-    verdict = judge([two_levels])
-    assert verdict.range_unmeasured is None and len(verdict.warnings) == 1
-    assert verdict.warnings[0].startswith("b.jpg: the umbra is not one level")
-    # Among photos whose umbrae are one level, the photo whose umbra is not is left out (then refitted).
-    verdict = judge([clean, two_levels, dataclasses.replace(clean, photo="g.jpg")])
-    assert verdict.leave_out == [("b.jpg", verdict.leave_out[0][1])]
-    assert verdict.leave_out[0][1].startswith("the umbra is not one level")
-    # Small residuals are not flagged whatever their ratio (a clean render's sky-term misfit).
-    assert fit_quality([PhotoAgreement("c.jpg", 0.01, 0.8, 0.8, 500, 300, 0.003, 0.02)]) == ([], None)
-    # Too few umbra samples to judge.
-    assert fit_quality([PhotoAgreement("d.jpg", 0.08, 0.4, 0.6, 322, 5, 0.022, 0.177)]) == ([], None)
-    # Texture: the lit residual a large part of the shadow's depth (the photos' median decides).
-    rough = PhotoAgreement("e.jpg", 0.22, 0.70, 0.68, 450, 273, 0.254, 0.078)
-    warnings, texture = fit_quality([rough])
-    assert "texture rivals the shadow" in warnings[0] and "texture" in texture
-    assert judge([rough]).range_unmeasured == texture
-    just_below = PhotoAgreement("f.jpg", 0.1, 0.5, 0.5, 450, 273, 0.99 * TEXTURE_DEPTH_RATIO * 0.5, 0.05)
-    assert fit_quality([just_below]) == ([], None)
-    assert fit_quality([rough, clean, clean])[1] is None
-
-
 def test_group_without_a_shadow_in_view_fits_nothing(one_group, tmp_path):
     from fitting import FitOptions, fit_folder
     folder = _copy(one_group, tmp_path / "gray")
@@ -234,7 +186,7 @@ def test_k_beyond_range_k_max_is_not_trusted(one_group):
 
 def test_resume_key_covers_photos_scene_options_and_software(one_group, tmp_path):
     from fitting import FitOptions, fit_folder
-    from fitting.resume import group_key
+    from fitting.folder.resume import group_key
     folder, out = _copy(one_group, tmp_path / "f"), tmp_path / "out"
     options = FitOptions(plots=False)
     calls = []
@@ -292,15 +244,15 @@ def test_ctrl_c_prints_one_line_and_resumes(one_group, tmp_path):
         # A child inherits an ignored SIGINT from its parent (the test runner may run with one),
         # and Python then never raises KeyboardInterrupt: start as a shell would start it.
         "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
-        "import fitting.solve as solve\n"
+        "import fitting.solve.group as solve\n"
         "fit_group = solve.fit_group\n"
         "def waiting_fit_group(*args, **kwargs):\n"
         "    print('test: fitting a group', file=sys.stderr, flush=True)\n"
         "    time.sleep(120)\n"
         "    return fit_group(*args, **kwargs)\n"
         "solve.fit_group = waiting_fit_group\n"
-        "from softshadow_cli.main import main\n"
-        "sys.exit(main(sys.argv[1:]))\n")
+        "from softshadow_cli.main import run\n"
+        "run(sys.argv[1:])\n")
     cmd = [sys.executable, "-c", driver, "fit", str(one_group), "--out", str(out), "--no-plots"]
     env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
@@ -415,13 +367,14 @@ def test_explicit_no_geometry_measures_each_photo(one_group, tmp_path):
     _write_scene(folder, data)
     assert load_scene(folder / "scene.toml").object is None
     (g,) = fit_folder(folder).groups  # one group per photo, labelled with its name: no geometry
-    assert g.label == "IMG_0004.jpg" and g.photos == ["IMG_0004.jpg"] and g.range_k is None
+    assert g.label == "IMG_0004.jpg" and g.photos == ("IMG_0004.jpg",) and g.range_k is None
 
 
 def test_exit_status_needs_a_converged_group(one_group, tmp_path, monkeypatch, capsys):
     import fitting
     from fitting import FitResults, GroupResult
-    stopped = GroupResult("13:21", "13:21", ["IMG_0004.jpg"], range_k=0.05, rho=0.2, converged=False)
+    stopped = GroupResult.from_json({"label": "13:21", "time": "13:21", "photos": ["IMG_0004.jpg"], "range_k": 0.05,
+                                     "rho": 0.2, "converged": False})
     monkeypatch.setattr(fitting, "fit_and_report", lambda *a, **k: FitResults([stopped], [], {}))
     code, err = _main(["fit", str(one_group), "--out", str(tmp_path / "out")], monkeypatch, capsys)
     assert code == 1 and "no group could be fitted" in err
@@ -460,7 +413,7 @@ def test_resume_key_covers_the_files_the_scene_names(tmp_path):
     the photo) changes the key; the file's name alone would not."""
     from scene import scene_from_dict
     from fitting import FitOptions
-    from fitting.resume import group_key, photo_digest
+    from fitting.folder.resume import group_key, photo_digest
 
     photo = tmp_path / "a.jpg"
     photo.write_bytes(b"photo")
@@ -485,3 +438,280 @@ def test_resume_key_covers_the_files_the_scene_names(tmp_path):
     (tmp_path / "a.ignore.png").write_bytes(b"a mask beside the photo")
     seen.add(key())
     assert len(seen) == len(files) + 2
+
+
+# --------------------------------------------------------------------------- issue 23: the second round
+
+def test_a_failed_group_is_never_reliable_nor_identifiable(tmp_path):
+    """A group with an error and null values must not read reliable (or identifiable) true, in
+    results.json or in summary.csv."""
+    import pandas as pd
+
+    from fitting import FitResults, GroupResult, write_results_json
+    from fitting.folder.many import folder_rows, write_summary
+    failed = GroupResult.failed("13:21", "13:21", ["IMG_0004.jpg"], "no shadow in view: ...")
+    write_results_json(FitResults([failed], [], {}), tmp_path)
+    (doc,) = json.loads((tmp_path / "results.json").read_text())["groups"]
+    assert doc["rho"] is None and doc["reliable"] is False and doc["identifiable"] is False
+    # summary.csv, also from a record written before the rule (reliable true beside an error)
+    stale = dict(doc, reliable=True, identifiable=True)
+    write_summary(folder_rows("f", [doc, stale]), tmp_path)
+    table = pd.read_csv(tmp_path / "summary.csv")
+    assert table["reliable"].tolist() == [False, False]
+
+
+def test_interrupted_force_run_says_what_resumes(one_group, tmp_path, monkeypatch, capsys):
+    """After Ctrl-C in a --force run, the same command (with --force) would start over: the hint
+    says to run it without --force."""
+    import fitting
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(fitting, "fit_and_report", interrupted)
+    for force, hint in ((True, "run the same command without --force to resume"),
+                        (False, "run the same command again to resume")):
+        code, err = _main(["fit", str(one_group), "--out", str(tmp_path / "out")] + ["--force"] * force,
+                          monkeypatch, capsys)
+        line = _one_line(err)
+        assert code == 130 and line.startswith("softshadow fit: interrupted") and hint in line, line
+
+
+def test_closing_line_claims_only_the_plots_written(one_group, tmp_path, monkeypatch, capsys):
+    """A file named plots in --out: the fit says the plots are not written and why, and its last
+    line does not claim them; a run that drew no plot does not claim any either."""
+    import fitting
+    from fitting import FitResults, GroupResult
+    from fitting.report.results import FitDiagnostics
+    from fitting.verdict.outcome import Estimate, Verdict
+    fitted = GroupResult("13:21", "13:21", ["IMG_0004.jpg"], Verdict(True, True), Estimate(range_k=0.005, rho=0.2),
+                         diagnostics=FitDiagnostics(converged=True))
+    seen = {}
+
+    def fake(photo_dir, out_dir, options, **kwargs):  # a fit that draws no plot
+        seen["plots"] = options.plots
+        Path(out_dir).mkdir(parents=True, exist_ok=True)
+        return FitResults([fitted], [], {})
+
+    monkeypatch.setattr(fitting, "fit_and_report", fake)
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "plots").write_text("a file where the plots would go")
+    main = __import__("importlib").import_module("softshadow_cli.main")
+    monkeypatch.setattr(main, "_use_compilation_cache", lambda: None)
+    assert main.main(["fit", str(one_group), "--out", str(out)]) == 0
+    captured = capsys.readouterr()
+    assert seen["plots"] is False
+    assert _one_line(captured.err) == (f"softshadow fit: no plots: {out / 'plots'} is a file, not a folder "
+                                       "(move it away, or give --no-plots)")
+    assert "plots" not in captured.out.splitlines()[-1]
+    assert main.main(["fit", str(one_group), "--out", str(tmp_path / "out2")]) == 0
+    last = capsys.readouterr().out.splitlines()[-1]
+    assert last.endswith("(no plots: no group has a fitted shadow to draw)"), last
+
+
+def test_without_scene_toml_the_closing_line_counts_the_plots_written(one_group, tmp_path, monkeypatch, capsys):
+    import importlib
+
+    from PIL import Image
+    folder = tmp_path / "noscene"
+    folder.mkdir()
+    with Image.open(one_group / "IMG_0004.jpg") as im:
+        im.resize((400, 300)).save(folder / "IMG_0004.jpg", exif=im.info.get("exif", b""))
+    out = tmp_path / "out"
+    main = importlib.import_module("softshadow_cli.main")
+    monkeypatch.setattr(main, "_use_compilation_cache", lambda: None)
+    assert main.main(["fit", str(folder), "--out", str(out)]) == 0
+    last = capsys.readouterr().out.splitlines()[-1]
+    n = len(list((out / "plots").glob("*.png"))) if (out / "plots").is_dir() else 0
+    claim = f" and {n} plot{'s' if n != 1 else ''} in {out / 'plots'}" if n else " (no plots: "
+    assert claim in last, (n, last)
+
+
+def _fake_photo(shape):
+    import types
+    return types.SimpleNamespace(gray=np.zeros(shape, np.float32), decimation=1, exif={})
+
+
+def test_a_camera_matrix_for_another_image_size_is_named():
+    """8000x6000 photos with a 640x480 camera matrix: the principal point is checked against the
+    photo's size (a photo 800x600 with K for 80x60 here: the same ratio)."""
+    from fitting.folder.views import camera_view
+    from fitting.photos.views import PhotoView
+    from scene import scene_from_dict
+    K = [[100.0, 0.0, 40.0], [0.0, 100.0, 30.0], [0.0, 0.0, 1.0]]
+    cam = {"kind": "explicit", "K": K, "R": [[1, 0, 0], [0, -1, 0], [0, 0, -1]], "t": [0, 0, 5]}
+    scene = scene_from_dict({"object": {"mesh": "pillar"}, "camera": cam})
+    view = PhotoView("a.jpg", np.zeros((600, 800), np.float32), np.zeros((600, 800), bool))
+    with pytest.raises(ValueError) as info:
+        camera_view(_fake_photo((600, 800)), scene.camera, view)
+    assert str(info.value) == ("the camera's principal point (40, 30) is far from the centre of this 800x600 "
+                               "photo: K looks made for a 80x60 image; give K for the photo's size")
+    camera_view(_fake_photo((60, 80)), scene.camera, view)  # the size it was made for
+    assert view.camera.width == 80
+
+
+def test_half_size_scales_the_scene_cameras():
+    """--half-size: K (and a top-down map's pixel_m and origin) are scaled to the decoded size,
+    exactly as PinholeCamera.with_size scales a camera to an image resampled by 1/2."""
+    from fitting.folder.views import decimated_spec
+    from scene import scene_from_dict
+    from softshadow import PinholeCamera
+    K = [[1000.0, 0.0, 400.0], [0.0, 1010.0, 299.0], [0.0, 0.0, 1.0]]
+    R = [[1, 0, 0], [0, -1, 0], [0, 0, -1]]
+    scene = scene_from_dict({"object": {"mesh": "pillar"},
+                             "camera": {"kind": "explicit", "K": K, "R": R, "t": [0, 0, 5]},
+                             "photos": {"m.jpg": {"camera": {"kind": "topdown", "pixel_m": 0.01,
+                                                             "origin_m": [-1.0, 2.0]}}}})
+    half = decimated_spec(scene.camera, 2)
+    expected = PinholeCamera(K, R, [0, 0, 5], 800, 600).with_size(400, 300).K
+    np.testing.assert_allclose(half.K, expected, rtol=0, atol=1e-12)
+    grid_full = scene.camera_for("m.jpg").grid(800, 600)
+    grid_half = decimated_spec(scene.camera_for("m.jpg"), 2).grid(400, 300)
+    # Pixel (0, 0) of the half-size map is the mean of the full map's pixels (0..1, 0..1).
+    assert grid_half.pixel_m == pytest.approx(0.02)
+    assert grid_half.origin_m == pytest.approx((grid_full.origin_m[0] + 0.005, grid_full.origin_m[1] - 0.005))
+    assert decimated_spec(scene.camera, 1) is scene.camera
+
+
+@pytest.fixture(scope="module")
+def dng_folder(tmp_path_factory):
+    """A synthetic RAW (DNG) folder with explicit cameras (pidng writes the DNG)."""
+    pytest.importorskip("pidng")
+    from data_synth import synthesize
+    return synthesize(tmp_path_factory.mktemp("dng") / "dng", "pillar", seed=0, size=(400, 300), renderer="model",
+                      fmt="dng", progress=False)
+
+
+def test_half_size_raw_with_explicit_cameras_is_fitted(dng_folder):
+    """A RAW folder with explicit cameras, decoded at half size: the shadow is where the scaled
+    cameras put it (the unscaled ones found "no shadow in view")."""
+    from fitting import FitOptions, fit_folder
+    truth = json.loads((dng_folder / "truth.json").read_text())["groups"][0]
+    results = fit_folder(dng_folder, options=FitOptions(plots=False), half_size=True)
+    (g,) = results.groups
+    assert g.fitted and g.error is None, g.error
+    assert abs(g.rho - truth["rho"]) < 0.04 and results.skipped == []
+
+
+def test_an_entry_for_no_file_is_named_with_the_close_name(one_group, tmp_path):
+    """[photos."img_0004.JPG"] for IMG_0004.jpg: said (with the close name), and that photo left
+    out rather than fitted without its entry; an entry for a photo not in the folder is noted."""
+    from fitting.folder.read import read_folder
+    from scene import load_scene
+    folder = _copy(one_group, tmp_path / "f", ["IMG_0004.jpg", "IMG_0005.jpg"])
+    data = _scene(folder)
+    data["photos"]["img_0004.JPG"] = data["photos"].pop("IMG_0004.jpg")
+    _write_scene(folder, data)
+    photos, skipped = read_folder(folder, load_scene(folder / "scene.toml"))
+    reasons = {s["photo"]: s["reason"] for s in skipped}
+    assert [p.name for p in photos] == ["IMG_0005.jpg"]
+    assert reasons["img_0004.JPG"] == ('[photos."img_0004.JPG"] in scene.toml matches no file; did you mean '
+                                       '"IMG_0004.jpg"? (names are case-sensitive)')
+    assert reasons["IMG_0004.jpg"].startswith('its scene.toml entry seems misspelt as [photos."img_0004.JPG"]')
+    assert reasons["IMG_0006.jpg"] == '[photos."IMG_0006.jpg"] in scene.toml matches no file in the folder'
+
+
+def test_the_only_photo_with_a_misspelt_entry_names_the_cause(one_group, tmp_path):
+    from fitting import FolderError, fit_folder
+    folder = _copy(one_group, tmp_path / "f", ["IMG_0004.jpg"])
+    data = _scene(folder)
+    data["photos"] = {"img_0004.JPG": data["photos"]["IMG_0004.jpg"]}
+    _write_scene(folder, data)
+    with pytest.raises(FolderError) as info:
+        fit_folder(folder)
+    assert "1 photo whose scene.toml entry is misspelt" in str(info.value)
+    assert 'rename it [photos."IMG_0004.jpg"]' in str(info.value)
+
+
+def _mask_cases(h, w):
+    rng = np.random.default_rng(0)
+    noisy = rng.integers(1, 4, (h, w)).astype(np.uint8)     # a JPEG'd mask: 1-3 everywhere
+    noisy[:10, :10] = 255
+    transparent = np.zeros((h, w, 4), np.uint8)               # white under a transparent background
+    transparent[..., :3] = 255
+    transparent[:10, :10, 3] = 255
+    partly = np.zeros((h, w), np.uint8)                       # faint noise over a third of it
+    partly[:, : w // 3] = rng.integers(1, 4, (h, w // 3))
+    partly[:10, -10:] = 255
+    return noisy, transparent, partly
+
+
+def test_masks_that_hide_the_whole_photo_or_are_not_binary_say_so(tmp_path):
+    from PIL import Image
+
+    from fitting.photos.ignore_masks import IgnoreMaskError, read_ignore_mask
+    noisy, transparent, partly = _mask_cases(60, 80)
+    for name, array in (("noisy.png", noisy), ("rgba.png", transparent), ("partly.png", partly)):
+        Image.fromarray(array).save(tmp_path / name)
+    with pytest.raises(IgnoreMaskError) as info:
+        read_ignore_mask(tmp_path / "noisy.png", (60, 80))
+    assert str(info.value).startswith("noisy.png: the ignore mask covers the whole photo (100.0 % of its pixels")
+    assert "faint values 1-3" in str(info.value) and "compression noise" in str(info.value)
+    mask = read_ignore_mask(tmp_path / "rgba.png", (60, 80))   # its alpha channel is read
+    assert mask.sum() == 100 and mask[:10, :10].all()
+    with pytest.raises(IgnoreMaskError, match=r"partly.png: the ignore mask is not binary; \d\d % of its pixels hold "
+                                              r"faint values 1-3"):
+        read_ignore_mask(tmp_path / "partly.png", (60, 80))
+    inverted = np.full((60, 80), 255, np.uint8)
+    Image.fromarray(inverted).save(tmp_path / "white.png")
+    with pytest.raises(IgnoreMaskError, match=r"covers the whole photo .*the pixels to keep must be 0"):
+        read_ignore_mask(tmp_path / "white.png", (60, 80))
+
+
+def test_a_folder_whose_masks_hide_everything_names_the_mask(one_group, tmp_path):
+    from PIL import Image
+
+    from fitting import FolderError, fit_folder
+    folder = _copy(one_group, tmp_path / "f", ["IMG_0004.jpg"])
+    noisy, _, _ = _mask_cases(SIZE[1], SIZE[0])
+    Image.fromarray(noisy).save(folder / "IMG_0004.ignore.png")
+    with pytest.raises(FolderError) as info:
+        fit_folder(folder)
+    text = str(info.value)
+    assert "1 photo with an unusable ignore mask" in text and "IMG_0004.ignore.png: the ignore mask covers" in text
+
+
+def test_scene_angles_are_checked_when_the_scene_is_read():
+    from scene import SceneError, scene_from_dict
+    for key, value in (("sun_elevation_deg", 95.0), ("sun_elevation_deg", -91.0), ("sun_azimuth_deg", 400.0)):
+        with pytest.raises(SceneError, match=rf'\[photos."a.jpg"\].{key} must be in \[.*\] \(degrees'):
+            scene_from_dict({"object": {"mesh": "pillar"},
+                             "photos": {"a.jpg": {"sun_azimuth_deg": 10.0, "sun_elevation_deg": 30.0, key: value}}})
+    K = [[-1000.0, 0.0, 320.0], [0.0, 1000.0, 240.0], [0.0, 0.0, 1.0]]
+    with pytest.raises(SceneError, match="positive focal lengths"):
+        scene_from_dict({"object": {"mesh": "pillar"},
+                         "camera": {"kind": "explicit", "K": K, "R": np.eye(3).tolist(), "t": [0, 0, 5]}})
+
+
+def test_range_images_with_negative_depths_or_in_the_wrong_unit_say_so(tmp_path):
+    from fitting.samples.receiver_points import ReceiverError, read_depth, receiver_for_photo
+    from scene import scene_from_dict
+    depth = np.full((30, 40), 5.0, np.float32)
+    depth[:5] = -2.0
+    np.save(tmp_path / "neg.depth.npy", depth)
+    with pytest.raises(ReceiverError, match=r"range image neg.depth.npy holds negative depths \(17 % of its pixels, "
+                                            r"down to -2 m\)"):
+        read_depth(tmp_path / "neg.depth.npy", (30, 40))
+    np.save(tmp_path / "km.depth.npy", np.linspace(2000.0, 10000.0, 1200).reshape(30, 40).astype(np.float32))
+    with pytest.raises(ReceiverError, match=r"its depths run 2.\d+ km to 9.\d+ km .*millimetres read as metres\? "
+                                            r"\(.npy holds metres\)"):
+        read_depth(tmp_path / "km.depth.npy", (30, 40))
+    # A camera 5 m from the object: depths of 5 km, or of 5 mm (metres written into a 16-bit PNG).
+    R = [[1, 0, 0], [0, -1, 0], [0, 0, -1]]
+    scene = {"object": {"mesh": "pillar"}, "receiver": {"kind": "depth", "depth": "far.depth.npy"},
+             "camera": {"kind": "explicit", "K": [[50.0, 0, 19.5], [0, 50.0, 14.5], [0, 0, 1]], "R": R,
+                        "t": [0, 0, 5]}}
+    np.save(tmp_path / "far.depth.npy", np.full((30, 40), 800.0, np.float32))
+    with pytest.raises(ReceiverError, match=r"far.depth.npy: its depths run 800 m to 800 m \(median 800 m\), but the "
+                                            r"camera stands 5 m from the object: millimetres read as metres\?"):
+        receiver_for_photo(scene_from_dict(scene, base_dir=tmp_path), "a.jpg", (30, 40), {})
+    import cv2
+    cv2.imwrite(str(tmp_path / "near.depth.png"), np.full((30, 40), 5, np.uint16))
+    scene["receiver"]["depth"] = "near.depth.png"
+    with pytest.raises(ReceiverError, match=r"its depths run 5 mm to 5 mm .*metres read as millimetres\? "
+                                            r"\(a 16-bit .png holds millimetres\)"):
+        receiver_for_photo(scene_from_dict(scene, base_dir=tmp_path), "a.jpg", (30, 40), {})
+    np.save(tmp_path / "far.depth.npy", np.full((30, 40), 5.0, np.float32))
+    scene["receiver"]["depth"] = "far.depth.npy"
+    assert receiver_for_photo(scene_from_dict(scene, base_dir=tmp_path), "a.jpg", (30, 40), {}).kind == "depth"

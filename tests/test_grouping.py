@@ -7,7 +7,7 @@ from zoneinfo import ZoneInfo
 
 import pytest
 
-from fitting.grouping import NO_TIME_REASON, PhotoGroup, group_photos, photo_time
+from fitting.photos.grouping import NO_TIME_REASON, PhotoGroup, group_photos, photo_time
 from scene import SceneError, scene_from_dict
 
 JST = dt.timezone(dt.timedelta(hours=9))
@@ -55,7 +55,7 @@ def test_aware_time_is_converted_to_site_local_clock():
     exif = {"DateTimeOriginal": "2026:04:20 00:20:00", "OffsetTimeOriginal": "+00:00"}
     when = photo_time("a.jpg", exif, _scene())
     assert (when.hour, when.minute) == (9, 20)
-    assert when == dt.datetime(2026, 4, 20, 0, 20, tzinfo=dt.timezone.utc)
+    assert when == dt.datetime(2026, 4, 20, 0, 20, tzinfo=dt.UTC)
 
 
 def test_bad_scene_time_names_it():

@@ -19,8 +19,8 @@ import pytest
 import trimesh
 
 from data_synth import PlaneReceiver, sky_visibility, sky_visibility_map
-from softshadow import (GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun, hidden_sky_fraction,
-                        hidden_sky_nodes)
+from softshadow import GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun
+from softshadow.internal import hidden_sky_fraction, hidden_sky_nodes
 from softshadow.meshes import builtin_mesh
 
 # Set by the direction count: against 16,384 directions at these points, casting with 256

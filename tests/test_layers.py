@@ -1,9 +1,11 @@
 """The package layers and the seam between discrete (NumPy/OpenCV) and differentiable (JAX) steps.
 
 - Imports only point down: softshadow (the renderer) <- scene <- fitting, data_synth
-  <- softshadow_cli (the command line and benchmarks).
-- A package above the renderer uses only the renderer's public names (``softshadow.__all__``),
-  and the same for ``scene``.
+  <- softshadow_cli (the command line) and benchmarks (a checkout's, not installed). The one
+  exception is ``softshadow/__main__.py``, the command's entry point for ``python -m softshadow``.
+- A package above the renderer uses only the renderer's exported names (``softshadow.__all__``
+  and ``softshadow.internal.__all__``), and ``scene``'s.
+- ``fitting``'s subpackages import each other in one order, with no circles.
 - The renderer's discrete modules do not import JAX.
 - Discrete steps run no eager JAX operation (each would compile and dispatch a tiny XLA
   program: the sun search once made 288 of them).
@@ -20,14 +22,18 @@ import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("softshadow", "scene", "fitting", "data_synth", "softshadow_cli")
+PACKAGES = ("softshadow", "scene", "fitting", "data_synth", "softshadow_cli", "benchmarks")
 ALLOWED = {
     "softshadow": {"softshadow"},
     "scene": {"scene", "softshadow"},
     "fitting": {"fitting", "scene", "softshadow"},
     "data_synth": {"data_synth", "scene", "softshadow"},
-    "softshadow_cli": set(PACKAGES),
+    "softshadow_cli": {"softshadow", "scene", "fitting", "data_synth", "softshadow_cli"},
+    "benchmarks": {"softshadow", "scene", "fitting", "data_synth", "benchmarks"},
 }
+ENTRY_POINTS = {Path("softshadow/__main__.py")}  # may import the command line
+#: fitting's subpackages, top floor first: each imports only those after it.
+FITTING_FLOORS = ("folder", "solve", "samples", "edges", "photos", "report", "verdict")
 PUBLIC_ONLY = ("softshadow", "scene")  # imported from above by their public names only
 DISCRETE_RENDERER_MODULES = ("meshes", "camera", "occluder", "raster", "posed", "plan", "colour", "threads",
                              "shadowmap", "slides", "projector", "visibility", "clip", "sky")
@@ -56,6 +62,8 @@ def _files(package):
 def test_imports_point_down(package):
     bad = []
     for path in _files(package):
+        if path.relative_to(ROOT) in ENTRY_POINTS:
+            continue
         for module, _, line in _imports(path):
             top = module.split(".")[0]
             if top in PACKAGES and top not in ALLOWED[package]:
@@ -66,18 +74,84 @@ def test_imports_point_down(package):
 @pytest.mark.parametrize("package", [p for p in PACKAGES if p not in ("softshadow",)])
 def test_lower_packages_are_used_by_their_public_names(package):
     import importlib
-    public = {p: set(importlib.import_module(p).__all__) for p in PUBLIC_ONLY}
+    exported = {p: set(importlib.import_module(p).__all__) for p in PUBLIC_ONLY}
+    exported["softshadow.internal"] = set(importlib.import_module("softshadow.internal").__all__)
     bad = []
     for path in _files(package):
+        if path.relative_to(ROOT) in ENTRY_POINTS:
+            continue
         for module, names, line in _imports(path):
             top = module.split(".")[0]
             if top == package or top not in PUBLIC_ONLY:
                 continue
             where = f"{path.relative_to(ROOT)}:{line}"
-            if module != top:
+            if module not in exported:
                 bad.append(f"{where} imports the submodule {module}")
-            bad += [f"{where} imports {top}.{n}, not in {top}.__all__" for n in names if n not in public[top]]
+                continue
+            bad += [f"{where} imports {module}.{n}, not in its __all__" for n in names if n not in exported[module]]
     assert not bad, "\n".join(bad)
+
+
+def _module_imports(package: str) -> dict[str, set[str]]:
+    """Each module of a package (dotted) and the modules of that package it imports, at any depth of
+    its code (imports inside functions included)."""
+    graph: dict[str, set[str]] = {}
+    for path in _files(package):
+        rel = path.relative_to(ROOT).with_suffix("")
+        name = ".".join(rel.parts[:-1] if rel.name == "__init__" else rel.parts)
+        here = name if rel.name == "__init__" else name.rpartition(".")[0]
+        targets = set()
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom):
+                if node.level:
+                    base = here.rsplit(".", node.level - 1)[0] if node.level > 1 else here
+                    mod = f"{base}.{node.module}" if node.module else base
+                    targets |= {mod} if node.module else {f"{base}.{a.name}" for a in node.names}
+                elif node.module and node.module.split(".")[0] == package:
+                    targets.add(node.module)
+            elif isinstance(node, ast.Import):
+                targets |= {a.name for a in node.names if a.name.split(".")[0] == package}
+        graph[name] = {t for t in targets if t != name}
+    return graph
+
+
+@pytest.mark.parametrize("package", ["fitting", "benchmarks", "softshadow", "data_synth", "scene"])
+def test_no_import_circles(package):
+    """No two modules import each other, directly or around a circle (imports inside functions
+    included: they only hide a circle)."""
+    graph = _module_imports(package)
+    graph = {m: {t for t in ts if t in graph} for m, ts in graph.items()}
+    state: dict[str, int] = {}
+    circles = []
+
+    def visit(node, path):
+        state[node] = 1
+        for nxt in sorted(graph[node]):
+            if state.get(nxt) == 1:
+                circles.append(" -> ".join(path[path.index(nxt):] + [nxt]))
+            elif nxt not in state:
+                visit(nxt, path + [nxt])
+        state[node] = 2
+
+    for node in sorted(graph):
+        if node not in state:
+            visit(node, [node])
+    assert not circles, "import circles:\n" + "\n".join(circles)
+
+
+def test_fitting_subpackages_import_downwards():
+    graph = _module_imports("fitting")
+    bad = []
+    for module, targets in graph.items():
+        parts = module.split(".")
+        if len(parts) < 3:
+            continue
+        floor = FITTING_FLOORS.index(parts[1])
+        for target in targets:
+            t = target.split(".")
+            if len(t) >= 2 and t[1] in FITTING_FLOORS and FITTING_FLOORS.index(t[1]) < floor:
+                bad.append(f"{module} imports {target}")
+    assert not bad, "imports that point up between fitting's subpackages:\n" + "\n".join(bad)
 
 
 @pytest.mark.parametrize("name", DISCRETE_RENDERER_MODULES)
@@ -148,8 +222,8 @@ def test_plans_run_no_eager_jax(no_eager_jax):
 
 def test_fitting_discrete_steps_run_no_eager_jax(no_eager_jax):
     from fitting import PhotoView
-    from fitting.samples import select_samples
-    from fitting.sun_search import search_sun
+    from fitting.samples.ground import select_samples
+    from fitting.photos.sun_search import search_sun
     from softshadow import GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun
     model = SoftShadowModel.from_mesh("pillar", profile="disk")
     sun, pose = Sun(150.0, 40.0), Pose()
@@ -174,3 +248,15 @@ def test_command_and_synthesis_steps_run_no_eager_jax(no_eager_jax):
         grid = _default_grid(model, pose, sun, 64, 64, None)
         mesh = posed_mesh("ball", (0.0, 0.0, 0.5), (10.0, 0.0, 30.0), 1.0)
     assert grid.width == 64 and len(mesh.vertices) > 0
+
+
+def test_code_cites_nothing_outside_the_repository():
+    """Comments and docstrings point at the repository's own docs, never at files a user does not have."""
+    import re
+    bad = []
+    for package in PACKAGES + ("examples",):
+        for path in _files(package):
+            for i, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+                if re.search(r"CONVENTIONS|\.\./shared|/work/shared", line):
+                    bad.append(f"{path.relative_to(ROOT)}:{i}: {line.strip()[:100]}")
+    assert not bad, "\n".join(bad)

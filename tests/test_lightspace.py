@@ -22,12 +22,11 @@ import numpy as np
 import pytest
 import trimesh
 from hypothesis import assume, given
-from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 from skimage.measure import find_contours
 
-from softshadow import (GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun, object_mask, plan_points,
-                        project_to_ground)
+from softshadow import GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun
+from softshadow.internal import object_mask, project_to_ground
 from softshadow.meshes import builtin_mesh
 from softshadow.shadowmap import BIAS_PX, LightFrame, depth_bias, faces_away, rasterise_depth
 from test_render_gradients import check_point_gradients, pillar_shadow_samples, scene, theta_of, unpack
@@ -38,7 +37,7 @@ from test_render_gradients import check_point_gradients, pillar_shadow_samples, 
 point_model = functools.partial(SoftShadowModel.from_mesh, footprint=False, hidden_sky=False)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def builtin_model(name: str, rule: str = "edge", profile: str = "linear") -> SoftShadowModel:
     return point_model(builtin_mesh(name), rule=rule, profile=profile)
 

@@ -1,5 +1,5 @@
 """Levels of detail: the decimated series (softshadow.lod) and the fitter's automatic choice
-(fitting.lod) on a small mesh."""
+(fitting.solve.lod) on a small mesh."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from softshadow import PAPER_FACE_COUNTS, decimate, lod_series
 
 @pytest.fixture(scope="module")
 def dragon():
-    from softshadow_cli.bench.meshes import mit_dragon
+    from benchmarks.meshes import mit_dragon
     return mit_dragon(full=True)
 
 
@@ -41,7 +41,7 @@ def test_series_drops_levels_the_mesh_cannot_fill():
 
 
 def test_fitter_counts_halve_down_to_the_coarsest():
-    from fitting.lod import fitter_face_counts
+    from fitting.solve.lod import fitter_face_counts
     assert fitter_face_counts(5120) == [5120, 2560, 1280, 640, 300]
     assert fitter_face_counts(41384)[:3] == [41384, 20692, 10346] and fitter_face_counts(41384)[-1] == 300
     assert fitter_face_counts(500) == [500, 300]
@@ -83,7 +83,7 @@ def test_automatic_choice_follows_the_tolerance(ball_folder):
     assert abs(fixed.lod_faces - 1000) <= 10
     # The coarsest level really changes the fit, so the strict choice kept the detail for a reason.
     # (Against the statistical error, the one lod's tolerance is measured in: the stated error adds
-    # the systematic floor of fitting.uncertainty.)
+    # the systematic floor of fitting.solve.uncertainty.)
     assert abs(loose.range_k - off.range_k) > off.range_stderr_stat
     doc = off.to_json()
     assert doc["lod_faces"] == 5120 and doc["mesh_faces"] == 5120
@@ -94,9 +94,9 @@ def test_noise_lets_a_coarser_level_through(ball_folder, tmp_path):
     import jax
 
     from data_synth import model_topdown_folder
-    from fitting.lod import LevelsOfDetail, ShadowReference, choice_samples
-    from softshadow import Pose, SoftShadowModel, Sun
-    from fitting.views import PhotoView
+    from fitting.solve.lod import LevelsOfDetail, ShadowReference, choice_samples
+    from softshadow import Pose, SoftShadowModel
+    from fitting.photos.views import PhotoView
     import cv2
 
     ball = _ball()
@@ -129,7 +129,7 @@ def test_noise_lets_a_coarser_level_through(ball_folder, tmp_path):
 
 
 def test_levels_are_kept_per_mesh_between_fits():
-    from fitting.lod import levels_of_detail
+    from fitting.solve.lod import levels_of_detail
     ball = _ball()
     lods = levels_of_detail(ball)
     faces, level = lods.level(1000)
@@ -144,7 +144,7 @@ def test_levels_are_kept_per_mesh_between_fits():
 def test_stable_pick_keeps_the_same_pixels_when_the_band_moves():
     """Common random numbers: a band one row wider keeps almost every pixel the narrower band's
     draw kept, where a fresh random draw would keep about half of them."""
-    from fitting.samples import stable_pick
+    from fitting.samples.photo_samples import stable_pick
     rows, cols = np.nonzero(np.ones((100, 200), bool))
     wide_rows, wide_cols = np.nonzero(np.ones((101, 200), bool))
     a = stable_pick(rows, cols, (120, 200), 5000, seed=3)
@@ -170,22 +170,116 @@ def test_cli_reports_the_level_in_results_and_table(ball_folder, tmp_path):
 
 
 def test_masking_report_marks_the_levels_a_slide_hides():
-    from softshadow_cli.bench.lod_grid import masking_report
+    from benchmarks.lod_grid import masking_report
+    table = {"faces": [41384, 5000, 300], "amplitudes": [0.5, 1.0], "frequencies": [0.0, 20.0], "ranges_k": [],
+             "ssim": [[[[1.0, 0.8, 0.4]], [[1.0, 0.9, 0.6]]], [[[1.0, 0.8, 0.4]], [[1.0, 0.98, 0.7]]]],
+             "margin": 0.01, "threshold": 0.95}
+    choices = [{"amplitude": 1.0, "frequency": 0.0, "chosen_faces": 41384, "predicted_ssim": 1.0, "measured_ssim": 1.0,
+                "measured_hidden": True, "coarsest_hidden_faces": 41384, "coarsest": True},
+               {"amplitude": 1.0, "frequency": 15.0, "chosen_faces": 5000, "predicted_ssim": 0.97,
+                "measured_ssim": 0.97, "measured_hidden": True, "coarsest_hidden_faces": 5000, "coarsest": True}]
     result = {"faces": [41384, 5000, 300], "slides": [{"amplitude": 1.0, "frequency": 0.0},
                                                     {"amplitude": 1.0, "frequency": 15.0}],
               "ssim": [[1.0, 0.80, 0.40], [1.0, 0.97, 0.70]], "hidden_threshold": 0.95,
-              "image_size": [40, 30], "render_seconds_per_image": [0.5, 0.2, 0.1], "date_utc": "today"}
+              "image_size": [40, 30], "supersample": 2, "seconds_per_image": 0.2, "date_utc": "today",
+              "table": table, "choices": choices, "check": {"slides": 2, "hidden": 2, "coarsest": 2}}
     env = {"machine": {"cores": 2, "cpu": "cpu", "load_average_1_5_15_min": [1.0, 1.0, 1.0]}}
     text = masking_report(result, env, "img/lod_grid.png")
     assert "| 1, 15 | **0.970** | 0.700 |" in text and "| 1, 0 | 0.800 | 0.400 |" in text
     assert "- 5,000 faces: hidden by (1, 15)" in text
     assert "- 300 faces: hidden by no slide; the slide that hides it best is (1, 15), SSIM 0.700" in text
+    assert "| 1, 15 | 5,000 | 0.970 | 0.970 | 5,000 (chosen) |" in text
+    assert "the chosen level is hidden (measured) under 2 and is the coarsest hidden level under 2" in text
+
+
+def _masking_table(ssim, margin=0.0):
+    from softshadow import MaskingTable
+    ssim = np.asarray(ssim, float)
+    return MaskingTable((1000, 500, 100), (0.5, 1.0), (0.0, 4.0, 16.0), (), ssim[:, :, None, :], margin)
+
+
+def test_masking_table_interpolates_and_chooses_the_coarsest_hidden_level():
+    """Grid values come back exactly; between them the prediction is linear in the amplitude and
+    in log(1 + frequency); the choice is the coarsest level predicted above the threshold plus the
+    margin, the full mesh when none is; the margin is the largest overestimate of a left-out value."""
+    full = [1.0, 1.0, 1.0]
+    ssim = [[[1.0, 0.80, 0.50], [1.0, 0.90, 0.70], [1.0, 0.94, 0.80]],
+            [[1.0, 0.80, 0.50], [1.0, 0.96, 0.90], [1.0, 0.99, 0.96]]]
+    table = _masking_table(ssim)
+    np.testing.assert_allclose(table.predict(1.0, 4.0), [1.0, 0.96, 0.90])
+    t = np.log1p(8.0) / np.log1p(16.0)  # 8 cycles on the log(1 + f) axis between 0 and 16
+    mid = table.predict(0.75, 8.0)
+    lo, hi = np.array(ssim[0]), np.array(ssim[1])
+    at4 = lambda row: row[1] + (np.log1p(8.0) - np.log1p(4.0)) / (np.log1p(16.0) - np.log1p(4.0)) * (row[2] - row[1])
+    np.testing.assert_allclose(mid, 0.5 * at4(lo) + 0.5 * at4(hi))
+    assert 0 < t < 1 and np.allclose(table.predict(1.0, 99.0), ssim[1][2])  # held at the grid's end
+    assert table.choose(1.0, 0.0) == 0  # the plain spotlight hides nothing
+    assert table.choose(1.0, 4.0) == 1 and table.choose(1.0, 16.0) == 2
+    assert _masking_table(ssim, margin=0.02).choose(1.0, 16.0) == 1  # the margin asks for more
+    # Left out, 4 cycles at amplitude 1 is predicted from 0 and 16: 0.96 -> over by at most ...
+    measured = _masking_table(ssim).with_margin()
+    freq = (np.log1p(4.0) - 0.0) / np.log1p(16.0)
+    guess = (1 - freq) * np.array(ssim[1][0]) + freq * np.array(ssim[1][2])
+    assert measured.margin == pytest.approx(max(0.0, guess[1] - 0.96, guess[2] - 0.90))
+    assert full == [1.0, 1.0, 1.0]
+    from softshadow import MaskingTable
+    again = MaskingTable.from_json(measured.to_json())
+    assert again.faces == measured.faces and again.margin == pytest.approx(measured.margin, abs=1e-5)
+    with pytest.raises(ValueError, match="finest first"):
+        MaskingTable((100, 1000), (1.0,), (0.0,), (), np.ones((1, 1, 1, 2)))
+
+
+def test_masking_table_of_a_small_scene_predicts_a_left_out_slide():
+    """measure_masking_table on a tiny view of the ball and two coarser levels: the full mesh's
+    SSIM is 1, the coarser levels' lower; a slide off the table's grid is predicted within the
+    table's own interpolation error (its margin) plus a small allowance."""
+    from softshadow import MaskingScene, SoftShadowModel, lod_series, masked_ssim, measure_masking_table
+    from softshadow.internal import comparison_region, render_level_image
+    mesh = trimesh.creation.icosphere(subdivisions=3, radius=0.5)  # 1,280 faces
+    mesh.apply_translation([0.0, 0.0, 0.6])
+    levels = [(lv.faces, SoftShadowModel.from_mesh(lv.mesh)) for lv in lod_series(mesh, (1280, 160, 60))]
+    scene = MaskingScene(width=64, height=48, camera_position=(1.2, -2.0, 1.3), camera_target=(0.0, 0.0, 0.6),
+                         projector_position=(-0.4, -1.9, 1.9), projector_target=(0.0, 0.0, 0.6), slide_px=96,
+                         shadow_px=256)
+    table = measure_masking_table(scene, levels, (0.5, 1.0), (0.0, 3.0, 8.0, 20.0), (0.005, 0.02), supersample=1)
+    assert table.faces == tuple(f for f, _ in levels) and np.all(table.ssim[..., 0] == 1.0)
+    assert np.all(table.ssim[..., 1:] < 1.0) and np.all(table.ssim[..., 2] <= table.ssim[..., 1] + 0.05)
+    assert 0.0 <= table.margin < 0.2
+    full, m0 = render_level_image(scene, levels[0][1], 0.75, 5.0, 0.01, 1)
+    coarse, m2 = render_level_image(scene, levels[2][1], 0.75, 5.0, 0.01, 1)
+    measured = masked_ssim(full, coarse, comparison_region(m0, m2))
+    assert table.predict(0.75, 5.0, 0.01)[2] - measured <= table.margin + 0.05
+
+
+def test_masking_choice_against_the_measured_grid():
+    """The masking choice against the table ``softshadow bench --what lod-grid`` measured
+    (docs/lod_masking.json): for each of the paper's slides the level the table predicts is hidden
+    in the measured grid (SSIM >= the threshold), and is the coarsest hidden level in most cases.
+    The table was measured on other slides than the paper's (only the spotlight is on both)."""
+    import json
+    from pathlib import Path
+
+    from softshadow import MaskingTable
+    path = Path(__file__).resolve().parents[1] / "docs" / "lod_masking.json"
+    result = json.loads(path.read_text())["lod_grid"]
+    table = MaskingTable.from_json(result["table"])
+    assert table.faces == tuple(result["faces"])
+    grid_points = {(a, f) for a in table.amplitudes for f in table.frequencies}
+    coarsest = 0
+    for slide, measured in zip(result["slides"], result["ssim"]):
+        a, f = slide["amplitude"], slide["frequency"]
+        assert f == 0 or (a, f) not in grid_points  # predicted, not looked up
+        choice = table.choose(a, f)
+        assert measured[choice] >= table.threshold, (slide, table.faces[choice], measured)
+        hidden = [i for i, v in enumerate(measured) if v >= table.threshold]
+        coarsest += choice == max(hidden)
+    assert coarsest > len(result["slides"]) / 2
 
 
 def test_bench_ceiling_is_the_fastest_levels_saving():
     """The LOD benchmark's ceiling: the fastest decimated level against the full mesh (off and
     auto never count), and the mesh's share of the full mesh's warm fit."""
-    from softshadow_cli.bench.lod import _ceiling
+    from benchmarks.lod import _ceiling
     rows = [{"lod": "off", "faces": 41384, "seconds": 2.0}, {"lod": "auto", "faces": 41384, "seconds": 0.5},
             {"lod": 20692, "faces": 20692, "seconds": 1.6}, {"lod": 1000, "faces": 1000, "seconds": 1.25},
             {"lod": 300, "faces": 300, "seconds": 1.3}]
@@ -195,7 +289,7 @@ def test_bench_ceiling_is_the_fastest_levels_saving():
 def test_bench_shifts_are_in_the_full_meshs_errors():
     """The LOD benchmark's shifts: a level's k and rho minus the full mesh's, over the full mesh's
     stated and statistical errors, and its warm speed-up."""
-    from softshadow_cli.bench.lod import _shifts
+    from benchmarks.lod import _shifts
     full = {"error": None, "range_k": 0.010, "rho": 0.25, "range_stderr": 0.001, "rho_stderr": 0.002,
             "range_stderr_stat": 0.0005, "rho_stderr_stat": 0.001, "seconds": 2.0}
     row = dict(full, range_k=0.0095, rho=0.254, seconds=0.5)
@@ -203,3 +297,47 @@ def test_bench_shifts_are_in_the_full_meshs_errors():
     assert row["k_shift_se"] == pytest.approx(-0.5) and row["rho_shift_se"] == pytest.approx(2.0)
     assert row["k_shift_se_stat"] == pytest.approx(-1.0) and row["rho_shift_se_stat"] == pytest.approx(4.0)
     assert row["speedup_warm"] == pytest.approx(4.0)
+
+
+def test_auto_hands_its_samples_to_the_fit_when_it_keeps_the_full_mesh(ball_folder, monkeypatch):
+    """The choice draws the fit's own samples; when it keeps the full mesh the fit uses them
+    instead of drawing them again (one draw per group, as with --lod off)."""
+    import fitting.solve.group as group
+    calls = []
+    draw = group.sample_views
+
+    def counted(*args, **kwargs):
+        calls.append(args[0])
+        return draw(*args, **kwargs)
+
+    monkeypatch.setattr(group, "sample_views", counted)
+    strict = _fit(ball_folder, lod="auto", lod_tolerance=0.0)
+    assert strict.lod_faces == 5120 and len(calls) == 1
+    calls.clear()
+    _fit(ball_folder, lod="off")
+    assert len(calls) == 1
+    calls.clear()
+    loose = _fit(ball_folder, lod="auto", lod_tolerance=1e9)  # a level chosen: the fit draws on it
+    assert loose.lod_faces == 300 and len(calls) == 2 and len(calls[1].occluder.faces) == 300
+
+
+def test_levels_are_kept_on_disk(tmp_path, monkeypatch):
+    """A level decimated once is read back by the next process (here: after the in-memory levels
+    are gone), not decimated again."""
+    import fitting.solve.lod as lod
+    monkeypatch.setenv("SOFTSHADOW_JAX_CACHE", str(tmp_path / "cache"))
+    ball = _ball()
+    first = lod.level_store(ball, 1000)
+    assert list((tmp_path / "cache" / "levels").glob("*.npz"))
+
+    def no_decimation(*args, **kwargs):
+        raise AssertionError("decimated again")
+
+    monkeypatch.setattr(lod, "decimate", no_decimation)
+    again = lod.level_store(ball, 1000)
+    np.testing.assert_array_equal(again.faces, first.faces)
+    np.testing.assert_allclose(again.vertices, first.vertices)
+    assert lod.level_store(ball, 10_000) is ball  # no fewer faces: the mesh itself
+    monkeypatch.setenv("SOFTSHADOW_JAX_CACHE", "off")
+    monkeypatch.setattr(lod, "decimate", lambda mesh, faces: first)
+    assert lod.level_store(ball, 999) is first  # no store: decimated

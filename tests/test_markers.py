@@ -1,6 +1,6 @@
 """ChArUco registration against rendered views of a board lying on the ground.
 
-The renderer here writes the board convention out independently of fitting.markers:
+The renderer here writes the board convention out independently of fitting.photos.markers:
 board-image pixel (c, r), at ``PPM`` pixels per metre, has its centre at board point
 ((c + 0.5) / PPM, (r + 0.5) / PPM), which lies at world (ox + x, oy - y, 0); the
 homography K [r1 r2 t] maps that ground point into the camera image.
@@ -14,9 +14,9 @@ import cv2
 import numpy as np
 import pytest
 
-from fitting.markers import (Registration, RegistrationError, board_from_spec, board_outline_world,
+from fitting.photos.markers import (Registration, RegistrationError, board_from_spec, board_outline_world,
                              board_world_points, marker_world_points, register_board)
-from fitting.photos import srgb_to_linear
+from fitting.photos.read import srgb_to_linear
 from softshadow.camera import look_at_camera
 from scene import CameraSpec
 
@@ -165,9 +165,9 @@ def _distorted(image: np.ndarray, K: np.ndarray, dist: np.ndarray) -> np.ndarray
 def test_scene_distortion_is_used_for_marker_cameras():
     """[camera] K and dist in scene.toml: the registered camera keeps the distortion, and the
     pose is as good as without a lens error (dropping dist, as before, costs pixels)."""
-    from fitting.api import _camera_view
-    from fitting.photos import Photo
-    from fitting.views import PhotoView
+    from fitting.folder.views import camera_view as _camera_view
+    from fitting.photos.read import Photo
+    from fitting.photos.views import PhotoView
     cam = OBLIQUE
     dist = np.array([-0.25, 0.08, 0.0, 0.0, 0.0])
     view = _distorted(render_view(cam, board_image()), cam.K, dist)
@@ -181,7 +181,7 @@ def test_scene_distortion_is_used_for_marker_cameras():
     assert error < 0.003
     without = register_board(view, SPEC, K=cam.K)  # the lens ignored, as before: ~8 mm off
     assert np.linalg.norm(without.camera.centre - cam.centre) > 4 * error
-    # The folder path (fitting.api) registers with the scene's distortion too, and EXIF does
+    # The folder path (fitting.folder.api) registers with the scene's distortion too, and EXIF does
     # not override the scene's K.
     gray = srgb_to_linear(view / 255.0).astype(np.float32)
     photo = Photo("p.png", Path("p.png"), gray[..., None].repeat(3, -1), gray, "srgb8", 8,

@@ -1,4 +1,4 @@
-"""The object itself as a receiver (``fitting.object_points``): which pixels see it, its attached
+"""The object itself as a receiver (``fitting.samples.object_points``): which pixels see it, its attached
 and cast self-shadow, and its light against the physical renderer (a small mesh, a small image)."""
 
 from __future__ import annotations
@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from softshadow import Pose, ShadowParams, SoftShadowModel, Sun, look_at_camera, object_mask
+from softshadow import Pose, ShadowParams, SoftShadowModel, Sun, look_at_camera
+from softshadow.internal import object_mask
 
 
 @pytest.fixture(scope="module")
@@ -29,7 +30,7 @@ def scene():
 
 
 def test_visible_pixels_are_the_object_seen_from_the_camera(scene):
-    from fitting.object_points import visible_object_pixels
+    from fitting.samples.object_points import visible_object_pixels
     model, mesh, sun, _, camera = scene
     px = visible_object_pixels(model, Pose(), camera)
     seen = np.zeros((camera.height, camera.width), bool)
@@ -56,7 +57,7 @@ def test_self_shadow_and_attached_shadow_match_ray_casting(scene):
     """Alpha on the object's visible points against rays to the sun's centre (the pillar's
     shadow on the block's top) and the faces turned away (attached): all agree but a few points
     at the shadow's edges."""
-    from fitting.object_points import object_light, visible_object_pixels
+    from fitting.samples.object_points import object_light, visible_object_pixels
     model, mesh, sun, light, camera = scene
     px = visible_object_pixels(model, Pose(), camera)
     _, alpha, c, _ = object_light(model, ShadowParams(light.range_k, light.rho), sun, Pose(), px)
@@ -76,7 +77,7 @@ def test_object_light_matches_the_physical_renderer(scene):
     (sun disk and sky by independent ray casting): within 0.02 at 95 % of the visible points (the
     rest at the self-shadow's edge, which the model draws hard)."""
     from data_synth.physical import irradiance, sky_visibility, sun_visibility
-    from fitting.object_points import object_light, visible_object_pixels
+    from fitting.samples.object_points import object_light, visible_object_pixels
     model, mesh, sun, light, camera = scene
     assert np.allclose(-sun.light_np, light.direction)
     px = visible_object_pixels(model, Pose(), camera)

@@ -15,11 +15,12 @@ import pytest
 from PIL import Image
 from scipy import ndimage
 
-from fitting.edge_measure import measure_shadow_edges
-from fitting.ground_region import ground_region
-from fitting.ignore_masks import IgnoreMaskError, ignore_mask_path, is_auxiliary, read_ignore_mask
-from fitting.photos import list_photos
-from fitting.shadow_cues import bluer_umbrae, log_rho_modes, mode_of_log_rho, reliability
+from fitting.edges.measure import measure_shadow_edges
+from fitting.edges.ground_region import ground_region
+from fitting.photos.ignore_masks import IgnoreMaskError, ignore_mask_path, is_auxiliary, read_ignore_mask
+from fitting.photos.read import list_photos
+from fitting.edges.cues import bluer_umbrae, edge_evidence, log_rho_modes, mode_of_log_rho
+from fitting.verdict.edge_rules import judge_edges
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 SUN = np.array([1.0, 0.97, 0.9])
@@ -112,6 +113,15 @@ def test_a_kerb_beside_the_shadow_is_either_left_out_or_flagged():
 
 # ----------------------------------------------------------------------------- cues and confidence
 
+def reliability(shadow_like_log_rho, positions, shape, lowest_log, kept_log_rho=None):
+    """(warnings, reliable) of the rule book on a measurement's cues; without ``kept_log_rho`` every
+    kept profile has one step (its outlines agree)."""
+    positions = np.asarray(positions, float).reshape(-1, 2)
+    kept = np.zeros(len(positions)) if kept_log_rho is None else kept_log_rho
+    verdict = judge_edges(edge_evidence(shadow_like_log_rho, positions, shape, lowest_log, kept, None))
+    return list(verdict.warnings), verdict.reliable
+
+
 def test_bluer_umbrae_apply_only_when_enough_edges_are_bluer():
     assert bluer_umbrae(np.array([0.5, 0.4, 0.02, 0.3, 0.6, 0.45, 0.0])).tolist() == [
         True, True, False, True, True, True, False]
@@ -177,7 +187,7 @@ def test_separate_outlines_with_different_steps_make_the_measurement_unreliable(
 
 def test_an_outline_whose_texture_changes_across_it_is_two_materials():
     """Per profile the texture ratio is noisy (a kerb's ranged 1.7-7); the outline's median decides."""
-    from fitting.shadow_cues import textured_outlines
+    from fitting.edges.cues import textured_outlines
 
     labels = np.array([1] * 6 + [2] * 6 + [3] * 2 + [4] * 3)
     ratios = np.array([3.1, 1.7, 6.9, 2.4, 4.0, np.nan,       # a kerb: median 3.1, x sqrt(0.27) = 1.6
@@ -225,8 +235,8 @@ def test_ignore_mask_reading_sizes_and_errors(tmp_path):
 
 def test_an_ignore_mask_beside_the_photo_removes_a_decoy_shadow(tmp_path):
     """Two shadows of different depth: the mask over the darker one leaves the other's rho."""
-    from fitting.api import fit_folder
-    from fitting.photos import linear_to_srgb
+    from fitting.folder.api import fit_folder
+    from fitting.photos.read import linear_to_srgb
     rng = np.random.default_rng(2)
     h, w = 160, 220
     yy, xx = np.mgrid[0:h, 0:w]

@@ -15,9 +15,9 @@ import tifffile
 from PIL import Image, ImageOps
 
 from datapaths import WORKSPACE
-from fitting.exif import (FULL_FRAME_DIAGONAL_MM, intrinsics_from_exif, photo_time_from_exif,
+from fitting.photos.exif import (FULL_FRAME_DIAGONAL_MM, intrinsics_from_exif, photo_time_from_exif,
                           read_exif)
-from fitting.photos import (IMAGE_EXTENSIONS, RAW_EXTENSIONS, PhotoError, apply_orientation,
+from fitting.photos.read import (IMAGE_EXTENSIONS, RAW_EXTENSIONS, PhotoError, apply_orientation,
                             linear_to_srgb, list_photos, read_photo, srgb_to_linear)
 
 # Real RAW files without a licence to copy them (../shared/data/raw, development workspace only).

@@ -15,7 +15,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import norm
 
-from softshadow import WIDE_BLUR_TAU, Pose, blurred_profile_alpha, profile_alpha
+from softshadow import Pose, blurred_profile_alpha, profile_alpha
+from softshadow.internal import WIDE_BLUR_TAU
 
 from test_fit_model import K, _oblique_view
 
@@ -102,9 +103,9 @@ def test_blurred_profile_vectorised_jvp_and_float32_gradients(profile):
     np.testing.assert_allclose(np.stack(g32), g64, atol=2e-4)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _view_samples(max_samples):
-    from fitting.samples import select_samples
+    from fitting.samples.ground import select_samples
     _, _, view = _oblique_view()
     from softshadow import SoftShadowModel
     model = SoftShadowModel.from_mesh("pillar", profile="disk")
@@ -112,7 +113,7 @@ def _view_samples(max_samples):
 
 
 def _group(n_photos=1, max_samples=300):
-    from fitting.solve import _group_arrays
+    from fitting.solve.group import _group_arrays
     view, samples = _view_samples(max_samples)
     return samples, _group_arrays([samples] * n_photos, [view] * n_photos)
 
@@ -121,7 +122,7 @@ def test_fit_model_alpha_is_the_exact_convolution_when_the_blur_exceeds_the_penu
     """The fitter's alpha for a narrow penumbra (k = 0.002, under a pixel wide on this 320x240
     view) under a 0.9 px camera blur is the exact convolution of the disk profile with a Gaussian
     of variance 1/12 + 0.81 px^2. Gauss-Hermite over that blur was off by up to 0.05 here."""
-    from fitting.model import FitConfig, angular_pixel_gradient, edge_terms, raw_from_k
+    from fitting.solve.model import FitConfig, angular_pixel_gradient, edge_terms, raw_from_k
     samples, group = _group()
     n = len(samples.observed)
     k = 0.002
@@ -138,8 +139,8 @@ def test_fit_model_alpha_is_the_exact_convolution_when_the_blur_exceeds_the_penu
 def test_each_photo_has_its_own_blur_and_its_jacobian_matches_finite_differences():
     """Two photos of one group with different blurs: each blur moves only its own photo's
     residuals, and the solver's Jacobian (the per-sample blur JVP) matches central differences."""
-    from fitting.model import FitConfig, FitParams, raw_from_k, residuals
-    from fitting.solve import _prepare, initial_params
+    from fitting.solve.model import FitConfig, FitParams, raw_from_k, residuals
+    from fitting.solve.group import _prepare, initial_params
     samples, group = _group(n_photos=2)
     params, _ = initial_params([samples, samples])
     config = FitConfig.make("disk", True, True, 0.05, "edge")

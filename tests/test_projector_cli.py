@@ -126,23 +126,25 @@ def test_render_with_a_projector_lights_where_it_points(folder, capsys):
     np.testing.assert_allclose(img[36, col(-2.0)], 0.085, atol=1e-6)
 
 
-@pytest.mark.parametrize("options, message", [
-    (["--projector", "1,2", "--projector-target", "0,0,0"], "--projector must be three numbers"),
-    (["--projector", "1,2,3"], "one --projector-target"),
-    (["--slide", "spot"], "--slide needs --projector"),
-    (["--projector", "1,2,3", "--projector-target", "0,0,0", "--slide", "sine:x"], "sine:FREQ"),
-    (["--projector", "1,2,3", "--projector-target", "0,0,0", "--slide", "nope.png"], "not found"),
-    (["--projector", "1,2,3", "--projector-target", "0,0,0", "--projector-fov", "200"], "fov_deg"),
+@pytest.mark.parametrize("options, message, status", [
+    # A value out of its range is refused before any work, with exit status 2 (softshadow_cli.validate).
+    (["--projector", "1,2", "--projector-target", "0,0,0"], "--projector must be three numbers", 2),
+    (["--projector", "1,2,3"], "one --projector-target", 2),
+    (["--slide", "spot"], "--slide needs --projector", 2),
+    (["--projector", "1,2,3", "--projector-target", "0,0,0", "--slide", "sine:x"], "sine:FREQ", 1),
+    (["--projector", "1,2,3", "--projector-target", "0,0,0", "--slide", "nope.png"], "not found", 1),
+    (["--projector", "1,2,3", "--projector-target", "0,0,0", "--projector-fov", "200"],
+     "--projector-fov must be in (0, 170), got 200", 2),
     (["--projector", "1,2,3", "--projector", "2,2,3", "--projector-target", "0,0,0", "--projector-target",
-      "0,0,0", "--slide", "spot", "--slide", "spot", "--slide", "spot"], "once per --projector"),
-    (["--camera-position", "1,2,3"], "both --camera-position and --camera-target"),
-    (["--projector", "1,2,3", "--projector-target", "0,0,0", "--silhouettes"], "--silhouettes"),
+      "0,0,0", "--slide", "spot", "--slide", "spot", "--slide", "spot"], "once per --projector", 2),
+    (["--camera-position", "1,2,3"], "both --camera-position and --camera-target", 2),
+    (["--projector", "1,2,3", "--projector-target", "0,0,0", "--silhouettes"], "--silhouettes", 1),
 ])
-def test_bad_render_options_fail_in_one_line(folder, capsys, options, message):
+def test_bad_render_options_fail_in_one_line(folder, capsys, options, message, status):
     code = main(["render", "--scene", str(folder / "scene.toml"), "--out", str(folder / "x.png"), "--no-sun",
                  *options])
     err = capsys.readouterr().err
-    assert code == 1 and message in err and len(err.strip().splitlines()) == 1, err
+    assert code == status and message in err and len(err.strip().splitlines()) == 1, err
     assert not (folder / "x.png").exists()
 
 

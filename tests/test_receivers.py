@@ -9,7 +9,6 @@ import math
 import cv2
 import numpy as np
 import pytest
-import trimesh
 
 from softshadow import look_at_camera
 
@@ -34,8 +33,8 @@ def test_tilted_light_matches_the_physical_renderer():
     lit level: receiver_light (with softshadow.sky) against data_synth.physical, two independent
     ray casters, within 0.01."""
     from data_synth.physical import combined_mesh, irradiance, sky_visibility, sun_visibility
-    from fitting.receiver_light import lit_level, plane_sky_fraction, sun_incidence, umbra_level
-    from softshadow import open_sky_fraction
+    from fitting.samples.receiver_light import lit_level, plane_sky_fraction, sun_incidence, umbra_level
+    from softshadow.internal import open_sky_fraction
     sun, along, pillar, wall = _wall_scene()
     d, side = _frame(along)
     face_n = -d
@@ -62,8 +61,8 @@ def test_tilted_light_matches_the_physical_renderer():
 def test_range_image_of_the_plane_gives_the_plane():
     """A range image of the ground z = 0 back-projects onto it, with normal +z and the plane's
     own pixel Jacobian; .npy metres and 16-bit .png millimetres read alike."""
-    from fitting.receiver_points import ReceiverSurface, read_depth
-    from fitting.views import PhotoView
+    from fitting.samples.receiver_points import ReceiverSurface
+    from fitting.photos.views import PhotoView
     cam = look_at_camera((0.5, -4.0, 1.7), (0.0, 1.0, 0.0), 96, 72, 60.0)
     rows, cols = np.mgrid[0:72, 0:96]
     ground, valid = cam.ground_points(cols.ravel(), rows.ravel())
@@ -78,7 +77,7 @@ def test_range_image_of_the_plane_gives_the_plane():
 
 
 def test_range_image_files(tmp_path):
-    from fitting.receiver_points import ReceiverError, read_depth
+    from fitting.samples.receiver_points import ReceiverError, read_depth
     z = np.full((6, 8), 2.5, np.float32)
     z[0, 0] = np.nan
     np.save(tmp_path / "a.depth.npy", z)
@@ -98,8 +97,8 @@ def test_range_image_files(tmp_path):
 
 def test_mesh_receiver_points_and_normals():
     """Rays cast on the wall receiver land on its faces with their normals turned to the camera."""
-    from fitting.receiver_points import ReceiverSurface
-    from fitting.views import PhotoView
+    from fitting.samples.receiver_points import ReceiverSurface
+    from fitting.photos.views import PhotoView
     sun, along, _, wall = _wall_scene()
     d, side = _frame(along)
     cam = look_at_camera(-3.0 * d + [0, 0, 1.6], 1.0 * d + [0, 0, 0.8], 80, 60, 50.0)
@@ -115,7 +114,7 @@ def test_mesh_receiver_points_and_normals():
 
 
 def test_photos_skip_range_images_and_masks(tmp_path):
-    from fitting.photos import list_photos
+    from fitting.photos.read import list_photos
     cv2.imwrite(str(tmp_path / "IMG_1.png"), np.zeros((4, 4), np.uint8))
     cv2.imwrite(str(tmp_path / "IMG_1.depth.png"), np.zeros((4, 4), np.uint16))
     cv2.imwrite(str(tmp_path / "IMG_1.ignore.png"), np.zeros((4, 4), np.uint8))
@@ -137,8 +136,8 @@ def test_small_end_to_end_fit_on_the_receiver(tmp_path, preset, size):
     There the penumbra is about 2 pixels wide, so k is only checked to a factor of 2 (the
     full-size figures are in docs/receivers.md); fitted as flat ground, depth-background
     read k 17x and rho 0.16 too large."""
-    from fitting.api import fit_folder
-    from fitting.solve import FitOptions
+    from fitting.folder.api import fit_folder
+    from fitting.solve.group import FitOptions
     folder = _synth(tmp_path, preset, size)
     truth = json.loads((folder / "truth.json").read_text())["groups"][0]
     (g,) = fit_folder(folder, options=FitOptions(plots=False)).groups

@@ -38,7 +38,7 @@ from softshadow.meshes import builtin_mesh
 point_model = functools.partial(SoftShadowModel.from_mesh, footprint=False, hidden_sky=False)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def builtin_model(name: str, rule: str = "edge", profile: str = "linear") -> SoftShadowModel:
     return point_model(builtin_mesh(name), rule=rule, profile=profile)
 
@@ -497,7 +497,7 @@ def test_camera_looking_straight_down_sees_the_ground_map(name, sun, grid):
 @pytest.mark.parametrize("k", [0.0, 0.02])
 def test_box_lit_side_on_does_not_depend_on_the_tie_break(rule, k):
     """Sun due east on an axis-aligned box: two faces have n . L = 0 exactly. Turning the sun by
-    +-1e-6 degrees breaks the tie either way; the shadow must not change (CONVENTIONS)."""
+    +-1e-6 degrees breaks the tie either way; the shadow must not change (docs/formats.md)."""
     mdl = point_model(standing_box((0.6, 0.4, 1.0)), rule=rule)
     grid = GroundGrid(0.0213, (-2.6, 0.61), 96, 64)  # pixel centres off the shadow's sides y = +-0.2
     maps = [alpha_map(mdl, k, Sun(az, 35.0), Pose(), grid) for az in (90.0, 90.0 - 1e-6, 90.0 + 1e-6)]

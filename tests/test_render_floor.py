@@ -25,8 +25,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gradcheck import PARAM_NAMES, STEPS, check_point_gradients, unpack
-from softshadow import (GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun, footprint_profile_alpha,
-                        hidden_sky_fraction, profile_alpha, profile_integral)
+from softshadow import GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun, profile_alpha
+from softshadow.internal import footprint_profile_alpha, hidden_sky_fraction, profile_integral
 from softshadow.meshes import builtin_mesh
 from test_render_gradients import pillar_shadow_samples, scene, theta_of
 
@@ -112,7 +112,7 @@ def test_footprint_float32_matches_float64():
         assert np.all(np.isfinite(np.asarray(g)))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def pillar(profile="disk", footprint=True, hidden_sky=True) -> SoftShadowModel:
     return SoftShadowModel.from_mesh(builtin_mesh("pillar"), profile=profile, footprint=footprint,
                                      hidden_sky=hidden_sky)

@@ -28,7 +28,7 @@ from gradcheck import PARAM_NAMES, STEPS, check_point_gradients, unpack
 from softshadow import GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun
 from softshadow.meshes import builtin_mesh
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def model(mesh: str, rule: str, profile: str) -> SoftShadowModel:
     return SoftShadowModel.from_mesh(builtin_mesh(mesh), rule=rule, profile=profile)
 

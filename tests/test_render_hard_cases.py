@@ -20,7 +20,8 @@ import pytest
 import trimesh
 
 from gradcheck import PARAM_NAMES, STEPS, check_point_gradients
-from softshadow import GroundGrid, Pose, PosedOccluder, ShadowParams, SoftShadowModel, Sun
+from softshadow import GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun
+from softshadow.internal import PosedOccluder
 from softshadow.meshes import builtin_mesh
 
 
@@ -29,7 +30,7 @@ from softshadow.meshes import builtin_mesh
 point_model = functools.partial(SoftShadowModel.from_mesh, footprint=False, hidden_sky=False)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def builtin_model(name: str, rule: str = "edge", profile: str = "linear") -> SoftShadowModel:
     return point_model(builtin_mesh(name), rule=rule, profile=profile)
 

@@ -1,26 +1,27 @@
 """The report writer: results.json, Table 2 (Markdown, CSV, terminal) and plots.
 
 FitResults are built by hand (no fitting here), so these tests are fast and check
-only the writing: exact CONVENTIONS keys and units, uncertainty propagation,
+only the writing: exact results.json keys and units, uncertainty propagation,
 column order, upper-bound marks, CSV round trip, PNG validity, atomic writes.
 """
 
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
-import time
 
 import matplotlib.image as mpimg
 import numpy as np
 import pytest
 
-from fitting import plots, report
-from fitting.report import (PAPER_TABLE2, brightness_stderr, format_table, nearest_paper_time,
+from fitting.report import plots
+from fitting.report import write as report
+from fitting.report.write import (PAPER_TABLE2, brightness_stderr, format_table, nearest_paper_time,
                             software_versions, write_report, write_results_json, write_table2)
-from fitting.results import FitResults, GroupResult, OverlayPlotData, ProfilePlotData
+from fitting.report.results import FitResults, GroupResult, OverlayPlotData, PlotData, ProfilePlotData, Verdict
 
-CONVENTIONS_GROUP_KEYS = {
+CONTRACT_GROUP_KEYS = {
     "label", "time", "photos", "range", "range_k", "range_stderr", "brightness", "rho",
     "rho_stderr", "sun_azimuth_deg", "sun_elevation_deg", "rmse", "n_profiles", "converged",
     "identifiable", "seconds"}
@@ -48,20 +49,25 @@ def _overlay(photo: str, h: int = 120, w: int = 160) -> OverlayPlotData:
     return OverlayPlotData(photo, image, alpha, uv)
 
 
+def _group(label, time, photos, *, profiles=(), overlays=(), **fields) -> GroupResult:
+    """A result from its results.json fields (``GroupResult.from_json``) and plot data."""
+    g = GroupResult.from_json({"label": label, "time": time, "photos": photos, **fields})
+    return dataclasses.replace(g, plots=PlotData(tuple(profiles), tuple(overlays)))
+
+
 def _results(with_plots: bool = False) -> FitResults:
     """Four groups out of time order: fitted, unidentifiable, failed, no scene."""
-    morning = GroupResult(
+    plots = dict(profiles=[_profiles("a.jpg"), _profiles("b.jpg", seed=1)],
+                 overlays=[_overlay("a.jpg"), _overlay("b.jpg", 90, 60)]) if with_plots else {}
+    morning = _group(
         "09:20", "09:20", ["a.jpg", "b.jpg"], range_k=0.0052, range_stderr=0.0003, rho=0.157,
         rho_stderr=0.002, sun_azimuth_deg=124.2, sun_elevation_deg=49.0, rmse=0.004,
-        n_profiles=64, converged=True, identifiable=True, seconds=0.81234)
-    noon = GroupResult("13:21", "13:21", ["c.jpg"], range_k=0.001, range_stderr=0.004, rho=0.2,
-                       rho_stderr=0.003, n_profiles=40, converged=True, identifiable=False)
-    evening = GroupResult("16:21", "16:21", ["d.jpg"], error="no shadow in view")
-    no_scene = GroupResult("IMG_7.jpg", None, ["IMG_7.jpg"], rho=0.3, rho_stderr=0.01,
-                           penumbra_px=3.4, penumbra_px_iqr=1.2, converged=True)
-    if with_plots:
-        morning.plot_profiles = [_profiles("a.jpg"), _profiles("b.jpg", seed=1)]
-        morning.plot_overlays = [_overlay("a.jpg"), _overlay("b.jpg", 90, 60)]
+        n_profiles=64, converged=True, identifiable=True, seconds=0.81234, **plots)
+    noon = _group("13:21", "13:21", ["c.jpg"], range_k=0.001, range_stderr=0.004, rho=0.2,
+                  rho_stderr=0.003, n_profiles=40, converged=True, identifiable=False)
+    evening = GroupResult.failed("16:21", "16:21", ["d.jpg"], "no shadow in view")
+    no_scene = _group("IMG_7.jpg", None, ["IMG_7.jpg"], rho=0.3, rho_stderr=0.01,
+                      penumbra_px=3.4, penumbra_px_iqr=1.2, converged=True)
     return FitResults([evening, no_scene, noon, morning],
                       [{"photo": "bad.jpg", "reason": "not an image: cannot decode"}], {})
 
@@ -84,7 +90,7 @@ def test_results_json_has_conventions_keys_and_paper_units(tmp_path):
     assert doc["software"]["numpy"] == np.__version__
     by_label = {g["label"]: g for g in doc["groups"]}
     for g in doc["groups"]:
-        assert CONVENTIONS_GROUP_KEYS <= set(g), CONVENTIONS_GROUP_KEYS - set(g)
+        assert CONTRACT_GROUP_KEYS <= set(g), CONTRACT_GROUP_KEYS - set(g)
     m = by_label["09:20"]
     assert m["range"] == pytest.approx(100 * 0.0052, rel=1e-12)
     assert m["brightness"] == pytest.approx(255 * 0.157 ** (1 / 2.2), rel=1e-12)
@@ -120,7 +126,8 @@ def test_results_json_write_is_atomic(tmp_path, monkeypatch):
 
     monkeypatch.setattr(json, "dump", dump_half_then_crash)
     changed = _results()
-    changed.groups[3].rho = 0.5
+    g = changed.groups[3]
+    changed.groups[3] = dataclasses.replace(g, estimate=dataclasses.replace(g.estimate, rho=0.5))
     with pytest.raises(RuntimeError, match="simulated crash"):
         write_results_json(changed, tmp_path)
     assert (tmp_path / "results.json").read_bytes() == old
@@ -188,11 +195,11 @@ def test_table2_markdown_columns_bounds_failures(tmp_path):
 
 def test_table2_reference_and_truth_rows(tmp_path):
     results = _results()
-    results.groups[3].time = "09:41"  # 21 minutes from the paper's 09:20: still matched
+    results.groups[3] = dataclasses.replace(results.groups[3], time="09:41")  # 21 minutes from 09:20: still matched
     md_path, _ = write_table2(results, tmp_path, reference=PAPER_TABLE2, truth=TRUTH)
     rows = {r[0]: r[1:] for r in _md_table(md_path.read_text())[2:]}
-    assert rows["Reference: range"] == ["6.0", "5.0", "8.0", "—"]
-    assert rows["Reference: brightness"] == ["110.0", "120.0", "180.0", "—"]
+    assert rows["Paper, set by hand: range (its own units)"] == ["6.0", "5.0", "8.0", "—"]
+    assert rows["Paper, set by hand: brightness"] == ["110.0", "120.0", "180.0", "—"]
     assert rows["Truth: range"][:2] == ["0.47", "0.47"]  # matched by photos, not label
     assert rows["Truth: brightness"][0] == f"{255 * 0.16 ** (1 / 2.2):.1f}"
     assert rows["Truth: ρ"][1] == "0.210"
@@ -242,7 +249,7 @@ def test_format_table_shows_fit_truth_and_paper():
     text = format_table(_results(), reference=PAPER_TABLE2, truth=TRUTH)
     lines = text.splitlines()
     assert lines[0].split() == ["Time", "of", "day", "09:20", "13:21", "16:21", "IMG_7.jpg"]
-    assert any(line.startswith("Reference: brightness") and "110.0" in line and "180.0" in line
+    assert any(line.startswith("Paper, set by hand: brightness") and "110.0" in line and "180.0" in line
                for line in lines)
     assert any(line.startswith("Truth: range") and "0.47" in line for line in lines)
     assert "≤ 0.10" in text and "no shadow in view" in text
@@ -274,7 +281,7 @@ def test_plot_group_writes_profiles_and_overlays(tmp_path):
 
 def test_overlay_draws_alpha_where_the_shadow_is(tmp_path):
     """The fitted alpha is drawn as a red tint: the shadowed half of the plot is redder."""
-    group = GroupResult("g", None, ["s.png"], rho=0.2, plot_overlays=[_overlay("s.png", 200, 200)])
+    group = _group("g", None, ["s.png"], rho=0.2, overlays=[_overlay("s.png", 200, 200)])
     (path,) = plots.plot_group(group, tmp_path)
     img = _png(path)[..., :3]
     redness = img[..., 0] - img[..., 1]
@@ -297,7 +304,7 @@ def test_overlay_of_a_big_photo_is_drawn_with_a_stride(tmp_path, monkeypatch):
         return imshow(self, x, *args, **kwargs)
 
     monkeypatch.setattr(Axes, "imshow", spy)
-    group = GroupResult("09:20", "09:20", ["big.jpg"], plot_overlays=[_overlay("big.jpg", 1200, 1600)])
+    group = _group("09:20", "09:20", ["big.jpg"], overlays=[_overlay("big.jpg", 1200, 1600)])
     (path,) = plots.plot_group(group, tmp_path)
     assert drawn and all(max(shape[:2]) <= plots.MAX_OVERLAY_SIDE for shape, _ in drawn)
     assert all(extent[1] >= 1600 - 1 and extent[2] >= 1200 - 1 for _, extent in drawn)
@@ -305,19 +312,18 @@ def test_overlay_of_a_big_photo_is_drawn_with_a_stride(tmp_path, monkeypatch):
 
 
 def test_plots_skip_empty_data(tmp_path):
-    empty = GroupResult("x", None, ["x.jpg"], error="board not found")
+    empty = GroupResult.failed("x", None, ["x.jpg"], "board not found")
     assert plots.plot_group(empty, tmp_path) == []
-    blank = GroupResult("y", None, ["y.jpg"], plot_profiles=[ProfilePlotData(
+    blank = _group("y", None, ["y.jpg"], profiles=[ProfilePlotData(
         "y.jpg", np.empty(0), np.empty(0), np.empty(0), np.empty(0, int))],
-        plot_overlays=[OverlayPlotData("y.jpg", np.empty((0, 0)), np.empty((0, 0)), np.empty((0, 2)))])
+        overlays=[OverlayPlotData("y.jpg", np.empty((0, 0)), np.empty((0, 0)), np.empty((0, 2)))])
     assert plots.plot_group(blank, tmp_path) == []
-    no_time = FitResults([GroupResult("IMG_7.jpg", None, ["IMG_7.jpg"], rho=0.3)], [], {})
+    no_time = FitResults([_group("IMG_7.jpg", None, ["IMG_7.jpg"], rho=0.3)], [], {})
     assert plots.plot_range_vs_time(no_time, tmp_path) is None
 
 
 def test_overlays_with_one_stem_do_not_overwrite(tmp_path):
-    group = GroupResult("g", None, ["a.jpg", "a.dng"],
-                        plot_overlays=[_overlay("a.jpg"), _overlay("a.dng")])
+    group = _group("g", None, ["a.jpg", "a.dng"], overlays=[_overlay("a.jpg"), _overlay("a.dng")])
     assert [p.name for p in plots.plot_group(group, tmp_path)] == ["g_overlay_a.png", "g_overlay_a_2.png"]
 
 
@@ -337,12 +343,12 @@ def test_safe_name():
 
 def test_write_report_writes_everything(tmp_path):
     written = write_report(_results(with_plots=True), tmp_path, reference=PAPER_TABLE2, truth=TRUTH)
-    assert set(written) == {"results.json", "table2.md", "table2.csv", "plots/09-20_profiles.png",
+    assert set(written) == {"results.json", "table2.md", "table2.csv", "index.html", "plots/09-20_profiles.png",
                             "plots/09-20_overlay_a.png", "plots/09-20_overlay_b.png",
                             "plots/range_vs_time.png"}
     for rel, path in written.items():
         assert path == tmp_path / rel and path.stat().st_size > 0
-    assert "Reference: range" in (tmp_path / "table2.md").read_text()
+    assert "Paper, set by hand: range" in (tmp_path / "table2.md").read_text()
 
 
 def test_write_report_survives_a_failing_plot(tmp_path, monkeypatch, caplog):
@@ -358,7 +364,7 @@ def test_write_report_survives_a_failing_plot(tmp_path, monkeypatch, caplog):
 
 def test_write_report_without_plots(tmp_path):
     written = write_report(_results(with_plots=True), tmp_path, plots=False)
-    assert set(written) == {"results.json", "table2.md", "table2.csv"}
+    assert set(written) == {"results.json", "table2.md", "table2.csv", "index.html"}
     assert not (tmp_path / "plots").exists()
 
 
@@ -381,9 +387,9 @@ def test_written_files_have_ordinary_permissions(tmp_path):
 
 def test_an_unreliable_group_says_so_in_the_table_and_csv(tmp_path):
     results = _results()
-    g = results.groups[3]
-    g.reliable, g.warnings = False, ["edges disagree: measured rho 0.200 (30 profiles), "
-                                     "another mode at rho 0.550 (20 profiles)"]
+    g = results.groups[3] = dataclasses.replace(results.groups[3], verdict=Verdict(
+        reliable=False, identifiable=True, warnings=("edges disagree: measured rho 0.200 (30 profiles), "
+                                                     "another mode at rho 0.550 (20 profiles)",)))
     md_path, csv_path = write_table2(results, tmp_path)
     md = md_path.read_text()
     assert f"{g.label}: NOT RELIABLE: edges disagree: measured rho 0.200 (30 profiles)" in md

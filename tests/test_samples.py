@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fitting.samples import paper_mask
+from fitting.samples.photo_samples import paper_mask
 
 
 def _scene(shadow: bool = True):
@@ -39,7 +39,7 @@ def test_hidden_sky_fraction_of_a_disk_overhead_matches_its_solid_angle():
     cosine-weighted sky from the point below its centre, and nothing from far away."""
     import trimesh
 
-    from softshadow import hidden_sky_fraction
+    from softshadow.internal import hidden_sky_fraction
     R, d = 1.0, 1.5
     disk = trimesh.creation.cylinder(radius=R, height=0.01, sections=128)
     disk.apply_translation([0.0, 0.0, d])

@@ -1,4 +1,4 @@
-"""Saved traced programs (fitting.saved_programs): a later process loads the fitter's solver
+"""Saved traced programs (fitting.solve.saved_programs): a later process loads the fitter's solver
 instead of tracing it, with the same results, and anything that cannot be saved or loaded
 falls back to tracing."""
 
@@ -10,9 +10,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from fitting import saved_programs
-from fitting.saved_programs import call_saved
-from softshadow import SAVED_PROGRAMS_ENV
+from fitting.solve import saved_programs
+from fitting.solve.saved_programs import call_saved
+from softshadow.internal import SAVED_PROGRAMS_ENV
 
 TRACES = []
 
@@ -119,7 +119,7 @@ def test_a_fit_through_the_saved_solver_equals_the_traced_one(tmp_path, monkeypa
     monkeypatch.setenv(SAVED_PROGRAMS_ENV, str(tmp_path / "programs"))
     _new_process()
     (exported,) = fit_folder(folder, options=options).groups
-    assert list((tmp_path / "programs").glob("fitting.solve-*.jaxexport"))
+    assert list((tmp_path / "programs").glob("fitting.solve.group-*.jaxexport"))
     _new_process()
     (loaded,) = fit_folder(folder, options=options).groups
     _new_process()

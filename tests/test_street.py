@@ -7,7 +7,7 @@ import json
 import pytest
 
 from data_synth import synthesize
-from fitting.api import fit_folder
+from fitting.folder.api import fit_folder
 
 
 @pytest.fixture(scope="module")

@@ -6,7 +6,6 @@ import json
 import math
 
 import numpy as np
-import pytest
 import trimesh
 
 from data_synth.lighting import SunSky
@@ -117,7 +116,7 @@ def test_umbra_far_from_the_pillar_has_brightness_rho_up_to_hidden_sky():
     sky = sky_visibility(mesh, pts, nrm, 4096, seed=0)
     ratio = (sun.sun_normal_irradiance * sun.direction[2] * sv + sun.sky_horizontal_irradiance * sky) / sun.lit_irradiance
     assert np.allclose(ratio, sun.rho * sky)
-    # The pillar hides a little sky (0.4-4 %, CONVENTIONS' hidden-sky correction), never more.
+    # The pillar hides a little sky (0.4-4 %, the model's hidden-sky correction), never more.
     assert np.all(sky < 0.999) and np.all(sky > 0.96)
     assert np.all(np.abs(ratio / sun.rho - 1) < 0.04)
 

@@ -152,7 +152,7 @@ def test_hard_cases(tmp_path):
     assert len(notime) == 1
     assert piexif.ExifIFD.DateTimeOriginal not in piexif.load(str(out / notime[0]))["Exif"]
     assert scene.photos[notime[0]].time is None and scene.photos[notime[0]].group is None
-    for name, spec in scene.photos.items():  # no site: every photo carries its sun
+    for _name, spec in scene.photos.items():  # no site: every photo carries its sun
         assert spec.sun_azimuth_deg is not None and spec.sun_elevation_deg is not None
 
 
@@ -161,7 +161,7 @@ def test_depth_background_writes_range_images(tmp_path):
     out = synthesize(tmp_path / "d", "depth-background", size=SMALL, progress=False, render_quality=FAST)
     scene = load_scene(out / "scene.toml")
     assert scene.receiver.kind == "depth"
-    for name, spec in scene.photos.items():
+    for _name, spec in scene.photos.items():
         assert spec.depth.endswith(".depth.npy")
         depth = np.load(out / spec.depth)
         assert depth.shape == SMALL[::-1] and depth.dtype == np.float32

@@ -1,4 +1,4 @@
-"""The stated errors (``fitting.uncertainty``): edge clusters, the cluster-robust covariance,
+"""The stated errors (``fitting.solve.uncertainty``): edge clusters, the cluster-robust covariance,
 the systematic floor and how the parts combine. Small NumPy problems with known answers."""
 
 from __future__ import annotations
@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fitting.solve import covariance
-from fitting.uncertainty import (CALIBRATED_EDGE_FLOOR, CALIBRATED_FLOOR, EdgeFloor, edge_rho_errors, profile_spread,
+from fitting.solve.group import covariance
+from fitting.solve.uncertainty import (CALIBRATED_EDGE_FLOOR, CALIBRATED_FLOOR, EdgeFloor, edge_rho_errors, profile_spread,
                                  SystematicFloor, cluster_covariance, combine_errors,
                                  edge_clusters, systematic_errors)
 
@@ -118,7 +118,7 @@ def test_edge_rho_error_adds_the_floor_and_the_profile_spread_in_quadrature():
 def test_resolution_warning_names_a_penumbra_under_the_blur_spot_only():
     """Warned when the penumbra is narrower than 2 sigma of pixel area plus camera blur
     (2 sqrt(1/12 + 0.7^2) = 1.49 px), quiet at and above it, and when nothing was measured."""
-    from fitting.uncertainty import RESOLVED_BLUR_WIDTHS, resolution_warning
+    from fitting.verdict.rules import RESOLVED_BLUR_WIDTHS, resolution_warning
     spot = RESOLVED_BLUR_WIDTHS * np.sqrt(1 / 12 + 0.7 ** 2)
     text = resolution_warning(1.2, 0.7)
     assert text is not None and text.startswith("penumbra 1.2 px wide") and "1.5 px" in text

@@ -16,7 +16,8 @@ import pytest
 import trimesh
 
 from data_synth import SunSky, sun_visibility
-from softshadow import GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun, concatenate_plans
+from softshadow import GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun
+from softshadow.internal import concatenate_plans
 from softshadow.meshes import builtin_mesh
 
 point_model = functools.partial(SoftShadowModel.from_mesh, footprint=False, hidden_sky=False)

@@ -1,0 +1,97 @@
+"""Scene images at interactive rates: ``softshadow bench --what scene``.
+
+The Dowling paper's view of the real Stanford dragon (MIT remesh, 41,384 faces) and its levels
+of detail (``softshadow.lod_series``, halving to the paper's 300 faces), 640 x 480, one sample
+per pixel, lit by the sun (its soft shadow: the renderer's expanded shadow volume, k = 0.01),
+one slide projector (the paper's lattice slide, 15 cycles, amplitude 1, its own shadow map)
+and an ambient term (``softshadow.MaskingScene``). Each level is drawn by ``FrameRenderer``
+(``render_frame``: forward only, the image ``render_scene`` draws) for ``frames`` frames after
+``warmup`` frames, the sun moving by 0.05 degrees of azimuth every frame so that nothing is
+reused between frames; ``frame_ms`` is the median wall time per frame, with the steps' medians
+beside it, with two threads (the renderer's default) and with one. The differentiable
+``render_scene`` of the full dragon is timed once warm beside it.
+
+Rows (key ``scene``): faces (the full mesh's), level (the face count drawn), width, height,
+frame_ms (median wall time per frame, two threads), frame_min_ms, frame_cpu_ms (median CPU time of
+the process per frame, all threads), the same with one thread (``..._one_thread``), steps_ms (the
+steps' median wall times, ``softshadow.internal.FRAME_STEPS``), and the load average before and
+after the level.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+__all__ = ["bench_scene", "SCENE_LEVELS"]
+
+#: The levels drawn: the full dragon, then halving to the paper's coarsest.
+SCENE_LEVELS = (20000, 10000, 5000, 2500, 1000, 300)
+
+
+def bench_scene(quick: bool = False, progress=None) -> dict:
+    from softshadow import FrameRenderer, MaskingScene, Pose, SoftShadowModel, lod_series, one_blas_thread, \
+        render_scene
+
+    from .environment import load_average
+    from .meshes import mit_dragon
+    frames, warmup = (9, 3) if quick else (31, 5)
+    scene = MaskingScene()
+    mesh = mit_dragon(full=True)
+    levels = lod_series(mesh, (len(mesh.faces), *SCENE_LEVELS))
+    proj = scene.projector(1.0, 15.0)
+    lights = scene.lights(0.01)
+    camera = scene.camera()
+    rows = []
+    with one_blas_thread():
+        for level in levels:
+            model = SoftShadowModel.from_mesh(level.mesh)
+            row = {"faces": int(len(mesh.faces)), "level": int(level.faces), "width": camera.width,
+                   "height": camera.height, "load_before": load_average()}
+            for threads in (2, 1):
+                if progress:
+                    progress(f"bench scene: {level.faces:,} faces, {threads} thread(s)")
+                renderer = FrameRenderer(threads=threads)
+                times, cpu, steps = [], [], []
+                try:
+                    for i in range(warmup + frames):
+                        sun = scene.sun_at(azimuth_offset_deg=0.05 * i)
+                        t, c = time.perf_counter(), time.process_time()
+                        frame = renderer.render(camera, model, Pose(), lights, sun, [proj],
+                                                object_albedo=scene.albedo, ground_albedo=scene.albedo)
+                        if i >= warmup:
+                            times.append(1e3 * (time.perf_counter() - t))
+                            cpu.append(1e3 * (time.process_time() - c))
+                            steps.append(frame.milliseconds)
+                finally:
+                    renderer.close()
+                key = "frame_ms" if threads == 2 else "frame_ms_one_thread"
+                row[key] = round(float(np.median(times)), 2)
+                row[key.replace("frame_ms", "frame_min_ms")] = round(float(np.min(times)), 2)
+                # The process's CPU time per frame (all its threads, XLA's included): what the frame
+                # costs the machine, less moved by the neighbours than the wall time.
+                row[key.replace("frame_ms", "frame_cpu_ms")] = round(float(np.median(cpu)), 2)
+                if threads == 2:
+                    row["steps_ms"] = {k: round(float(np.median([s.get(k, 0.0) for s in steps])), 2)
+                                      for k in steps[0]}
+            row["load_after"] = load_average()
+            rows.append(row)
+        # The differentiable path, warm, for comparison.
+        model = SoftShadowModel.from_mesh(mesh)
+        times = []
+        for _ in range(2 if quick else 4):
+            t = time.perf_counter()
+            out = render_scene(camera, model, Pose(), lights, scene.sun_at(), [proj], object_albedo=scene.albedo,
+                               ground_albedo=scene.albedo, range_k_max=float(lights.range_k))
+            np.asarray(out.image)
+            times.append(1e3 * (time.perf_counter() - t))
+    full = next(r for r in rows if r["level"] == r["faces"])
+    coarse = min(rows, key=lambda r: r["level"])
+    return {"scene": rows, "render_scene_ms": round(float(np.median(times[1:])), 1),
+            "settings": {"frames": frames, "warmup": warmup, "sun": scene.sun_description(),
+                         "range_k": float(lights.range_k), "slide": "sine, 15 cycles, amplitude 1",
+                         "shadow_px": int(proj.shadow_px)},
+            "summary": {"full_frame_ms": full["frame_ms"], "coarsest_level": coarse["level"],
+                        "coarsest_frame_ms": coarse["frame_ms"],
+                        "coarsest_over_full": round(coarse["frame_ms"] / full["frame_ms"], 3)}}

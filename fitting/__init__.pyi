@@ -1,0 +1,50 @@
+"""Static view of fitting's lazily imported names, for type checkers, IDEs and the API reference."""
+
+from .folder.api import FolderError as FolderError
+from .folder.api import fit_and_report as fit_and_report
+from .folder.api import fit_folder as fit_folder
+from .folder.api import fit_photos as fit_photos
+from .edges.measure import EdgeMeasurement as EdgeMeasurement
+from .edges.measure import measure_shadow_edges as measure_shadow_edges
+from .photos.exif import intrinsics_from_exif as intrinsics_from_exif
+from .photos.exif import photo_time_from_exif as photo_time_from_exif
+from .photos.exif import read_exif as read_exif
+from .photos.grouping import NO_TIME_REASON as NO_TIME_REASON
+from .photos.grouping import PhotoGroup as PhotoGroup
+from .photos.grouping import group_photos as group_photos
+from .photos.grouping import photo_time as photo_time
+from .folder.many import DONE_MARKER as DONE_MARKER
+from .folder.many import SUMMARY_COLUMNS as SUMMARY_COLUMNS
+from .folder.many import find_photo_folders as find_photo_folders
+from .folder.many import fit_many as fit_many
+from .folder.many import write_summary as write_summary
+from .photos.markers import Registration as Registration
+from .photos.markers import RegistrationError as RegistrationError
+from .photos.markers import board_from_spec as board_from_spec
+from .photos.markers import board_outline_world as board_outline_world
+from .photos.markers import board_world_points as board_world_points
+from .photos.markers import register_board as register_board
+from .solve.options import FitOptions as FitOptions
+from .photos.read import IMAGE_EXTENSIONS as IMAGE_EXTENSIONS
+from .photos.read import RAW_EXTENSIONS as RAW_EXTENSIONS
+from .photos.read import Photo as Photo
+from .photos.read import PhotoError as PhotoError
+from .photos.read import linear_to_srgb as linear_to_srgb
+from .photos.read import list_photos as list_photos
+from .photos.read import read_photo as read_photo
+from .photos.read import srgb_to_linear as srgb_to_linear
+from .solve.problem import GroupProblem as GroupProblem
+from .solve.problem import SolveOutcome as SolveOutcome
+from .solve.problem import group_problem as group_problem
+from .report.write import PAPER_TABLE2 as PAPER_TABLE2
+from .report.write import format_table as format_table
+from .report.write import write_report as write_report
+from .report.write import write_results_json as write_results_json
+from .report.write import write_table2 as write_table2
+from .report.results import FitResults as FitResults
+from .report.results import GroupResult as GroupResult
+from .samples.photo_samples import NoShadowInView as NoShadowInView
+from .solve.group import fit_group as fit_group
+from .photos.views import PhotoView as PhotoView
+
+__all__ = ["DONE_MARKER", "EdgeMeasurement", "FitOptions", "FitResults", "FolderError", "GroupProblem", "GroupResult", "IMAGE_EXTENSIONS", "NO_TIME_REASON", "NoShadowInView", "PAPER_TABLE2", "Photo", "PhotoError", "PhotoGroup", "PhotoView", "RAW_EXTENSIONS", "Registration", "RegistrationError", "SUMMARY_COLUMNS", "SolveOutcome", "board_from_spec", "board_outline_world", "board_world_points", "find_photo_folders", "fit_and_report", "fit_folder", "fit_group", "fit_many", "fit_photos", "format_table", "group_photos", "group_problem", "intrinsics_from_exif", "linear_to_srgb", "list_photos", "measure_shadow_edges", "photo_time", "photo_time_from_exif", "read_exif", "read_photo", "register_board", "srgb_to_linear", "write_report", "write_results_json", "write_summary", "write_table2"]

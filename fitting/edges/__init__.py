@@ -1,0 +1,1 @@
+"""The no-geometry path: shadow edges found and measured in one photo."""

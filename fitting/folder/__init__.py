@@ -1,0 +1,1 @@
+"""Entry points: one folder, many folders (Dask), the resume store."""

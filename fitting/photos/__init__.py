@@ -1,0 +1,1 @@
+"""Reading photos, their times, cameras, suns and groups."""

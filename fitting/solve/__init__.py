@@ -1,0 +1,1 @@
+"""One time of day: the pixel model, optimistix least squares, errors, levels of detail, options."""

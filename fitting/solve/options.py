@@ -1,0 +1,35 @@
+"""The fit's options (``FitOptions``), apart from the solver so that reading them loads no JAX."""
+
+from __future__ import annotations
+
+import dataclasses
+
+__all__ = ["FitOptions"]
+
+
+@dataclasses.dataclass
+class FitOptions:
+    """Choices of the fit. profiles / blur: candidates compared by BIC.
+
+    The default profile is ``disk``: the sun is a disk, and with it k reads tan(sun radius),
+    the truth convention of docs/formats.md and the Mitsuba renders. ("linear", "disk") lets BIC
+    choose; a linear ramp fitted to a real sun reads about 0.854 of that k.
+    """
+
+    profiles: tuple[str, ...] = ("disk",)
+    blur: tuple[bool, ...] = (False, True)
+    rule: str = "edge"
+    range_k_max: float = 0.03
+    max_samples_per_photo: int = 1300  # three photos fill a 4,096 bucket
+    robust: bool = True
+    max_steps: int = 60
+    seed: int = 0
+    sky_occlusion: bool = True  # model the sky the object hides from each sample (softshadow.sky)
+    plots: bool = True
+    overlays: str = "first"  # overlay plots for the "first" photo of each group, "all", or "none"
+    verbose: bool = False
+    # Level of detail of the object's mesh (``fitting.solve.lod``): "auto" (the coarsest level that moves
+    # k and rho by at most lod_tolerance of their stated standard errors), "off" (the mesh as it is), or
+    # a face count (that level, decimated).
+    lod: str | int = "auto"
+    lod_tolerance: float = 0.1

@@ -1,0 +1,57 @@
+"""Static view of softshadow's lazily imported names, for type checkers, IDEs and the API reference."""
+
+from .colour import linear_to_srgb as linear_to_srgb
+from .colour import srgb_to_linear as srgb_to_linear
+from .compilation_cache import use_compilation_cache as use_compilation_cache
+from .camera import GroundGrid as GroundGrid
+from .camera import PinholeCamera as PinholeCamera
+from .camera import look_at_camera as look_at_camera
+from .lod import LodLevel as LodLevel
+from .lod import PAPER_FACE_COUNTS as PAPER_FACE_COUNTS
+from .lod import decimate as decimate
+from .lod import lod_series as lod_series
+from .masking import HIDDEN_SSIM as HIDDEN_SSIM
+from .masking import MaskingScene as MaskingScene
+from .masking import MaskingTable as MaskingTable
+from .masking import measure_masking_table as measure_masking_table
+from .masking import masked_ssim as masked_ssim
+from .meshes import BUILTIN_MESHES as BUILTIN_MESHES
+from .meshes import MeshError as MeshError
+from .meshes import builtin_mesh as builtin_mesh
+from .meshes import load_mesh as load_mesh
+from .params import Pose as Pose
+from .params import ShadowParams as ShadowParams
+from .params import Sun as Sun
+from .penumbra import occluded_disk_fraction as occluded_disk_fraction
+from .penumbra import profile_alpha as profile_alpha
+from .pixel_profile import blurred_profile_alpha as blurred_profile_alpha
+from .projector import Projector as Projector
+from .render import CameraRender as CameraRender
+from .render import SoftShadowModel as SoftShadowModel
+from .scene_frame import FrameRenderer as FrameRenderer
+from .scene_frame import SceneFrame as SceneFrame
+from .scene_frame import render_frame as render_frame
+from .scene_render import SceneLights as SceneLights
+from .scene_render import SceneRender as SceneRender
+from .scene_render import SceneSetup as SceneSetup
+from .scene_render import prepare_scene as prepare_scene
+from .scene_render import render_scene as render_scene
+from .scene_render import shade_scene as shade_scene
+from .slides import PAPER_SLIDES as PAPER_SLIDES
+from .slides import SlideError as SlideError
+from .slides import load_slide as load_slide
+from .slides import sine_slide as sine_slide
+from .slides import slide_from_text as slide_from_text
+from .slides import spot_slide as spot_slide
+from .threads import one_blas_thread as one_blas_thread
+from .sun import SunBelowHorizonError as SunBelowHorizonError
+from .sun import light_direction as light_direction
+from .sun import sun_direction as sun_direction
+from .units import brightness_to_paper as brightness_to_paper
+from .units import paper_to_range_k as paper_to_range_k
+from .units import paper_to_rho as paper_to_rho
+from .units import range_to_paper as range_to_paper
+from . import internal as internal
+from ._version import __version__ as __version__
+
+__all__ = ["BUILTIN_MESHES", "CameraRender", "GroundGrid", "HIDDEN_SSIM", "LodLevel", "MaskingScene", "MaskingTable", "MeshError", "PAPER_FACE_COUNTS", "PAPER_SLIDES", "PinholeCamera", "Pose", "Projector", "FrameRenderer", "SceneFrame", "SceneLights", "SceneRender", "SceneSetup", "ShadowParams", "SlideError", "SoftShadowModel", "Sun", "SunBelowHorizonError", "blurred_profile_alpha", "brightness_to_paper", "builtin_mesh", "decimate", "light_direction", "linear_to_srgb", "load_mesh", "load_slide", "lod_series", "look_at_camera", "masked_ssim", "measure_masking_table", "occluded_disk_fraction", "one_blas_thread", "paper_to_range_k", "paper_to_rho", "prepare_scene", "profile_alpha", "range_to_paper", "render_frame", "render_scene", "shade_scene", "sine_slide", "slide_from_text", "spot_slide", "srgb_to_linear", "sun_direction", "use_compilation_cache", "__version__"]

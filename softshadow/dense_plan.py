@@ -1,0 +1,438 @@
+"""The sun's plan at many receiver points at once (a camera's every pixel), in compiled passes.
+
+``plan_points``' light-space back end makes its per-point choices as NumPy array operations:
+at the 300,000 points of a 640 x 480 scene image their temporaries cost most of a frame.
+``plan_dense_points`` makes the same choices, step by step with the same raster, shadow map and
+rules (``softshadow.plan``), with the per-point steps (projection, the reach test, gathering,
+the points' spacing, the raster lookup, the band) as compiled loops (numba), and keeps the
+result compact: the hard shadow of every point and a ``PointPlan`` of the band points only,
+which is all the penumbra formula (``softshadow.evaluate``) needs. ``DensePlan.point_plan``
+expands it into the ``PointPlan`` that ``plan_points(..., backend="light")`` returns, equal to
+it (tests/test_scene_frame.py).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+
+import numpy as np
+
+from .camera import GroundGrid
+from .occluder import Occluder
+from .params import Pose, Sun
+from .plan import (BAND_FRACTION, CANDIDATE_RADII_PX, CANDIDATE_REACH_PX, MAX_RASTER_SIDE, N_CANDIDATES, EdgeSet,
+                   PointPlan, _pack_edges, bucket_size, light_band_widths)
+from .posed import PosedOccluder
+from .raster import candidate_labels, rasterise_shadow
+from .scratch import Scratch, scratch_array
+from .shadowmap import (_LOOKUP_OFFSETS, _NEAREST_OFFSETS, BIAS_PX, FACING_TOL, PRECISION_ULPS, SLOPE_PX, TAN_MAX,
+                        LightFrame, faces_away, shadow_map)
+
+__all__ = ["DensePlan", "plan_dense_points"]
+
+
+@dataclasses.dataclass(frozen=True)
+class DensePlan:
+    """The sun's plan at n points, compact.
+
+    edges: the silhouette's ``EdgeSet``; hard (n,) 0/1: the hard shadow (attached shadow
+    included) of every point; band (m,) int64: the points in a penumbra band, ascending;
+    edge_id (m, K) int32, near_boundary (m,): their candidate edges and boundary flags
+    (``PointPlan``'s meanings).
+    """
+
+    edges: EdgeSet
+    hard: np.ndarray
+    band: np.ndarray
+    edge_id: np.ndarray
+    near_boundary: np.ndarray
+
+    def band_plan(self, size: int | None = None) -> PointPlan:
+        """A ``PointPlan`` of the band points only, padded to ``size`` (default: a power-of-two
+        bucket, so that a jitted evaluation sees few shapes); padding rows are inactive."""
+        m = len(self.band)
+        size = size or bucket_size(m)
+        edge_id = np.zeros((size, N_CANDIDATES), np.int32)
+        edge_id[:m] = self.edge_id
+        hard = np.zeros(size)
+        hard[:m] = self.hard[self.band]
+        near = np.zeros(size)
+        near[:m] = self.near_boundary
+        return PointPlan(self.edges, edge_id, hard, np.arange(size) < m, near)
+
+    def point_plan(self, pad_to: int | None = None) -> PointPlan:
+        """The ``PointPlan`` of all n points, as ``plan_points`` returns it (padded to ``pad_to``,
+        default a power-of-two bucket)."""
+        n = len(self.hard)
+        size = pad_to or bucket_size(n)
+        edge_id = np.zeros((size, N_CANDIDATES), np.int32)
+        edge_id[self.band] = self.edge_id
+        hard = np.zeros(size)
+        hard[:n] = self.hard
+        active = np.zeros(size, bool)
+        active[self.band] = True
+        near = np.zeros(size)
+        near[self.band] = self.near_boundary
+        return PointPlan(self.edges, edge_id, hard, active, near)
+
+
+def _empty(edges: EdgeSet, hard: np.ndarray) -> DensePlan:
+    return DensePlan(edges, hard, np.zeros(0, np.int64), np.zeros((0, N_CANDIDATES), np.int32), np.zeros(0))
+
+
+def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k_max: float,
+                      normals: np.ndarray | None = None, *, rule: str = "edge", margin_px: float = 2.5,
+                      posed: PosedOccluder | None = None, faces: np.ndarray | None = None,
+                      scratch: Scratch | None = None) -> DensePlan:
+    """``plan_points(occ, pose, sun, points, range_k_max, rule, normals=normals, backend="light",
+    margin_px=margin_px)``, compact (``DensePlan``) and faster for many points.
+
+    points (N, 3) world metres; normals (N, 3) unit or None; posed: the occluder already posed
+    under this sun (``PosedOccluder.make(occ, pose, sun)``), to share it with other steps;
+    faces (N,) int, optional: the occluder's face each point lies on (-1: not on it), as a
+    camera's z-buffer knows it. A point whose own face is the shadow map's nearest face at its
+    pixel is lit without the lookup (the lookup would find that face and the point on it).
+    scratch: keep the per-point arrays in these buffers (``softshadow.scratch``; the plan's
+    ``hard`` is then overwritten by the next call with the same scratch).
+    """
+    posed = PosedOccluder.make(occ, pose, sun) if posed is None else posed
+    sil, light, world = posed.silhouette, posed.light, posed.world
+    points = np.ascontiguousarray(points, np.float64).reshape(-1, 3)
+    n = len(points)
+    if normals is not None:
+        normals = np.ascontiguousarray(normals, np.float64).reshape(-1, 3)
+        if len(normals) != n:
+            raise ValueError(f"{len(normals)} normals for {n} receiver points")
+    edges = _pack_edges(occ, sil)
+    if not (n and len(sil.vertex_ids)):
+        attached = np.zeros(n, bool) if normals is None else faces_away(normals, light)
+        return _empty(edges, attached.astype(np.float64))
+    frame = LightFrame.of_light(light, 0.5 * (world.min(0) + world.max(0)))
+    uv_v, d_v = frame.project(world)
+    # Attached shadow (``faces_away``), light-space positions (``LightFrame.project``) and the
+    # deepest point, in one pass.
+    uv_all = scratch_array(scratch, "sun.uv", (n, 2))
+    d_all = scratch_array(scratch, "sun.depth", n)
+    hard = scratch_array(scratch, "sun.hard", n)
+    basis = np.stack([frame.origin, frame.e1, frame.e2, frame.light])
+    d_max = _project_kernel()(points, np.zeros((0, 3)) if normals is None else normals, basis, -FACING_TOL,
+                              uv_all, d_all, hard)
+    ids = sil.vertex_ids
+    edge_depth = np.minimum(d_v[ids[:, 0]], d_v[ids[:, 1]])
+    # The region the shadow can reach, as plan_points takes it (its comments give the reasons).
+    reach = float(light_band_widths(d_max - edge_depth.min(), range_k_max))
+    lo_occ = np.array([uv_v[:, 0].min(), uv_v[:, 1].min()])
+    hi_occ = np.array([uv_v[:, 0].max(), uv_v[:, 1].max()])
+    extent = float((hi_occ - lo_occ).max()) + 3.0 * reach
+    margin_m = (margin_px + CANDIDATE_REACH_PX + 2) * extent / 256
+    # Each point within its own reach (``plan._within_reach``), gathered.
+    cand = scratch_array(scratch, "sun.cand", n, np.int64)
+    uv_p = scratch_array(scratch, "sun.cand_uv", (n, 2))
+    d_p = scratch_array(scratch, "sun.cand_depth", n)
+    count = _reach_kernel()(uv_all, d_all, hard, lo_occ, hi_occ, float(edge_depth.min()),
+                            1.5 * float(light_band_widths(np.float64(1.0), range_k_max)), margin_m, cand, uv_p, d_p)
+    if not count:
+        return _empty(edges, hard)
+    cand, uv_p, d_p = cand[:count], uv_p[:count], d_p[:count]
+    att = hard[cand] > 0
+    reach = float(light_band_widths(d_p.max() - edge_depth.min(), range_k_max))
+    extent = float((hi_occ - lo_occ).max()) + 3.0 * reach
+    lo_pts = np.array([uv_p[:, 0].min(), uv_p[:, 1].min()])
+    hi_pts = np.array([uv_p[:, 0].max(), uv_p[:, 1].max()])
+    spacing = _spacing(uv_p, extent / 128)
+    pixel_m = max(float(np.clip(spacing, extent / 2048, extent / 256)), 1e-5)
+    map_pixel_m = float(np.clip(spacing, extent / 2048, extent / 512))
+    pad_m = 1.5 * reach + (margin_px + CANDIDATE_REACH_PX + 2) * pixel_m
+    lo = np.maximum(lo_occ - pad_m, lo_pts - pad_m)
+    hi = np.minimum(hi_occ + pad_m, hi_pts + pad_m)
+    if np.any(hi <= lo):
+        return _empty(edges, hard)
+    pixel_m = max(pixel_m, float((hi - lo).max()) / MAX_RASTER_SIDE)
+    map_pixel_m = max(min(map_pixel_m, pixel_m), float((hi - lo).max()) / MAX_RASTER_SIDE, 1e-5)
+    width = int(np.ceil((hi[0] - lo[0]) / pixel_m)) + 1
+    height = int(np.ceil((hi[1] - lo[1]) / pixel_m)) + 1
+    grid = GroundGrid(pixel_m, (float(lo[0]), float(hi[1])), width, height)
+    raster = rasterise_shadow(grid, world, light, sil, uv_v)
+    m = len(cand)
+    in_view = scratch_array(scratch, "sun.in_view", m, np.uint8)
+    label = scratch_array(scratch, "sun.label", m, np.int32)
+    dist = scratch_array(scratch, "sun.dist", m, np.float32)  # as ShadowRaster.lookup's: float32 pixels x size
+    index = scratch_array(scratch, "sun.index", m, np.int64)
+    # The raster at each point (``ShadowRaster.lookup``), and the points near the outline, where a
+    # raster pixel is too coarse for the side: tested exactly.
+    n_near = _lookup_kernel()(uv_p, grid.origin_m[0], grid.origin_m[1], pixel_m, raster.hard, raster.edge_label,
+                              raster.boundary_dist_px, 2.0 * pixel_m, att, in_view, label, dist, index)
+    if n_near:
+        near = index[:n_near].copy()
+        in_view[near] = posed.hard_shadow_at(uv_p[near], projected=uv_v)
+    lit_ids = np.flatnonzero(sil.lit) if occ.watertight else np.arange(len(occ.faces))
+    lit_faces = occ.faces[lit_ids]
+    # Farther from the sun than the whole occluder: behind it wherever it is in the way (most of a
+    # cast shadow). The others in its view go to the shadow map.
+    behind = scratch_array(scratch, "sun.behind", m, np.bool_)
+    box = np.empty(4)
+    n_test = _test_kernel()(in_view, att, d_p, uv_p, float(d_v[lit_faces].max(initial=-np.inf)) + 0.5 * map_pixel_m,
+                            behind, index, box)
+    if n_test:
+        test = index[:n_test]
+        m_lo = box[:2] - 3 * map_pixel_m
+        m_hi = box[2:] + 3 * map_pixel_m
+        map_grid = GroundGrid(map_pixel_m, (float(m_lo[0]), float(m_hi[1])),
+                              int(np.ceil((m_hi[0] - m_lo[0]) / map_pixel_m)) + 1,
+                              int(np.ceil((m_hi[1] - m_lo[1]) / map_pixel_m)) + 1)
+        shape = (map_grid.height, map_grid.width)
+        smap = shadow_map(map_grid, uv_v, d_v, lit_faces, out=(scratch_array(scratch, "sun.map_depth", shape),
+                                                               scratch_array(scratch, "sun.map_face", shape, np.int32)))
+        # ``ShadowMap.occluder_depth`` and ``depth_bias`` per point (their rules), the receiver's
+        # slope from its normal, in one pass.
+        scale = max(smap.scale, float(np.abs(world).max()))
+        g = map_grid
+        _depth_test_kernel()(cand, test, uv_p, d_p, points, np.zeros((0, 3)) if normals is None else normals,
+                             np.full(0, -1, np.int64) if faces is None else np.asarray(faces, np.int64),
+                             lit_ids, light, g.origin_m[0], g.origin_m[1], map_pixel_m, smap.face_id,
+                             np.ascontiguousarray(smap.triangle), smap.plane, smap.slope, scale, behind)
+    # The hard shadow of every point, and the band: its width from the wedge at the point's depth
+    # behind its edge (``light_band_widths``, linear in that depth).
+    frac = raster.edge_outline_fraction
+    frac = np.zeros(1) if frac is None else np.asarray(frac, np.float64)
+    near_b = scratch_array(scratch, "sun.near_boundary", m, np.bool_)
+    n_band = _band_kernel()(cand, d_p, label, dist, att, behind, edge_depth, float(light_band_widths(np.float64(1.0),
+                            range_k_max)), frac, raster.edge_outline_fraction is not None, BAND_FRACTION,
+                            margin_px * pixel_m, 1.5 * pixel_m, hard, index, near_b)
+    sel = index[:n_band].copy()
+    band = cand[sel]
+    edge_id = np.zeros((len(sel), N_CANDIDATES), np.int32)
+    if len(sel):
+        cr = np.clip(np.rint(grid.to_pixel(uv_p[sel])).astype(np.int64), 0, [width - 1, height - 1])
+        edge_id[:] = np.maximum(candidate_labels(raster.edge_label, cr[:, 1], cr[:, 0], radii=CANDIDATE_RADII_PX,
+                                                 max_candidates=N_CANDIDATES, neighbours=raster.edge_neighbours), 0)
+    near_b = near_b[:n_band]
+    return DensePlan(_pack_edges(occ, sil, raster=raster), hard, band, edge_id, near_b.astype(np.float64))
+
+
+def _spacing(uv: np.ndarray, cell_m: float) -> float:
+    """``plan._spacing`` (the points' typical spacing: the area of the cells of side ``cell_m``
+    they occupy, per point, square-rooted) in one compiled pass."""
+    lo_u, lo_v = float(uv[:, 0].min()), float(uv[:, 1].min())
+    width = int((uv[:, 0].max() - lo_u) / cell_m) + 1
+    height = int((uv[:, 1].max() - lo_v) / cell_m) + 1
+    taken = _spacing_kernel()(uv, lo_u, lo_v, cell_m, width, height)
+    return cell_m * float(np.sqrt(taken / len(uv)))
+
+
+@functools.cache
+def _spacing_kernel():
+    import numba
+
+    @numba.njit(cache=True, nogil=True)
+    def kernel(uv, lo_u, lo_v, cell_m, width, height):
+        taken = np.zeros(width * height, np.bool_)
+        count = 0
+        for i in range(uv.shape[0]):
+            k = int((uv[i, 1] - lo_v) / cell_m) * width + int((uv[i, 0] - lo_u) / cell_m)
+            if not taken[k]:
+                taken[k] = True
+                count += 1
+        return count
+
+    return kernel
+
+
+@functools.cache
+def _project_kernel():
+    """Per point: attached shadow (n . L >= -FACING_TOL, as ``faces_away``; 1.0 in hard), the
+    light-space position and depth (``LightFrame.project``); returns the largest depth."""
+    import numba
+
+    @numba.njit(cache=True, nogil=True)
+    def kernel(points, normals, basis, tol, uv, d, hard):
+        light = basis[3]
+        d_max = -np.inf
+        for i in range(points.shape[0]):
+            x, y, z = points[i, 0] - basis[0, 0], points[i, 1] - basis[0, 1], points[i, 2] - basis[0, 2]
+            uv[i, 0] = x * basis[1, 0] + y * basis[1, 1] + z * basis[1, 2]
+            uv[i, 1] = x * basis[2, 0] + y * basis[2, 1] + z * basis[2, 2]
+            d[i] = x * basis[3, 0] + y * basis[3, 1] + z * basis[3, 2]
+            d_max = max(d_max, d[i])
+            hard[i] = 0.0
+            if normals.shape[0] and normals[i, 0] * light[0] + normals[i, 1] * light[1] + normals[i, 2] * light[2] >= tol:
+                hard[i] = 1.0
+        return d_max
+
+    return kernel
+
+
+@functools.cache
+def _reach_kernel():
+    """``plan._within_reach``'s test (per_m: 1.5 wedge widths per metre behind the nearest
+    edge), the points within reach gathered in order; returns their count."""
+    import numba
+
+    @numba.njit(cache=True, nogil=True)
+    def kernel(uv_all, d_all, hard, lo, hi, edge_depth, per_m, margin_m, cand, uv, d):
+        count = 0
+        for i in range(uv_all.shape[0]):
+            pad = per_m * max(d_all[i] - edge_depth, 0.0) + margin_m
+            if (uv_all[i, 0] >= lo[0] - pad) & (uv_all[i, 0] <= hi[0] + pad) & (uv_all[i, 1] >= lo[1] - pad) \
+                    & (uv_all[i, 1] <= hi[1] + pad):
+                cand[count] = i
+                uv[count, 0], uv[count, 1], d[count] = uv_all[i, 0], uv_all[i, 1], d_all[i]
+                count += 1
+        return count
+
+    return kernel
+
+
+@functools.cache
+def _depth_test_kernel():
+    """The sun's depth test at the candidates ``test`` (cand[test] into the points):
+    ``ShadowMap.occluder_depth`` (the exact face among the point's map pixel
+    and its 8 neighbours, else the nearest covered pixel's within 2, extrapolated) against
+    the point's depth plus ``depth_bias`` (the receiver's slope from its normal), into
+    behind[test]. A point on the occluder whose own face is the nearest at its pixel is lit."""
+    import numba
+
+    @numba.njit(cache=True, nogil=True)
+    def kernel(cand, test, uv, depth, points, normals, faces, lit_ids, light, ox, oy, pixel_m, face_id, triangle,
+               plane, face_slope, scale, behind):
+        h, w = face_id.shape
+        for j in range(test.shape[0]):
+            p = cand[test[j]]
+            scale = max(scale, abs(points[p, 0]), abs(points[p, 1]), abs(points[p, 2]))
+        rounding = PRECISION_ULPS * np.finfo(np.float64).eps * scale
+        for j in range(test.shape[0]):
+            q = test[j]
+            p = cand[q]
+            u, v = uv[q, 0], uv[q, 1]
+            col = int(np.rint((u - ox) / pixel_m))
+            row = int(np.rint((oy - v) / pixel_m))
+            if faces.shape[0] and faces[p] >= 0 and 0 <= row < h and 0 <= col < w and face_id[row, col] >= 0 \
+                    and lit_ids[face_id[row, col]] == faces[p]:
+                continue
+            best, fs, exact = np.inf, 0.0, False
+            for k in range(_LOOKUP_OFFSETS.shape[0]):
+                r, c = row + _LOOKUP_OFFSETS[k, 0], col + _LOOKUP_OFFSETS[k, 1]
+                if r < 0 or r >= h or c < 0 or c >= w:
+                    continue
+                f = face_id[r, c]
+                if f < 0:
+                    continue
+                t0u, t0v = triangle[f, 0, 0], triangle[f, 0, 1]
+                ex1, ey1 = triangle[f, 1, 0] - t0u, triangle[f, 1, 1] - t0v
+                ex2, ey2 = triangle[f, 2, 0] - t0u, triangle[f, 2, 1] - t0v
+                px, py = u - t0u, v - t0v
+                area = ex1 * ey2 - ey1 * ex2
+                if area == 0:
+                    area = 1.0
+                b1 = (px * ey2 - py * ex2) / area
+                b2 = (ex1 * py - ey1 * px) / area
+                if b1 >= -1e-7 and b2 >= -1e-7 and b1 + b2 <= 1.0 + 1e-7:
+                    best, exact = plane[f, 2] + plane[f, 0] * (u - t0u) + plane[f, 1] * (v - t0v), True
+                    break
+            if not exact:
+                for k in range(_NEAREST_OFFSETS.shape[0]):
+                    r, c = row + _NEAREST_OFFSETS[k, 0], col + _NEAREST_OFFSETS[k, 1]
+                    if r < 0 or r >= h or c < 0 or c >= w:
+                        continue
+                    f = face_id[r, c]
+                    if f >= 0:
+                        best = plane[f, 2] + plane[f, 0] * (u - triangle[f, 0, 0]) + plane[f, 1] * (v - triangle[f, 0, 1])
+                        fs = face_slope[f]
+                        break
+            bias = BIAS_PX * pixel_m + rounding + 0.0
+            if not exact:
+                recv = 0.0
+                if normals.shape[0]:
+                    cos = abs(normals[p, 0] * light[0] + normals[p, 1] * light[1] + normals[p, 2] * light[2])
+                    recv = np.sqrt(max(1.0 - cos * cos, 0.0)) / max(cos, 1e-12)
+                bias += SLOPE_PX * pixel_m * (min(fs, TAN_MAX) + min(recv, TAN_MAX))
+            behind[q] = depth[q] > best + bias
+
+    return kernel
+
+
+@functools.cache
+def _lookup_kernel():
+    """``ShadowRaster.lookup`` at light-space points (the nearest pixel): hard, label and the
+    distance in metres (0, -1, +inf outside the raster); the points not in attached shadow within
+    ``near_m`` of the outline listed in ``near``. Returns their count."""
+    import numba
+
+    @numba.njit(cache=True, nogil=True)
+    def kernel(uv, ox, oy, pixel_m, hard, edge_label, dist_px, near_m, att, in_view, label, dist, near):
+        h, w = hard.shape
+        pm = np.float32(pixel_m)
+        n = 0
+        for i in range(uv.shape[0]):
+            c = np.rint((uv[i, 0] - ox) / pixel_m)
+            r = np.rint((oy - uv[i, 1]) / pixel_m)
+            if 0 <= c < w and 0 <= r < h:
+                ci, ri = int(c), int(r)
+                in_view[i] = hard[ri, ci]
+                label[i] = edge_label[ri, ci]
+                dist[i] = dist_px[ri, ci] * pm
+            else:
+                in_view[i], label[i], dist[i] = 0, -1, np.inf
+            # The comparison in float32, as the array version's (a float32 array against a float).
+            if dist[i] <= np.float32(near_m) and not att[i]:
+                near[n] = i
+                n += 1
+        return n
+
+    return kernel
+
+
+@functools.cache
+def _test_kernel():
+    """The points in the occluder's view (and not in attached shadow): those deeper than
+    ``d_far`` are behind it; the others listed in ``test``, their light-space bounding box in
+    box (lo u, lo v, hi u, hi v). Returns their count."""
+    import numba
+
+    @numba.njit(cache=True, nogil=True)
+    def kernel(in_view, att, d, uv, d_far, behind, test, box):
+        n = 0
+        box[0], box[1], box[2], box[3] = np.inf, np.inf, -np.inf, -np.inf
+        for i in range(in_view.shape[0]):
+            behind[i] = False
+            if in_view[i] == 0 or att[i]:
+                continue
+            if d[i] > d_far:
+                behind[i] = True
+                continue
+            test[n] = i
+            n += 1
+            box[0], box[1] = min(box[0], uv[i, 0]), min(box[1], uv[i, 1])
+            box[2], box[3] = max(box[2], uv[i, 0]), max(box[3], uv[i, 1])
+        return n
+
+    return kernel
+
+
+@functools.cache
+def _band_kernel():
+    """Per point: its hard shadow into hard[cand] (behind the occluder or attached), and the band
+    and boundary flags of ``plan_points``' light back end from the width of its wedge (per_m
+    times its depth behind its edge): the band BAND_FRACTION of it plus the margin, near the
+    boundary within a quarter of it plus 1.5 pixels on a clean outline edge (all of its length
+    on the outline). The band's points listed in ``band``; returns their count."""
+    import numba
+
+    @numba.njit(cache=True, nogil=True)
+    def kernel(cand, d, label, dist, att, behind, edge_depth, per_m, frac, has_frac, fraction, margin_m, near_m,
+               hard, band, near_b):
+        n = 0
+        for i in range(d.shape[0]):
+            hard[cand[i]] = 1.0 if (behind[i] or att[i]) else 0.0
+            lab = label[i]
+            width = per_m * max(d[i] - edge_depth[max(lab, 0)], 0.0)
+            a = lab >= 0 and dist[i] <= fraction * width + margin_m and not att[i]
+            clean = has_frac and lab >= 0 and frac[lab] >= 0.99
+            near_b[n] = a and dist[i] <= 0.25 * width + near_m and clean
+            if a:
+                band[n] = i
+                n += 1
+        return n
+
+    return kernel

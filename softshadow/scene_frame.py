@@ -1,0 +1,209 @@
+"""Scene images at interactive rates: ``render_scene``'s image, forward only (NumPy, compiled loops).
+
+``render_scene`` keeps the sun's soft shadow differentiable (``shade_scene`` is JAX over every
+visible pixel). An interactive view needs only the image, so ``render_frame`` draws the same
+model with the work a frame needs:
+
+1. what each pixel sees: ``visible_surfaces`` (the z-buffer, back faces of closed meshes culled);
+2. each projector's shadow map and light (``Projector.add_irradiance``), as ``render_scene``;
+3. the sun's plan at the visible points: ``plan_dense_points``, equal to the ``plan_points``
+   that ``render_scene`` makes, kept compact (the hard shadow of every point, a plan of the
+   band points only);
+4. the expanded-shadow-volume soft shadow in the band: the renderer's own penumbra formula
+   (``evaluate.plan_alpha``, JAX, compiled per bucket of band sizes), at the band points only;
+5. the shading of every visible pixel in one compiled pass (numba)::
+
+       I = albedo * (ambient + projectors + E_sun max(0, n . s) (1 - alpha))
+
+The image agrees with ``render_scene``'s (same lights, same ``range_k_max``) to rounding
+(tests/test_scene_frame.py). ``range_k_max`` defaults to the lights' own k: the bands are as
+narrow as this frame's k allows.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import time
+from collections.abc import Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
+
+import numpy as np
+
+from .camera import GroundGrid, PinholeCamera
+from .dense_plan import DensePlan, plan_dense_points
+from .evaluate import plan_alpha_jit
+from .params import Pose, Sun
+from .plan import grid_bucket_size
+from .posed import PosedOccluder
+from .projector import Projector
+from .render import SoftShadowModel
+from .scratch import Scratch, scratch_array
+from .scene_render import SceneLights, _object_surface, projector_light
+from .visibility import Surface, VisibleSurfaces, visible_surfaces
+
+__all__ = ["FRAME_STEPS", "FrameRenderer", "SceneFrame", "band_alpha", "render_frame"]
+
+#: The steps ``SceneFrame.milliseconds`` times (wall time; with a second thread "projectors" is
+#: the wait for it after the sun's steps).
+FRAME_STEPS = ("visibility", "projectors", "sun_plan", "sun_band", "shading")
+
+
+@dataclasses.dataclass(frozen=True)
+class SceneFrame:
+    """image (H, W, 3) float64 linear radiance (``background`` where nothing is seen); visible:
+    what each pixel sees; plan: the sun's ``DensePlan`` (None without a sun); milliseconds: wall
+    time per step (``FRAME_STEPS``)."""
+
+    image: np.ndarray
+    visible: VisibleSurfaces
+    plan: DensePlan | None
+    milliseconds: dict
+
+
+def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pose: Pose | None = None,
+                 lights: SceneLights | None = None, sun: Sun | None = None,
+                 projectors: Sequence[Projector] = (), receivers: Sequence[Surface] = (),
+                 object_albedo=0.8, ground_albedo=0.8, range_k_max: float | None = None,
+                 background=0.0, *, scratch: Scratch | None = None,
+                 pool: ThreadPoolExecutor | None = None) -> SceneFrame:
+    """The scene's image (H, W, 3), linear radiance: ``render_scene``'s, forward only and fast.
+
+    Arguments as ``render_scene``'s (flat shading, one sample per pixel); range_k_max: the k the
+    sun's penumbra bands are sized for, default the lights' k. scratch: keep the per-frame
+    arrays in these buffers (the frame's arrays are then overwritten by the next frame made
+    with them; ``FrameRenderer`` does this); pool: a thread to run the projectors on while this
+    one makes the sun's plan (and to pose the occluder while this one finds what each pixel
+    sees).
+    """
+    pose = Pose() if pose is None else pose
+    lights = SceneLights() if lights is None else lights
+    k = float(lights.range_k)
+    range_k_max = k if range_k_max is None else float(range_k_max)
+    ms = {}
+    t = time.perf_counter()
+    surfaces = [_object_surface(model, pose, object_albedo), *receivers]
+    posed = None
+    if sun is not None:
+        posed = _submit(pool, PosedOccluder.make, model.occluder, pose, sun)
+    vis = visible_surfaces(camera, surfaces, ground_albedo, scratch=scratch, albedo=False)
+    # Each point's surface (GROUND -1, the object 0, receivers 1...), and its albedo by that.
+    surface = vis.surface.reshape(-1)[vis.pixel]
+    albedos = np.vstack([_albedo_of(ground_albedo), *[s.albedo for s in surfaces]])
+    t = _lap(ms, "visibility", t)
+    light = _submit(pool, projector_light, vis, surfaces, projectors, scratch=scratch)
+    if pool is None:
+        t = _lap(ms, "projectors", t)
+    plan, alpha_band = None, np.zeros(0)
+    try:
+        if sun is not None and len(vis.pixel):
+            on_object = np.where(surface == 0, vis.face.reshape(-1)[vis.pixel], -1)
+            plan = plan_dense_points(model.occluder, pose, sun, vis.points, range_k_max, vis.normals,
+                                     rule=model.rule, posed=_result(posed), faces=on_object, scratch=scratch)
+            t = _lap(ms, "sun_plan", t)
+            alpha_band = band_alpha(plan, vis.points, model, pose, sun, k)
+            t = _lap(ms, "sun_band", t)
+    finally:
+        # The projectors' thread finished before anything else uses the buffers (also on an error).
+        if pool is not None:
+            light = _result(light)
+            t = _lap(ms, "projectors", t)
+    h, w = vis.shape
+    image = scratch_array(scratch, "frame.image", (h * w, 3))
+    image[:] = np.broadcast_to(np.asarray(background, np.float64), (3,))
+    sun_dir = np.zeros(3) if sun is None else -np.asarray(sun.light_np, np.float64)
+    hard = plan.hard if plan is not None else np.zeros(0)
+    band = plan.band if plan is not None else np.zeros(0, np.int64)
+    _shade_kernel()(vis.pixel, vis.normals, surface, albedos, light, float(lights.ambient),
+                    float(lights.sun_irradiance) if sun is not None else 0.0, sun_dir, hard, band, alpha_band,
+                    image)
+    _lap(ms, "shading", t)
+    return SceneFrame(image.reshape(h, w, 3), vis, plan, ms)
+
+
+class FrameRenderer:
+    """``render_frame`` for a stream of frames: the per-frame arrays are kept between frames
+    (``softshadow.scratch``: fresh memory costs a fifth of a frame in page faults) and a second
+    thread runs the projectors while the first makes the sun's plan.
+
+    ``render(...)`` takes ``render_frame``'s arguments. A frame's arrays (image, visible, plan)
+    are overwritten by the next frame: copy what you keep. Not for use from two threads at once.
+    """
+
+    def __init__(self, threads: int = 2):
+        if threads not in (1, 2):
+            raise ValueError(f"FrameRenderer threads must be 1 or 2, got {threads!r}")
+        self.scratch = Scratch()
+        self.pool = ThreadPoolExecutor(1, thread_name_prefix="softshadow-frame") if threads == 2 else None
+
+    def render(self, *args, **kwargs) -> SceneFrame:
+        return render_frame(*args, **kwargs, scratch=self.scratch, pool=self.pool)
+
+    def close(self) -> None:
+        if self.pool is not None:
+            self.pool.shutdown()
+
+
+def _submit(pool: ThreadPoolExecutor | None, fn, *args, **kwargs):
+    """fn(...) on the pool's thread (a Future), or here and now without a pool."""
+    return fn(*args, **kwargs) if pool is None else pool.submit(fn, *args, **kwargs)
+
+
+def _result(value):
+    return value.result() if isinstance(value, Future) else value
+
+
+def band_alpha(plan: DensePlan, points: np.ndarray, model: SoftShadowModel, pose: Pose, sun: Sun,
+               range_k: float) -> np.ndarray:
+    """alpha (m,) at the plan's band points: the model's penumbra formula (``plan_alpha``, JAX),
+    on the band padded to one of a few sizes per octave so that it compiles once per size."""
+    m = len(plan.band)
+    if not m:
+        return np.zeros(0)
+    size = grid_bucket_size(m)
+    pts = np.zeros((size, 3))
+    pts[:m] = points[plan.band]
+    alpha = plan_alpha_jit(pts, plan.band_plan(size), pose, sun, range_k, model.rule, model.profile, None,
+                           model.corners)
+    return np.asarray(alpha, np.float64)[:m]
+
+
+def _lap(ms: dict, step: str, start: float) -> float:
+    now = time.perf_counter()
+    ms[step] = 1e3 * (now - start)
+    return now
+
+
+@functools.cache
+def _shade_kernel():
+    """The compiled shading pass (numba): per visible point, its surface's albedo (albedos' row
+    surface + 1: the ground's first) times ambient plus the
+    projectors' light plus the sun's, E max(0, n . s) (1 - alpha), alpha the plan's hard shadow or
+    (band points, ascending in ``band``) the penumbra formula's; into the flat image."""
+    import numba
+
+    @numba.njit(cache=True, nogil=True)
+    def kernel(pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, hard, band, alpha_band,
+               image):
+        j = 0
+        has_sun = hard.shape[0] > 0
+        for i in range(pixel.shape[0]):
+            sun = 0.0
+            if has_sun:
+                alpha = hard[i]
+                if j < band.shape[0] and band[j] == i:
+                    alpha = alpha_band[j]
+                    j += 1
+                cos = normals[i, 0] * sun_dir[0] + normals[i, 1] * sun_dir[1] + normals[i, 2] * sun_dir[2]
+                sun = sun_irradiance * max(cos, 0.0) * (1.0 - alpha)
+            p = pixel[i]
+            s = surface[i] + 1  # the ground (-1) first
+            for c in range(3):
+                image[p, c] = albedos[s, c] * (ambient + light[i, c] + sun)
+
+    return kernel
+
+
+def _albedo_of(value) -> np.ndarray:
+    """The ground's albedo (3,) (0 without a ground: no pixel has it then)."""
+    return np.zeros(3) if value is None else np.broadcast_to(np.asarray(value, np.float64).reshape(-1), (3,))

@@ -1,0 +1,132 @@
+"""The forward-only scene image (softshadow.scene_frame, docs/projector.md).
+
+- ``plan_dense_points`` makes the same plan as ``plan_points``' light-space back end (every
+  leaf equal), with and without normals, with the object's own faces given, on a receiver mesh.
+- ``render_frame`` draws ``render_scene``'s image (same lights and band k) to rounding: the sun,
+  a projector, a receiver mesh, the ground; no sun; a top-down map.
+- ``FrameRenderer`` keeps its buffers between frames without mixing frames up (images equal to
+  fresh ``render_frame`` calls, across a change of image size).
+- Back-face culling of a closed mesh changes no pixel of the z-buffer.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import numpy as np
+import pytest
+
+import softshadow as ss
+from softshadow import (GroundGrid, Pose, Projector, SceneLights, SoftShadowModel, Sun, look_at_camera, render_frame,
+                        render_scene, sine_slide)
+from softshadow.internal import FRAME_STEPS, Surface, plan_dense_points, visible_surfaces
+from softshadow.scene_render import _object_surface
+
+
+@functools.cache
+def model_of(name: str) -> SoftShadowModel:
+    return SoftShadowModel.from_mesh(name, footprint=False, hidden_sky=False)
+
+
+def _step() -> Surface:
+    """A receiver mesh: a 0.3 m step beside the object, open (not closed)."""
+    import trimesh
+    box = trimesh.creation.box((1.2, 3.0, 0.3))
+    return Surface.from_trimesh(box, position=(1.6, 0.0, 0.15), albedo=(0.6, 0.7, 0.8), name="step")
+
+
+def _plans_equal(a, b) -> None:
+    for x, y in zip(jax.tree_util.tree_leaves(a), jax.tree_util.tree_leaves(b)):
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+
+
+@pytest.mark.parametrize("mesh, sun, with_normals", [
+    ("ball", (200.0, 40.0), True),
+    ("pillar", (250.0, 35.0), True),
+    ("pillar", (120.0, 60.0), False),
+])
+def test_dense_plan_equals_plan_points(mesh, sun, with_normals):
+    model = model_of(mesh)
+    pose = Pose(rotation_deg=(0.0, 0.0, 25.0))
+    cam = look_at_camera((3.5, -4.0, 3.0), (0.0, 0.0, 0.5), 120, 90, 50.0)
+    vis = visible_surfaces(cam, [_object_surface(model, pose, 0.8), _step()], 0.8)
+    normals = vis.normals if with_normals else None
+    sun = Sun(*sun)
+    ref = model.plan_points(sun, pose, vis.points, 0.02, normals=normals, backend="light")
+    dense = plan_dense_points(model.occluder, pose, sun, vis.points, 0.02, normals)
+    assert dense.band.size > 20 and dense.hard.sum() > 50, "the scene must show a shadow and a penumbra"
+    _plans_equal(ref, dense.point_plan())
+    # The object's own faces given: a point whose face is the nearest to the sun skips the lookup.
+    on_object = np.where(vis.surface.ravel()[vis.pixel] == 0, vis.face.ravel()[vis.pixel], -1)
+    _plans_equal(ref, plan_dense_points(model.occluder, pose, sun, vis.points, 0.02, normals,
+                                        faces=on_object).point_plan())
+
+
+def _scene(size=(120, 90)):
+    cam = look_at_camera((3.0, -4.0, 2.6), (0.0, 0.0, 0.5), *size, 50.0)
+    proj = Projector((-3.0, -2.5, 3.0), (0.0, 0.0, 0.5), sine_slide(6, 0.8, 64), fov_deg=45.0, shadow_px=256)
+    return cam, proj
+
+
+@pytest.mark.parametrize("mesh, with_sun, receiver", [("ball", True, True), ("pillar", True, False),
+                                                      ("ball", False, True)])
+def test_render_frame_equals_render_scene(mesh, with_sun, receiver):
+    model = model_of(mesh)
+    cam, proj = _scene()
+    sun = Sun(230.0, 40.0) if with_sun else None
+    lights = SceneLights(0.15, 0.9, 0.02)
+    receivers = [_step()] if receiver else []
+    args = (cam, model, Pose(), lights, sun, [proj], receivers)
+    ref = render_scene(*args, object_albedo=0.85, ground_albedo=0.8, range_k_max=0.02)
+    frame = render_frame(*args, object_albedo=0.85, ground_albedo=0.8)
+    ref_image = np.asarray(ref.image)
+    assert ref_image.max() > 0.5 and np.ptp(ref_image) > 0.3
+    np.testing.assert_allclose(frame.image, ref_image, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(frame.visible.surface, ref.setup.visible.surface)
+    assert set(frame.milliseconds) <= set(FRAME_STEPS)
+
+
+def test_render_frame_top_down_map():
+    model = model_of("pillar")
+    grid = GroundGrid.around((0.8, 0.8), 3.0, 64)
+    _, proj = _scene()
+    lights = SceneLights.from_rho(Sun(200.0, 45.0), 0.02, 0.3)
+    ref = render_scene(grid, model, Pose(), lights, Sun(200.0, 45.0), [proj], range_k_max=0.02)
+    frame = render_frame(grid, model, Pose(), lights, Sun(200.0, 45.0), [proj])
+    np.testing.assert_allclose(frame.image, np.asarray(ref.image), rtol=0, atol=1e-12)
+
+
+def test_frame_renderer_reuses_its_buffers_without_mixing_frames():
+    model = model_of("ball")
+    renderer = ss.FrameRenderer(threads=2)
+    try:
+        for size, azimuth, k in (((120, 90), 200.0, 0.01), ((120, 90), 240.0, 0.03), ((80, 60), 210.0, 0.02),
+                                 ((120, 90), 200.0, 0.01)):
+            cam, proj = _scene(size)
+            args = (cam, model, Pose(), SceneLights(0.2, 0.8, k), Sun(azimuth, 40.0), [proj], [_step()])
+            got = renderer.render(*args).image.copy()
+            np.testing.assert_array_equal(got, render_frame(*args).image)
+    finally:
+        renderer.close()
+
+
+def test_back_face_culling_changes_no_pixel():
+    model = model_of("ball")
+    surf = _object_surface(model, Pose(position=(0.2, 0.1, 0.0)), 0.8)
+    assert surf.closed, "the ball is closed and outward-wound"
+    cam = look_at_camera((2.0, -3.0, 2.0), (0.0, 0.0, 0.8), 96, 72, 50.0)
+    open_surf = Surface(surf.vertices, surf.faces, surf.albedo, normals=surf.normals)
+    for camera in (cam, GroundGrid.around((0.0, 0.0), 3.0, 64)):
+        a, b = visible_surfaces(camera, [surf], 0.8), visible_surfaces(camera, [open_surf], 0.8)
+        np.testing.assert_array_equal(a.face, b.face)
+        np.testing.assert_array_equal(a.points, b.points)
+    # A camera inside the near plane's reach of the mesh cuts it open: nothing is culled then.
+    close = look_at_camera((0.0, 0.0, 1.0), (0.0, 1.0, 1.0), 64, 48, 90.0)
+    np.testing.assert_array_equal(visible_surfaces(close, [surf], 0.8).face,
+                                  visible_surfaces(close, [open_surf], 0.8).face)
+
+
+def test_surface_normals_are_checked():
+    with pytest.raises(ValueError, match="one normal per face"):
+        Surface(np.eye(3), [[0, 1, 2]], normals=np.zeros((2, 3)))
