@@ -16,7 +16,6 @@ import dataclasses
 import functools
 
 import equinox as eqx
-import jax
 import numpy as np
 from jaxtyping import Bool, Float, Int
 
@@ -744,7 +743,7 @@ def _plan_points_wedge(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, 
     depth complexity in front of each point by ray casting where the occluder may lie behind it,
     else from the winding counts in the sun's view)."""
     posed = PosedOccluder.make(occ, pose, sun)
-    sil, light = posed.silhouette, posed.light
+    light = posed.light
     n = len(points)
     size = pad_to or bucket_size(n)
     hard = np.zeros(size)

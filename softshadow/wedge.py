@@ -234,12 +234,15 @@ def _square_sector(qx, qy):
     """The area (in the unit square about the origin) swept from the direction (1/2, -1/2)
     counterclockwise to the direction (qx, qy): a quarter of the perimeter passed."""
     ax_, ay_ = jnp.abs(qx), jnp.abs(qy)
-    m = jnp.maximum(ax_, ay_)
-    m = jnp.where(m > 0, 2.0 * m, 1.0)
-    X, Y = qx / m, qy / m
     right = qx >= ay_
     top = (qy > ax_) & ~right
     left = (-qx >= ay_) & ~right & ~top
+    # Each side scales by its own coordinate (not max(|qx|, |qy|), whose derivative at a tie, a
+    # direction through a corner, is half of each side's): the perimeter's derivative is then
+    # the same from both sides of a corner.
+    m = 2.0 * jnp.where(right | left, ax_, ay_)
+    m = jnp.where(m > 0, m, 1.0)
+    X, Y = qx / m, qy / m
     perimeter = jnp.where(right, Y + 0.5, jnp.where(top, 1.5 - X, jnp.where(left, 2.5 - Y, 3.5 + X)))
     return 0.25 * perimeter
 

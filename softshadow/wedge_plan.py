@@ -22,9 +22,10 @@ as the sun and pose move.
 from __future__ import annotations
 
 import functools
+import os
+from concurrent.futures import ThreadPoolExecutor
 
 import equinox as eqx
-import jax
 import numpy as np
 from jaxtyping import Float, Int
 
@@ -269,12 +270,12 @@ def arrangement(points: np.ndarray, ids: np.ndarray, edges: WedgeEdges, light: n
     change, pchange = np.empty((n, max_crossings), np.int8), np.empty((n, max_crossings), np.int8)
     boundary = np.zeros(n, bool)
     overflow = np.zeros(64, np.int64)
-    _arrangement_kernel()(np.ascontiguousarray(points, np.float64), np.ascontiguousarray(ids, np.int64),
-                          np.ascontiguousarray(edges.a, np.float64), np.ascontiguousarray(edges.b, np.float64),
-                          edges.faces, np.asarray(edges.centre, np.bool_), np.asarray(edges.jump, np.float64), frame,
-                          float(radius), reach, axes, with_pixel, offset, pixel_offset, pair_edge, *flags, n_pairs,
-                          cross, change,
-                          n_cross, pcross, pchange, n_pcross, boundary, overflow)
+    args = (np.ascontiguousarray(points, np.float64), np.ascontiguousarray(ids, np.int64),
+            np.ascontiguousarray(edges.a, np.float64), np.ascontiguousarray(edges.b, np.float64), edges.faces,
+            np.asarray(edges.centre, np.bool_), np.asarray(edges.jump, np.float64), frame, float(radius), reach, axes,
+            with_pixel, offset, pixel_offset, pair_edge, *flags, n_pairs, cross, change, n_cross, pcross, pchange,
+            n_pcross, boundary, overflow)
+    _on_threads(_arrangement_kernel(), min(64, max(1, n // 256)), args)
     # Compact: the pairs in point order, the crossings' slots renumbered to pairs.
     pair_of = np.arange(k)[None, :] < n_pairs[:, None]
     base = np.concatenate([[0], np.cumsum(n_pairs)[:-1]])
@@ -379,11 +380,34 @@ def gather_candidates(points, a: np.ndarray, b: np.ndarray, edge_reach: np.ndarr
     box = [np.minimum(a_uv[:, 0], b_uv[:, 0]), np.maximum(a_uv[:, 0], b_uv[:, 0]),
            np.minimum(a_uv[:, 1], b_uv[:, 1]), np.maximum(a_uv[:, 1], b_uv[:, 1])]
     ends = np.ascontiguousarray(np.column_stack([a_uv, a @ s, b_uv, b @ s, *box, reach * reach]))
-    query(grid is not None, grid.width if grid is not None else 0, n, geometry, pts, plane, r, e1, e2, ends, s,
-          float(range_k) * (1.0 + REACH_MARGIN), lo[0], lo[1], cell, n_cols, n_rows, start, members,
-          ids, count, overflow)
+    _on_threads(query, min(64, max(1, n // 1024)),
+                (grid is not None, grid.width if grid is not None else 0, n, geometry, pts, plane, r, e1, e2, ends, s,
+                 float(range_k) * (1.0 + REACH_MARGIN), lo[0], lo[1], cell, n_cols, n_rows, start, members, ids, count,
+                 overflow))
     index = np.flatnonzero(count)
     return WedgeCandidates(index, ids[index], count[index], int(overflow.sum()))
+
+
+@functools.cache
+def _helper_thread() -> ThreadPoolExecutor | None:
+    """One more thread for the plan's compiled loops when the process may use two cores."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    return ThreadPoolExecutor(1, thread_name_prefix="softshadow-plan") if cores > 1 else None
+
+
+def _on_threads(loop, n_chunks: int, args: tuple) -> None:
+    """loop(first, stride, n_chunks, *args) over its chunks, the even ones here and the odd ones on
+    the helper thread (the loops release the GIL and write disjoint rows; interleaved chunks share
+    the work evenly: the points are in raster order)."""
+    helper = _helper_thread()
+    if helper is None or n_chunks < 2:
+        loop(0, 1, n_chunks, *args)
+        return
+    odd = helper.submit(loop, 1, 2, n_chunks, *args)
+    try:
+        loop(0, 2, n_chunks, *args)
+    finally:
+        odd.result()
 
 
 @functools.cache
@@ -474,11 +498,11 @@ def _kernels():
         return best, kappa * max(da + best_t * step, 0.0) + r
 
     @numba.njit(cache=True, nogil=True)
-    def query(is_grid, width, n, geometry, points, plane, rpix, e1, e2, ends, s, kappa, x0, y0, cell, n_cols,
-              n_rows, start, members, ids, count, overflow):
+    def query(first, stride, n_chunks, is_grid, width, n, geometry, points, plane, rpix, e1, e2, ends, s, kappa,
+              x0, y0, cell, n_cols, n_rows, start, members, ids, count, overflow):
+        # Chunks first, first + stride, ... of n_chunks (``_on_threads``).
         k_max = ids.shape[1]
-        n_chunks = min(64, max(1, n // 1024))
-        for c in range(n_chunks):
+        for c in range(first, n_chunks, stride):
             x = np.zeros(3)
             score = np.empty(k_max)
             for i in range(c * n // n_chunks, (c + 1) * n // n_chunks):
@@ -586,20 +610,23 @@ def _arrangement_kernel():
                     continue
                 dxi, dyi = bx[i] - ax[i], by[i] - ay[i]
                 path = x_lo[i] <= qx_hi and x_hi[i] >= qx_lo and y_lo[i] <= qy_hi and y_hi[i] >= qy_lo
-                den = qx * dyi - qy * dxi
-                if path and den != 0.0:
-                    s_ = (ax[i] * dyi - ay[i] * dxi) / den
-                    r_ = (ax[i] * qy - ay[i] * qx) / den
-                    if 0.0 < s_ < 1.0 and 0.0 < r_ < 1.0:
+                # Both tests: 0 < s, r < 1 for s = sn / den, r = rn / den, without dividing.
+                if path:
+                    den = qx * dyi - qy * dxi
+                    sn = ax[i] * dyi - ay[i] * dxi
+                    rn = ax[i] * qy - ay[i] * qx
+                    if (den > 0.0 and 0.0 < sn < den and 0.0 < rn < den) or (
+                            den < 0.0 and den < sn < 0.0 and den < rn < 0.0):
                         W += -w[i] if den > 0.0 else w[i]
                 meet = x_lo[i] <= x_hi[j] and x_hi[i] >= x_lo[j] and y_lo[i] <= y_hi[j] and y_hi[i] >= y_lo[j]
-                den = dx * dyi - dy * dxi
-                if meet and den != 0.0:
+                if meet:
+                    den = dx * dyi - dy * dxi
                     ex, ey = ax[i] - ax[j], ay[i] - ay[j]
-                    s_ = (ex * dyi - ey * dxi) / den
-                    r_ = (ex * dy - ey * dx) / den
-                    if 0.0 < s_ < 1.0 and 0.0 < r_ < 1.0:
-                        y = ya + s_ * ln
+                    sn = ex * dyi - ey * dxi
+                    rn = ex * dy - ey * dx
+                    if (den > 0.0 and 0.0 < sn < den and 0.0 < rn < den) or (
+                            den < 0.0 and den < sn < 0.0 and den < rn < 0.0):
+                        y = ya + sn / den * ln
                         if lo[j] < y < hi[j]:
                             ys[m] = y
                             js[m] = -w[i] if den > 0.0 else w[i]
@@ -893,13 +920,12 @@ def _arrangement_kernel():
 
 
     @numba.njit(cache=True, nogil=True)
-    def kernel(points, ids, a, b, faces, centre, jump, frame, radius, reach, axes, with_pixel, offset, pixel_offset,
-               pair_edge, p_st, p_en, p_pst, p_pen, p_flip, p_pflip, n_pairs, cross, cross_change, n_cross, pcross,
-               pcross_change, n_pcross, boundary, overflow):
-        n, k = ids.shape
-        c_max = cross.shape[1]
-        n_chunks = min(64, max(1, n // 256))
-        for chunk in range(n_chunks):
+    def kernel(first, stride, n_chunks, points, ids, a, b, faces, centre, jump, frame, radius, reach, axes,
+               with_pixel, offset, pixel_offset, pair_edge, p_st, p_en, p_pst, p_pen, p_flip, p_pflip, n_pairs, cross,
+               cross_change, n_cross, pcross, pcross_change, n_pcross, boundary, overflow):
+        # Chunks first, first + stride, ... of n_chunks (``_on_threads``).
+        n = ids.shape[0]
+        for chunk in range(first, n_chunks, stride):
             point_range(chunk * n // n_chunks, (chunk + 1) * n // n_chunks, chunk, points, ids, a, b, faces,
                         centre, jump, frame, radius, reach, axes, with_pixel, offset, pixel_offset, pair_edge,
                         p_st, p_en, p_pst,
