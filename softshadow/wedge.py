@@ -316,8 +316,8 @@ def pixel_mean_alpha(points, edge_vertices_world, light, choices, pixel_axes):
     lt = light if light.ndim == 1 else light[jnp.maximum(pp, 0)]
     axes = jnp.broadcast_to(jnp.asarray(pixel_axes, dtype), (n, 2, 3))[jnp.maximum(pp, 0)]
     choices = _cast(choices, dtype)
-    return pixel_hard_area(*pixel_segments(points[jnp.maximum(pp, 0)], ev[:, 0], ev[:, 1], choices.pixel_flip, lt,
-                                           axes), choices, n)
+    ax, ay, bx, by = pixel_segments(points[jnp.maximum(pp, 0)], ev[:, 0], ev[:, 1], choices.pixel_flip, lt, axes)
+    return pixel_hard_area(ax, ay, bx, by, choices, n)
 
 
 def _cast(choices, dtype):
@@ -374,7 +374,8 @@ def wedge_alpha(points, edge_vertices_world, light, range_k, choices, profile: s
         hard = _hard_term(ax, ay, lines, choices.hard_offset, choices.side_end, choices.cross, choices.cross_change,
                           pp, n, dtype, y_cross)
         return _disk_mass(lines, choices, y_cross, hard, n, profile)
-    area = pixel_hard_area(*pixel_segments(x, a, b, choices.pixel_flip, lt, axes), choices, n)
+    pax, pay, pbx, pby = pixel_segments(x, a, b, choices.pixel_flip, lt, axes)
+    area = pixel_hard_area(pax, pay, pbx, pby, choices, n)
     scale = 1.0 + 0.5 * (jnp.abs(du_a) + jnp.abs(du_b))
     share = _line_share(lines, choices, y_cross, scale, profile)
     bump = footprint_bump(u, du_a, du_b, profile)

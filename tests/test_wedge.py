@@ -11,11 +11,15 @@ from __future__ import annotations
 import functools
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 import trimesh
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from data_synth import SunSky, sun_visibility
+from gradcheck import PARAM_NAMES, STEPS, check_point_gradients, unpack
 from softshadow import GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun
 from softshadow.internal import concatenate_plans
 from softshadow.meshes import builtin_mesh
@@ -198,3 +202,138 @@ def test_float32_matches_float64():
         lo = mdl.ground_map(ShadowParams(0.02, 0.3), sun, pose, grid)
         assert lo.dtype == np.float32
     assert np.abs(np.asarray(lo, np.float64) - hi).max() < 2e-4
+
+
+# -- gradients: autodiff against central finite differences (float64, plan held fixed) ------------
+
+def pillar_band_points(sun: Sun, pose: Pose, phase: float, height: float = 3.0, half_width: float = 0.3) -> np.ndarray:
+    """Ground points (N, 3) on cross-sections of the pillar's shadow (half_width metres each side
+    of its axis) and past its tip; ``phase`` in [0, 1) shifts them by a fraction of their spacing
+    (generic points)."""
+    light = np.asarray(sun.light_np)
+    rot = np.asarray(pose.rotation)
+    axis = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, height]]) @ rot.T + np.asarray(pose.position, np.float64)
+    ground = axis[:, :2] - (axis[:, 2] / light[2])[:, None] * light[:2]
+    base, tip = ground
+    along = (tip - base) / np.linalg.norm(tip - base)
+    perp = np.array([-along[1], along[0]])
+    offsets = (np.linspace(-1.0, 1.0, 121) + phase / 60.0) * half_width
+    rows = [base + f * (tip - base) + offsets[:, None] * perp for f in (0.3, 0.6, 0.9)]
+    rows += [tip + offsets[:, None] * along + o * perp for o in (-0.04, 0.017)]
+    xy = np.concatenate(rows)
+    return np.c_[xy, np.zeros(len(xy))]
+
+
+gradient_scene = st.fixed_dictionaries({
+    "range_k": st.floats(0.01, 0.04), "rho": st.floats(0.05, 0.95), "azimuth": st.floats(0.0, 360.0),
+    "elevation": st.floats(20.0, 70.0), "x": st.floats(-1.0, 1.0), "y": st.floats(-1.0, 1.0),
+    "z": st.floats(0.0, 0.3), "rot_x": st.floats(-10.0, 10.0), "rot_y": st.floats(-10.0, 10.0),
+    "rot_z": st.floats(-180.0, 180.0), "phase": st.floats(0.05, 0.95)})
+
+SKEWED_PIXEL = np.array([[0.011, 0.002, 0.0], [-0.003, 0.013, 0.0]])  # a skewed 1 cm pixel
+
+
+@functools.cache
+def wedge_pillar(profile: str) -> SoftShadowModel:
+    return SoftShadowModel.from_mesh(builtin_mesh("pillar"), rule="wedge", profile=profile)
+
+
+@pytest.mark.parametrize("profile,pixel", [("disk", False), ("linear", True)])
+@settings(max_examples=4)  # each example: a plan, a forward Jacobian and 20 evaluations
+@given(d=gradient_scene)
+def test_point_gradients_match_finite_differences(profile, pixel, d):
+    """Every parameter at generic penumbra points, sampled at the point and as pixel means (the
+    default model's footprint); none is silently zero."""
+    theta0 = np.array([d[name] for name in PARAM_NAMES], np.float64)
+    _, sun, pose = unpack(jnp.asarray(theta0))
+    points = pillar_band_points(sun, pose, d["phase"])
+    jac = check_point_gradients(wedge_pillar(profile), theta0, points, 1.5 * d["range_k"],
+                                pixel_axes=SKEWED_PIXEL if pixel else None)
+    for i, name in enumerate(PARAM_NAMES):
+        assert np.max(np.abs(jac[:, i])) > 1e-6, f"{name}: zero gradient across the whole penumbra"
+
+
+def _theta(k, rho, sun: Sun, pose: Pose) -> np.ndarray:
+    return np.r_[k, rho, float(sun.azimuth_deg), float(sun.elevation_deg), np.asarray(pose.position, float),
+                 np.asarray(pose.rotation_deg, float)]
+
+
+@pytest.mark.parametrize("pixel", [False, True])
+def test_gradients_match_finite_differences_under_a_grazing_sun(pixel):
+    """The sun 4 deg up: the pillar's shadow is 43 m long and its penumbra metres wide."""
+    sun, pose = Sun(120.0, 4.0), Pose(rotation_deg=(0.0, 0.0, 10.0))
+    points = pillar_band_points(sun, pose, 0.37, half_width=2.0)
+    check_point_gradients(wedge_pillar("disk"), _theta(0.01, 0.3, sun, pose), points, 0.015, min_points=40,
+                          pixel_axes=SKEWED_PIXEL * 5 if pixel else None)
+
+
+@pytest.mark.parametrize("k", [1e-3, 1e-5])
+def test_gradients_match_finite_differences_as_k_goes_to_zero(k):
+    """Pixel means as k -> 0+: the penumbra (k d) is far narrower than the 1 cm pixel; the means
+    still carry the hard shadow's area, differentiably. Points beside the pillar's side lines."""
+    sun, pose = Sun(200.0, 35.0), Pose(rotation_deg=(0.0, 0.0, 15.0))
+    points = pillar_band_points(sun, pose, 0.37)
+    steps = STEPS.copy()
+    steps[0] = 1e-5 * k
+    check_point_gradients(wedge_pillar("disk"), _theta(k, 0.3, sun, pose), points, 1.5 * k, min_points=12,
+                          pixel_axes=SKEWED_PIXEL, steps=steps, smooth_fraction=0.8)
+
+
+def test_k_zero_is_the_limit_of_k_to_zero_with_finite_gradients():
+    """At k = 0 the pixel means are the hard shadow's area in each pixel, the limit of k -> 0+
+    (not the point-sampled hard shadow), and their gradients are finite."""
+    mdl = wedge_pillar("disk").with_options(hidden_sky=False)
+    sun, pose = Sun(200.0, 35.0), Pose(rotation_deg=(0.0, 0.0, 15.0))
+    grid = GroundGrid.around((0.6, 1.6), 1.6, 48)
+    at_zero = np.asarray(mdl.ground_map(ShadowParams(0.0, 0.3), sun, pose, grid))
+    near_zero = np.asarray(mdl.ground_map(ShadowParams(1e-7, 0.3), sun, pose, grid))
+    partial = (at_zero > 0.31) & (at_zero < 0.99)
+    assert partial.sum() > 40, "the pixels on the outline should be partly shaded"
+    assert np.abs(at_zero - near_zero).max() < 1e-4
+    plan = mdl.plan_grid(sun, pose, grid, range_k_max=1e-6)
+    grad = jax.grad(lambda t: jnp.sum(mdl.ground_map(*unpack(t), grid, plan=plan)))(
+        jnp.asarray(_theta(0.0, 0.3, sun, pose)))
+    assert np.all(np.isfinite(np.asarray(grad)))
+
+
+def test_base_corner_pixel_is_continuous_with_matching_gradients():
+    """The issue's case: pixels about the pillar's base corner under a low sun. Fresh plans at pose
+    x = -h and +h differ by O(h) (no jump), their central differences agree with autodiff."""
+    mdl = wedge_pillar("disk")
+    sun, params = Sun(200.0, 5.0), ShadowParams(0.0046, 0.3)
+    axes = np.eye(2, 3) * 0.01
+    offsets = (np.arange(-2, 3) + 0.3) * 0.01  # the corner (0.1, -0.1) inside the middle pixel
+    points = np.array([[0.1 + a, -0.1 + b, 0.0] for a in offsets for b in offsets])
+
+    def fresh(x):
+        return np.asarray(mdl.at_points(params, sun, Pose(position=(x, 0.0, 0.0)), points, pixel_axes=axes,
+                                        range_k_max=0.007))
+
+    plan = mdl.plan_points(sun, Pose(), points, 0.007, pixel_axes=axes)
+    autodiff = np.asarray(jax.jacfwd(lambda x: mdl.at_points(params, sun, Pose(position=jnp.stack([x, 0.0, 0.0])),
+                                                             points, pixel_axes=axes, plan=plan))(jnp.asarray(0.0)))
+    assert np.abs(autodiff).max() > 10.0, "the corner's pixels should move with the pillar"
+    for h in (1e-5, 1e-6):
+        plus, minus = fresh(h), fresh(-h)
+        assert np.abs(plus - minus).max() < 200 * h
+        np.testing.assert_allclose((plus - minus) / (2 * h), autodiff, atol=0.5)
+
+
+def test_float32_gradients_match_float64():
+    """The float32 path's gradients (k, rho, sun, pose) against float64's, pixel means on."""
+    mdl = wedge_pillar("disk").with_options(hidden_sky=False)
+    sun, pose = Sun(150.0, 45.0), Pose(rotation_deg=(0.0, 0.0, 25.0))
+    grid = GroundGrid.around((0.6, 1.6), 2.4, 48)
+    plan = mdl.plan_grid(sun, pose, grid, range_k_max=0.03)
+    theta = _theta(0.02, 0.3, sun, pose)
+    weights = np.random.default_rng(5).standard_normal((48, 48))
+
+    def grad_in(dtype):
+        loss = lambda t: jnp.sum(jnp.asarray(weights, dtype) * mdl.ground_map(*unpack(t), grid, plan=plan))
+        return np.asarray(jax.grad(loss)(jnp.asarray(theta, dtype)), np.float64)
+
+    hi = grad_in(jnp.float64)
+    with jax.enable_x64(False):
+        lo = grad_in(jnp.float32)
+    assert np.all(np.isfinite(lo))
+    np.testing.assert_allclose(lo, hi, rtol=2e-2, atol=2e-3 * np.abs(hi).max())
