@@ -150,8 +150,9 @@ def _run_bench(args, progress) -> int:
         from .fit import bench_fit
         result["fit"] = bench_fit(quick=args.quick)
     if args.what == "startup":
-        from .startup import bench_startup
-        result["startup"] = bench_startup(quick=args.quick, progress=progress)
+        from .startup import bench_startup, write_startup_report
+        result = _run_and_report(lambda: {"startup": bench_startup(quick=args.quick, progress=progress)},
+                                 write_startup_report, result, args.json_path, getattr(args, "report", None))
     if args.what == "floor":
         from .floor import bench_floor
         result["floor"] = bench_floor(quick=args.quick, progress=progress)

@@ -199,3 +199,25 @@ def bench_lod(quick: bool = False, seed: int = 0, progress=None, fresh: bool = T
                 scene["fresh_process_seconds"] = _fresh(folder, Path(tmp) / f"{name}-fresh", levels[-1])
             out["scenes"][name] = scene
     return out
+
+
+def bench_lod_fresh(scene: str = "sun-640", pairs: int = 4, seed: int = 0, progress=None) -> dict:
+    """Only the fresh-process part of ``bench_lod`` for one scene (``_fresh``: ``softshadow fit``
+    with ``--lod off`` and ``--lod auto`` alternated ``pairs`` times, caches kept), with the load
+    average before and after."""
+    from data_synth import synthesize
+
+    from .environment import load_average
+    from .meshes import mit_dragon
+    name, size, radius, _ = next(s for s in SCENES if s[0] == scene)
+    mesh = mit_dragon(full=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp) / name
+        synthesize(folder, preset="dragon", seed=seed, size=size, progress=False, object_mesh=mesh,
+                   sun_radius_deg=radius)
+        if progress:
+            progress(f"bench lod: {name} fresh processes")
+        before = load_average()
+        times = _fresh(folder, Path(tmp) / f"{name}-fresh", LEVELS[-1], pairs=pairs)
+        return {"scene": name, "size": list(size), "load_before": before, "load_after": load_average(),
+                "fresh_process_seconds": times}

@@ -24,7 +24,7 @@ import time
 
 import numpy as np
 
-__all__ = ["bench_scene", "SCENE_LEVELS"]
+__all__ = ["bench_scene", "scene_table", "SCENE_LEVELS"]
 
 #: The levels drawn: the full dragon, then halving to the paper's coarsest.
 SCENE_LEVELS = (20000, 10000, 5000, 2500, 1000, 300)
@@ -95,3 +95,18 @@ def bench_scene(quick: bool = False, progress=None) -> dict:
             "summary": {"full_frame_ms": full["frame_ms"], "coarsest_level": coarse["level"],
                         "coarsest_frame_ms": coarse["frame_ms"],
                         "coarsest_over_full": round(coarse["frame_ms"] / full["frame_ms"], 3)}}
+
+
+def scene_table(result: dict) -> str:
+    """The Markdown table of ``bench_scene``'s rows (docs/level_of_detail.md)."""
+    lines = ["| faces drawn | frame ms, 2 threads (min) | CPU ms per frame | frame ms, 1 thread (min) | "
+             "CPU ms per frame | steps ms, 2 threads: visibility / sun plan / sun band / shading | load before |",
+             "|---:|---:|---:|---:|---:|---|---|"]
+    for r in result["scene"]:
+        s = r["steps_ms"]
+        load = ", ".join(f"{x:.1f}" for x in r["load_before"]) if r.get("load_before") else "?"
+        lines.append(f"| {r['level']:,} | {r['frame_ms']:.1f} ({r['frame_min_ms']:.1f}) | {r['frame_cpu_ms']:.1f} | "
+                     f"{r['frame_ms_one_thread']:.1f} ({r['frame_min_ms_one_thread']:.1f}) | "
+                     f"{r['frame_cpu_ms_one_thread']:.1f} | {s['visibility']:.1f} / {s['sun_plan']:.1f} / "
+                     f"{s['sun_band']:.1f} / {s['shading']:.1f} | {load} |")
+    return "\n".join(lines)

@@ -59,7 +59,8 @@ class Misdescription:
         return float(true_scale) * self.scale_factor
 
     def position(self, true_position) -> tuple[float, float, float]:
-        return tuple(float(a) + float(b) for a, b in zip(true_position, self.position_offset_m))
+        x, y, z = (float(a) + float(b) for a, b in zip(true_position, self.position_offset_m))
+        return x, y, z
 
     def sun(self, azimuth_deg: float, elevation_deg: float) -> tuple[float, float]:
         return ((float(azimuth_deg) + self.sun_offset_deg[0]) % 360.0, float(elevation_deg) + self.sun_offset_deg[1])

@@ -27,6 +27,7 @@ import trimesh
 from scipy.spatial import ConvexHull, QhullError
 
 from .lighting import SunSky, limb_darkening_weight
+from .receivers import Receiver
 from .sampling import (bilinear, cap_directions, cosine_hemisphere_directions, orthonormal_basis,
                        stratified_square, strata_side)
 
@@ -42,7 +43,8 @@ def combined_mesh(*meshes) -> trimesh.Trimesh:
     meshes = [m for m in meshes if m is not None]
     if len(meshes) == 1:
         return meshes[0]
-    return trimesh.util.concatenate(meshes)
+    combined: trimesh.Trimesh = trimesh.util.concatenate(meshes)  # trimesh annotates it as any Geometry
+    return combined
 
 
 def _any_hit(mesh: trimesh.Trimesh, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
@@ -228,7 +230,7 @@ class SkyVisibilityMap:
     grids: tuple[SkyGrid, ...]
     outside: float = 1.0
     mesh: trimesh.Trimesh | None = dataclasses.field(default=None, repr=False)
-    receiver: object = dataclasses.field(default=None, repr=False)
+    receiver: Receiver | None = dataclasses.field(default=None, repr=False)
     n_samples: int = 1024
     seed: int | None = 0
     spread: float = SKY_SPREAD

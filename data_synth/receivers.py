@@ -19,7 +19,7 @@ from collections.abc import Callable
 import numpy as np
 import trimesh
 
-__all__ = ["PlaneReceiver", "HeightfieldReceiver", "MeshReceiver", "bank_terrain", "rising_bank",
+__all__ = ["Receiver", "PlaneReceiver", "HeightfieldReceiver", "MeshReceiver", "bank_terrain", "rising_bank",
            "steps_receiver", "wall_receiver", "texture_coordinates"]
 
 
@@ -175,6 +175,10 @@ class MeshReceiver:
         """Unit face normals (N, 3) of the hit triangles tri (N,)."""
         return np.asarray(self.mesh.face_normals)[np.asarray(tri, dtype=np.int64)]
 
+
+
+#: The receivers a synthetic scene can have.
+Receiver = PlaneReceiver | HeightfieldReceiver | MeshReceiver
 
 def texture_coordinates(points: np.ndarray, normals: np.ndarray) -> np.ndarray:
     """Where a receiver point reads the ground texture (N, 2), metres.

@@ -23,7 +23,7 @@ import trimesh
 from .lighting import SunSky
 from .physical import (RAY_OFFSET_M, combined_mesh, irradiance, shadow_reach, sky_visibility,
                        sky_visibility_map, sun_visibility)
-from .receivers import MeshReceiver, texture_coordinates
+from .receivers import MeshReceiver, Receiver, texture_coordinates
 from .textures import GroundAppearance
 from .tracing import KIND_OBJECT, KIND_RECEIVER, ViewRays, pixel_axes, trace
 
@@ -41,7 +41,7 @@ class SynthScene:
 
     object_mesh: trimesh.Trimesh
     object_albedo: tuple[float, float, float]
-    receiver: object
+    receiver: Receiver
 
 
 @dataclasses.dataclass(frozen=True)
@@ -113,7 +113,7 @@ class PhysicalRenderer:
         self.seed = seed
         self.occluders = combined_mesh(scene.object_mesh, scene.receiver.mesh)
         self._sky_map = None
-        self._blockers = None
+        self._blockers: trimesh.Trimesh | None = None
 
     def sky_map(self):
         """The receiver's sky on world grids (the plane and the height field: a function of x, y)."""
@@ -225,7 +225,7 @@ class PhysicalRenderer:
         """What can hide sky from a mesh receiver: the object and the receiver's faces that
         rise above its lowest level (a flat floor there cannot block rays going up from points
         on or above it; leaving it out lets the bounding-sphere cull work)."""
-        if getattr(self, "_blockers", None) is None:
+        if self._blockers is None:
             mesh = self.scene.receiver.mesh
             low = float(mesh.bounds[0, 2])
             tall = np.asarray(mesh.triangles)[:, :, 2].max(axis=1) > low + 1e-6
@@ -233,7 +233,8 @@ class PhysicalRenderer:
             if tall.any():
                 parts.append(mesh.submesh([np.flatnonzero(tall)], append=True))
             self._blockers = combined_mesh(*parts)
-        return self._blockers
+        blockers: trimesh.Trimesh = self._blockers
+        return blockers
 
     def _mesh_receiver_sky(self, hits, rays, recv, step: int = 4) -> np.ndarray:
         """Open sky (M,) of a mesh receiver's pixels recv: cast on a lattice of every step-th

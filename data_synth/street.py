@@ -102,7 +102,8 @@ def _person(x, y, height=1.75) -> trimesh.Trimesh:
     body.apply_translation([x, y, (height - 0.25) / 2])
     head = trimesh.creation.icosphere(subdivisions=2, radius=0.11)
     head.apply_translation([x, y, height - 0.12])
-    return trimesh.util.concatenate([body, head])
+    person: trimesh.Trimesh = trimesh.util.concatenate([body, head])  # trimesh annotates it as any Geometry
+    return person
 
 
 def _pole(x, y, height) -> trimesh.Trimesh:
@@ -116,7 +117,8 @@ def _tree(x, y) -> trimesh.Trimesh:
     trunk.apply_translation([x, y, 1.5])
     crown = trimesh.creation.icosphere(subdivisions=2, radius=1.8)
     crown.apply_translation([x, y, 4.2])
-    return trimesh.util.concatenate([trunk, crown])
+    tree: trimesh.Trimesh = trimesh.util.concatenate([trunk, crown])  # trimesh annotates it as any Geometry
+    return tree
 
 
 def _facade(centre_xy, across_xy, width, height, depth=6.0) -> trimesh.Trimesh:
@@ -141,8 +143,8 @@ def street_scene(seed: int):
     people = [np.array([0.0, 0.0]) + s * across + f * away
               for s, f in ((rng.uniform(1.8, 2.6), rng.uniform(0.0, 1.0)), (rng.uniform(4.2, 5.0), 0.5))]
     poles = [rng.uniform(-0.8, -0.3) * across + 2.5 * away, rng.uniform(3.5, 4.5) * across + 5.0 * away]
-    parts = [_person(*p, height=float(rng.uniform(1.6, 1.9))) for p in people]
-    parts += [_pole(*p, height=float(rng.uniform(3.5, 5.0))) for p in poles]
+    parts = [_person(x, y, height=float(rng.uniform(1.6, 1.9))) for x, y in people]
+    parts += [_pole(x, y, height=float(rng.uniform(3.5, 5.0))) for x, y in poles]
     far = 24.0 * away
     parts += [_facade(far + 8.0 * across, across, 12.0, float(rng.uniform(6, 10))),
               _facade(far - 9.0 * across, across, 8.0, float(rng.uniform(5, 8)))]

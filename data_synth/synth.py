@@ -15,6 +15,7 @@ import json
 import math
 import time
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 import trimesh
@@ -33,6 +34,11 @@ from .textures import GroundAppearance, procedural_texture
 from .tracing import pinhole_rays, topdown_rays
 
 __all__ = ["synthesize", "synthesize_plan", "posed_mesh", "OutputExistsError"]
+
+#: The renderers of a synthetic folder: "physical" (ray-cast sun disk and sky) or "model" (the fitted model).
+Renderer = Literal["physical", "model"]
+#: How the cameras are given: "explicit" (in scene.toml) or "markers" (a ChArUco board in view).
+Cameras = Literal["explicit", "markers"]
 
 
 class OutputExistsError(FileExistsError):
@@ -148,10 +154,10 @@ def _group_truth(label: str, photos: list[PhotoPlan]) -> dict:
     return truth
 
 
-def synthesize(out_dir, preset: str = "table2", seed: int = 0, renderer: str = "physical",
+def synthesize(out_dir, preset: str = "table2", *, seed: int = 0, renderer: Renderer = "physical",
                size: tuple[int, int] | None = None, fmt: str | None = None, quality: int = 92,
                progress: bool = True, force: bool = False, write_sun: bool | None = None,
-               cameras: str = "explicit", render_quality: RenderQuality | None = None,
+               cameras: Cameras = "explicit", render_quality: RenderQuality | None = None,
                noise: bool = True, object_mesh: trimesh.Trimesh | str | Path | None = None,
                sun_radius_deg: float | None = None) -> Path:
     """Render preset ``preset`` into ``out_dir`` and return its path.
@@ -196,9 +202,9 @@ def _synthesize(out_dir, preset, seed, renderer, size, fmt, quality, progress, f
                             render_quality, noise, object_mesh)
 
 
-def synthesize_plan(out_dir, plan: PresetPlan, *, seed: int = 0, renderer: str = "physical",
+def synthesize_plan(out_dir, plan: PresetPlan, *, seed: int = 0, renderer: Renderer = "physical",
                     fmt: str | None = None, quality: int = 92, progress: bool = False, force: bool = False,
-                    write_sun: bool | None = None, cameras: str = "explicit",
+                    write_sun: bool | None = None, cameras: Cameras = "explicit",
                     render_quality: RenderQuality | None = None, noise: bool = True,
                     object_mesh: trimesh.Trimesh | str | Path | None = None) -> Path:
     """Render a plan (a preset's, or one drawn at random: ``data_synth.draw``) into ``out_dir``.

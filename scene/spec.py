@@ -170,8 +170,9 @@ class ProjectorSpec:
         else:
             d = np.asarray(self.direction, float)
             target, reference = tuple(np.asarray(self.position) + d / np.linalg.norm(d)), 1.0
-        return Projector(self.position, target, slide_from_text(self.slide_text, base_dir), self.fov_deg,
-                         self.up, self.intensity, self.falloff, reference, self.shadow_px)
+        return Projector(self.position, target, slide_from_text(self.slide_text, base_dir), fov_deg=self.fov_deg,
+                         up=self.up, intensity=self.intensity, falloff=self.falloff, reference_m=reference,
+                         shadow_px=self.shadow_px)
 
     def to_toml(self) -> dict:
         out: dict[str, Any] = {"position": list(self.position)}

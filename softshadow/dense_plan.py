@@ -26,8 +26,8 @@ from .plan import (BAND_FRACTION, CANDIDATE_RADII_PX, CANDIDATE_REACH_PX, MAX_RA
 from .posed import PosedOccluder
 from .raster import candidate_labels, rasterise_shadow
 from .scratch import Scratch, scratch_array
-from .shadowmap import (_LOOKUP_OFFSETS, _NEAREST_OFFSETS, BIAS_PX, FACING_TOL, PRECISION_ULPS, SLOPE_PX, TAN_MAX,
-                        LightFrame, faces_away, shadow_map)
+from .shadowmap import (BIAS_PX, FACING_TOL, PRECISION_ULPS, SLOPE_PX, TAN_MAX, LightFrame, face_depth_at, faces_away,
+                        shadow_map)
 
 __all__ = ["DensePlan", "plan_dense_points"]
 
@@ -108,7 +108,10 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
     if not (n and len(sil.vertex_ids)):
         attached = np.zeros(n, bool) if normals is None else faces_away(normals, light)
         return _empty(edges, attached.astype(np.float64))
-    frame = LightFrame.of_light(light, 0.5 * (world.min(0) + world.max(0)))
+    # Per column: (V, 3).min(0) is several times slower.
+    lo_w = np.array([world[:, j].min() for j in range(3)])
+    hi_w = np.array([world[:, j].max() for j in range(3)])
+    frame = LightFrame.of_light(light, 0.5 * (lo_w + hi_w))
     uv_v, d_v = frame.project(world)
     # Attached shadow (``faces_away``), light-space positions (``LightFrame.project``) and the
     # deepest point, in one pass.
@@ -183,7 +186,8 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
                               int(np.ceil((m_hi[1] - m_lo[1]) / map_pixel_m)) + 1)
         shape = (map_grid.height, map_grid.width)
         smap = shadow_map(map_grid, uv_v, d_v, lit_faces, out=(scratch_array(scratch, "sun.map_depth", shape),
-                                                               scratch_array(scratch, "sun.map_face", shape, np.int32)))
+                                                               scratch_array(scratch, "sun.map_face", shape, np.int32)),
+                          scratch=scratch, name="sun.map")
         # ``ShadowMap.occluder_depth`` and ``depth_bias`` per point (their rules), the receiver's
         # slope from its normal, in one pass.
         scale = max(smap.scale, float(np.abs(world).max()))
@@ -292,6 +296,7 @@ def _depth_test_kernel():
     the point's depth plus ``depth_bias`` (the receiver's slope from its normal), into
     behind[test]. A point on the occluder whose own face is the nearest at its pixel is lit."""
     import numba
+    depth_at = face_depth_at()
 
     @numba.njit(cache=True, nogil=True)
     def kernel(cand, test, uv, depth, points, normals, faces, lit_ids, light, ox, oy, pixel_m, face_id, triangle,
@@ -310,36 +315,7 @@ def _depth_test_kernel():
             if faces.shape[0] and faces[p] >= 0 and 0 <= row < h and 0 <= col < w and face_id[row, col] >= 0 \
                     and lit_ids[face_id[row, col]] == faces[p]:
                 continue
-            best, fs, exact = np.inf, 0.0, False
-            for k in range(_LOOKUP_OFFSETS.shape[0]):
-                r, c = row + _LOOKUP_OFFSETS[k, 0], col + _LOOKUP_OFFSETS[k, 1]
-                if r < 0 or r >= h or c < 0 or c >= w:
-                    continue
-                f = face_id[r, c]
-                if f < 0:
-                    continue
-                t0u, t0v = triangle[f, 0, 0], triangle[f, 0, 1]
-                ex1, ey1 = triangle[f, 1, 0] - t0u, triangle[f, 1, 1] - t0v
-                ex2, ey2 = triangle[f, 2, 0] - t0u, triangle[f, 2, 1] - t0v
-                px, py = u - t0u, v - t0v
-                area = ex1 * ey2 - ey1 * ex2
-                if area == 0:
-                    area = 1.0
-                b1 = (px * ey2 - py * ex2) / area
-                b2 = (ex1 * py - ey1 * px) / area
-                if b1 >= -1e-7 and b2 >= -1e-7 and b1 + b2 <= 1.0 + 1e-7:
-                    best, exact = plane[f, 2] + plane[f, 0] * (u - t0u) + plane[f, 1] * (v - t0v), True
-                    break
-            if not exact:
-                for k in range(_NEAREST_OFFSETS.shape[0]):
-                    r, c = row + _NEAREST_OFFSETS[k, 0], col + _NEAREST_OFFSETS[k, 1]
-                    if r < 0 or r >= h or c < 0 or c >= w:
-                        continue
-                    f = face_id[r, c]
-                    if f >= 0:
-                        best = plane[f, 2] + plane[f, 0] * (u - triangle[f, 0, 0]) + plane[f, 1] * (v - triangle[f, 0, 1])
-                        fs = face_slope[f]
-                        break
+            best, fs, exact = depth_at(u, v, row, col, face_id, triangle, plane, face_slope, -1e-7, 1.0 + 1e-7, 1.0)
             bias = BIAS_PX * pixel_m + rounding + 0.0
             if not exact:
                 recv = 0.0

@@ -57,12 +57,12 @@ class Sun(eqx.Module):
     @property
     def light(self) -> Float[Array, "3"]:
         """Direction the light travels, L = -s, shape (3,)."""
-        return light_direction(self.azimuth_deg, self.elevation_deg)
+        return jnp.asarray(light_direction(self.azimuth_deg, self.elevation_deg))
 
     @property
     def light_np(self) -> np.ndarray:
         """``light`` in NumPy float64, for the discrete steps (no eager JAX ops)."""
-        return light_direction(float(self.azimuth_deg), float(self.elevation_deg), np)
+        return np.asarray(light_direction(float(self.azimuth_deg), float(self.elevation_deg), np))
 
 
 def rotation_matrix_xyz(rotation_deg) -> Float[Array, "3 3"]:

@@ -310,7 +310,8 @@ def edge_alpha(points, edge_ids: Int[Array, "n K"], edge_vertices_world: Float[A
                           rule, paper_normal_world, near_boundary=near_boundary, pixel_axes=pixel_axes)
     if pixel_axes is None:
         return profile_alpha(out, profile)
-    return footprint_profile_alpha(*out, profile)
+    u, du_a, du_b = out
+    return footprint_profile_alpha(u, du_a, du_b, profile)
 
 
 def profile_slope(u, profile: str = "linear"):

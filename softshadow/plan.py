@@ -279,7 +279,7 @@ def _spacing(uv: np.ndarray, cell_m: float) -> float:
     return cell_m * float(np.sqrt(np.count_nonzero(taken) / len(uv)))
 
 
-def light_band_widths(depth_behind: np.ndarray, range_k: float) -> np.ndarray:
+def light_band_widths(depth_behind: np.ndarray | float, range_k: float) -> np.ndarray | float:
     """Width (m, perpendicular to the light) of a penumbra wedge at ``depth_behind`` metres
     behind its edge along the light: 2 k d for the ``edge`` rule (L +- k n, n perpendicular
     to L), and at most 2 k (1 + k) d for the ``paper`` rule's tilted N."""

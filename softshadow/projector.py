@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from typing import Literal
 
 import numpy as np
 
@@ -43,7 +44,7 @@ from .camera import GroundGrid, PinholeCamera, look_at_camera
 from .clip import clip_near
 from .scratch import Scratch, scratch_array
 from .shadowmap import (_LOOKUP_OFFSETS, _NEAREST_OFFSETS, BIAS_PX, FACING_TOL, PRECISION_ULPS, SLOPE_PX, TAN_MAX,
-                        ShadowMap, shadow_map)
+                        ShadowMap, rasterise_depth)
 
 __all__ = ["FALLOFFS", "NEAR_M", "Projector", "ProjectorShadowMap", "projector_shadow_map"]
 
@@ -59,7 +60,7 @@ def _vector(value, name: str) -> np.ndarray:
     return v
 
 
-@dataclasses.dataclass(frozen=True, eq=False)
+@dataclasses.dataclass(frozen=True, eq=False, kw_only=True)
 class Projector:
     """A slide projector (see the module docstring).
 
@@ -71,13 +72,13 @@ class Projector:
     shadow_px: the shadow map's pixels across the slide's larger side.
     """
 
-    position: np.ndarray
-    target: np.ndarray
-    slide: np.ndarray
+    position: np.ndarray = dataclasses.field(kw_only=False)
+    target: np.ndarray = dataclasses.field(kw_only=False)
+    slide: np.ndarray = dataclasses.field(kw_only=False)
     fov_deg: float = 30.0
     up: np.ndarray = (0.0, 0.0, 1.0)
     intensity: float = 1.0
-    falloff: str = "inverse-square"
+    falloff: Literal["inverse-square", "none"] = "inverse-square"
     reference_m: float | None = None
     shadow_px: int = 1024
 
@@ -388,19 +389,20 @@ def projector_shadow_map(projector: Projector, vertices, faces, *, facing=None, 
 
     facing (F,) int8, optional: -1 for the faces of closed, outward-wound meshes, whose faces
     turned away from the projector are then not drawn (``rasterise_depth``); 0 otherwise.
-    scratch, name: keep the map's pixels in these buffers under this name (``softshadow.scratch``).
+    scratch, name: keep the map's arrays in these buffers under this name (``softshadow.scratch``;
+    the map is then overwritten by the next one made with them).
     """
     world = np.ascontiguousarray(vertices, np.float64).reshape(-1, 3)
     faces = np.ascontiguousarray(faces, np.int64).reshape(-1, 3)
     facing = None if facing is None else np.asarray(facing, np.int8).reshape(len(faces))
     # Faces cut at the near plane: the part of a face in front of the projector still casts. A
     # closed mesh cut open shows its inside, so nothing is culled then.
-    _, z_world = projector.image_coordinates(world)
-    as_given = True
-    if len(world) and z_world.min() <= NEAR_M:
-        world, faces, _ = clip_near(world, z_world, faces, NEAR_M)
-        facing, as_given = None, False
     ab, z = projector.image_coordinates(world)
+    as_given = True
+    if len(world) and z.min() <= NEAR_M:
+        world, faces, _ = clip_near(world, z, faces, NEAR_M)
+        facing, as_given = None, False
+        ab, z = projector.image_coordinates(world)
     h, w = projector.slide.shape[:2]
     K = projector.camera.K
     half = np.array([0.5 * w / K[0, 0], 0.5 * h / K[1, 1]])  # the slide's half extent in (a, b)
@@ -416,26 +418,60 @@ def projector_shadow_map(projector: Projector, vertices, faces, *, facing=None, 
     if not len(faces):
         return ProjectorShadowMap(projector, None, pixel_tan, scale)
     uv = np.column_stack([ab[:, 0], -ab[:, 1]])
-    out = (scratch_array(scratch, f"{name}.zbuf", (height, width)),
-           scratch_array(scratch, f"{name}.face_id", (height, width), np.int32))
-    smap = shadow_map(grid, uv, -1.0 / np.maximum(z, NEAR_M), faces, facing=facing, out=out)  # originals behind: unused
-    # The bias's slope term in metric terms: tan of the angle between each face's normal and the
-    # ray from the projector to its centroid.
-    slope = np.empty(len(faces))
-    _slope_kernel()(world, faces, projector.position, slope)
-    return ProjectorShadowMap(projector, dataclasses.replace(smap, slope=slope), pixel_tan, scale, as_given)
+    depth = -1.0 / np.maximum(z, NEAR_M)  # the originals behind the plane are unused
+    zbuf, fid = rasterise_depth(grid.to_pixel(uv), depth, faces, (height, width), facing=facing,
+                                out=(scratch_array(scratch, f"{name}.zbuf", (height, width)),
+                                     scratch_array(scratch, f"{name}.face_id", (height, width), np.int32)))
+    # Per face, in one pass: the map's triangle and depth plane (``shadow_map``'s), the bias's slope
+    # term in metric terms (tan of the angle between the face's normal and the ray from the
+    # projector to its centroid) and the lookup's packed data.
+    f = len(faces)
+    triangle = scratch_array(scratch, f"{name}.triangle", (f, 3, 2))
+    plane = scratch_array(scratch, f"{name}.plane", (f, 3))
+    slope = scratch_array(scratch, f"{name}.slope", f)
+    packed = scratch_array(scratch, f"{name}.packed", (f, 9))
+    map_scale = _faces_kernel()(world, uv, depth, faces, projector.position, triangle, plane, slope, packed)
+    smap = ShadowMap(grid, zbuf, fid, plane, slope, triangle, map_scale)
+    out = ProjectorShadowMap(projector, smap, pixel_tan, scale, as_given)
+    out.__dict__["_packed_faces"] = packed  # the cached property, computed here
+    return out
 
 
 @functools.cache
-def _slope_kernel():
-    """Per face, tan of the angle between its normal and the ray from the projector to its
-    centroid (numba)."""
+def _faces_kernel():
+    """Per face (numba): its map triangle (F, 3, 2) and depth plane (F, 3) as ``shadow_map``
+    makes them (``shadowmap._face_planes``'s arithmetic), tan of the angle between its normal
+    and the ray from the projector to its centroid (F,), and ``_packed_faces``' row (F, 9);
+    returns ``shadow_map``'s scale (the largest |u|, |v|, |depth| of the vertices, at least 1)."""
     import numba
 
     @numba.njit(cache=True, nogil=True)
-    def kernel(world, faces, position, slope):
+    def kernel(world, uv, depth, faces, position, triangle, plane, slope, packed):
+        scale = 1.0
+        for i in range(uv.shape[0]):
+            scale = max(scale, abs(uv[i, 0]), abs(uv[i, 1]), abs(depth[i]))
         for f in range(faces.shape[0]):
             i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
+            u0, v0 = uv[i0, 0], uv[i0, 1]
+            triangle[f, 0, 0], triangle[f, 0, 1] = u0, v0
+            triangle[f, 1, 0], triangle[f, 1, 1] = uv[i1, 0], uv[i1, 1]
+            triangle[f, 2, 0], triangle[f, 2, 1] = uv[i2, 0], uv[i2, 1]
+            # The depth plane about the first corner (``_face_planes``).
+            ux, uy, uz = uv[i1, 0] - u0, uv[i1, 1] - v0, depth[i1] - depth[i0]
+            vx, vy, vz = uv[i2, 0] - u0, uv[i2, 1] - v0, depth[i2] - depth[i0]
+            nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+            nd = nz if abs(nz) > 1e-300 else 1e-300
+            pa, pb = -nx / nd, -ny / nd
+            plane[f, 0], plane[f, 1], plane[f, 2] = pa, pb, depth[i0]
+            # The lookup's barycentric gradients (``ProjectorShadowMap._packed_faces``).
+            area = ux * vy - uy * vx
+            if area == 0:
+                area = 1.0
+            packed[f, 0], packed[f, 1] = u0, v0
+            packed[f, 2], packed[f, 3] = vy / area, -vx / area
+            packed[f, 4], packed[f, 5] = -uy / area, ux / area
+            packed[f, 6], packed[f, 7], packed[f, 8] = pa, pb, depth[i0]
+            # The slope against the ray from the projector.
             ux, uy, uz = world[i1, 0] - world[i0, 0], world[i1, 1] - world[i0, 1], world[i1, 2] - world[i0, 2]
             vx, vy, vz = world[i2, 0] - world[i0, 0], world[i2, 1] - world[i0, 1], world[i2, 2] - world[i0, 2]
             nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
@@ -445,5 +481,7 @@ def _slope_kernel():
             norm = max(np.sqrt(nx * nx + ny * ny + nz * nz), 1e-300) * np.sqrt(rx * rx + ry * ry + rz * rz)
             cos = abs(nx * rx + ny * ry + nz * rz) / norm
             slope[f] = np.sqrt(max(1.0 - cos * cos, 0.0)) / max(cos, 1e-12)
+        return scale
 
     return kernel
+

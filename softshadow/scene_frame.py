@@ -36,16 +36,17 @@ from .evaluate import plan_alpha_jit
 from .params import Pose, Sun
 from .plan import grid_bucket_size
 from .posed import PosedOccluder
-from .projector import Projector
+from .projector import Projector, projector_shadow_map
 from .render import SoftShadowModel
 from .scratch import Scratch, scratch_array
-from .scene_render import SceneLights, _object_surface, projector_light
+from .scene_render import SceneLights, _object_surface
 from .visibility import Surface, VisibleSurfaces, visible_surfaces
 
 __all__ = ["FRAME_STEPS", "FrameRenderer", "SceneFrame", "band_alpha", "render_frame"]
 
 #: The steps ``SceneFrame.milliseconds`` times (wall time; with a second thread "projectors" is
-#: the wait for it after the sun's steps).
+#: the wait for it after the sun's steps; without one, "sun_plan" includes posing the occluder
+#: and "projectors" both the shadow maps and the light).
 FRAME_STEPS = ("visibility", "projectors", "sun_plan", "sun_band", "shading")
 
 
@@ -63,54 +64,71 @@ class SceneFrame:
 
 def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pose: Pose | None = None,
                  lights: SceneLights | None = None, sun: Sun | None = None,
-                 projectors: Sequence[Projector] = (), receivers: Sequence[Surface] = (),
+                 projectors: Sequence[Projector] = (), *, receivers: Sequence[Surface] = (),
                  object_albedo=0.8, ground_albedo=0.8, range_k_max: float | None = None,
-                 background=0.0, *, scratch: Scratch | None = None,
+                 background=0.0, scratch: Scratch | None = None,
                  pool: ThreadPoolExecutor | None = None) -> SceneFrame:
     """The scene's image (H, W, 3), linear radiance: ``render_scene``'s, forward only and fast.
 
     Arguments as ``render_scene``'s (flat shading, one sample per pixel); range_k_max: the k the
     sun's penumbra bands are sized for, default the lights' k. scratch: keep the per-frame
     arrays in these buffers (the frame's arrays are then overwritten by the next frame made
-    with them; ``FrameRenderer`` does this); pool: a thread to run the projectors on while this
-    one makes the sun's plan (and to pose the occluder while this one finds what each pixel
-    sees).
+    with them; ``FrameRenderer`` does this); pool: a thread that poses the occluder and makes the
+    projectors' shadow maps while this one finds what each pixel sees, then the projectors'
+    light while this one makes the sun's plan.
     """
     pose = Pose() if pose is None else pose
     lights = SceneLights() if lights is None else lights
     k = float(lights.range_k)
     range_k_max = k if range_k_max is None else float(range_k_max)
-    ms = {}
+    ms: dict[str, float] = {}
     t = time.perf_counter()
     surfaces = [_object_surface(model, pose, object_albedo), *receivers]
-    posed = None
-    if sun is not None:
-        posed = _submit(pool, PosedOccluder.make, model.occluder, pose, sun)
-    vis = visible_surfaces(camera, surfaces, ground_albedo, scratch=scratch, albedo=False)
-    # Each point's surface (GROUND -1, the object 0, receivers 1...), and its albedo by that.
-    surface = vis.surface.reshape(-1)[vis.pixel]
-    albedos = np.vstack([_albedo_of(ground_albedo), *[s.albedo for s in surfaces]])
-    t = _lap(ms, "visibility", t)
-    light = _submit(pool, projector_light, vis, surfaces, projectors, scratch=scratch)
+    # Neither the posed occluder nor the projectors' shadow maps need what the camera sees: the
+    # second thread makes them while this one finds it.
+    posed = None if sun is None else _submit(pool, PosedOccluder.make, model.occluder, pose, sun)
+    if pool is None and sun is not None:
+        t = _lap(ms, "sun_plan", t)
+    casters = _Casters.of(surfaces)
+    maps = _submit(pool, _projector_maps, projectors, casters, scratch)
     if pool is None:
         t = _lap(ms, "projectors", t)
+    light = None
     plan, alpha_band = None, np.zeros(0)
     try:
-        if sun is not None and len(vis.pixel):
-            on_object = np.where(surface == 0, vis.face.reshape(-1)[vis.pixel], -1)
+        vis = visible_surfaces(camera, surfaces, ground_albedo, scratch=scratch, albedo=False)
+        n = len(vis.pixel)
+        # Each point's surface (GROUND -1, the object 0, receivers 1...), its face on the object
+        # (-1 elsewhere) and among the shadow casters' faces (-1: none), in one pass.
+        surface = scratch_array(scratch, "frame.surface", n, np.int64)
+        on_object = scratch_array(scratch, "frame.object_face", n, np.int64)
+        own = scratch_array(scratch, "frame.caster_face", n, np.int64)
+        _point_faces_kernel()(vis.pixel, vis.surface.reshape(-1), vis.face.reshape(-1), casters.offset, surface,
+                              on_object, own)
+        albedos = np.vstack([_albedo_of(ground_albedo), *[s.albedo for s in surfaces]])
+        t = _lap(ms, "visibility", t)
+        light = _submit(pool, _projector_light, vis, own, projectors, maps, scratch)
+        if pool is None:
+            t = _lap(ms, "projectors", t, add=True)
+        if sun is not None and n:
             plan = plan_dense_points(model.occluder, pose, sun, vis.points, range_k_max, vis.normals,
                                      rule=model.rule, posed=_result(posed), faces=on_object, scratch=scratch)
-            t = _lap(ms, "sun_plan", t)
+            t = _lap(ms, "sun_plan", t, add=pool is None)
             alpha_band = band_alpha(plan, vis.points, model, pose, sun, k)
             t = _lap(ms, "sun_band", t)
     finally:
-        # The projectors' thread finished before anything else uses the buffers (also on an error).
-        if pool is not None:
-            light = _result(light)
-            t = _lap(ms, "projectors", t)
+        # The second thread's work finished before anything else uses the buffers (also on an
+        # error: the next frame would share them).
+        for pending in (posed, maps, light):
+            if isinstance(pending, Future):
+                pending.exception()
+    if pool is not None:
+        light = _result(light)
+        t = _lap(ms, "projectors", t)
     h, w = vis.shape
     image = scratch_array(scratch, "frame.image", (h * w, 3))
-    image[:] = np.broadcast_to(np.asarray(background, np.float64), (3,))
+    if n < h * w:  # the shading writes every pixel that sees something; the rest is background
+        image[:] = np.broadcast_to(np.asarray(background, np.float64), (3,))
     sun_dir = np.zeros(3) if sun is None else -np.asarray(sun.light_np, np.float64)
     hard = plan.hard if plan is not None else np.zeros(0)
     band = plan.band if plan is not None else np.zeros(0, np.int64)
@@ -144,6 +162,78 @@ class FrameRenderer:
             self.pool.shutdown()
 
 
+@dataclasses.dataclass(frozen=True)
+class _Casters:
+    """The surfaces that cast the projectors' shadows as one mesh (``projector_light``'s):
+    vertices (V, 3), faces (F, 3), facing (F,) int8 (-1 for closed surfaces, for culling), and
+    offset (S + 1,): each surface's first face among them (-1: it casts none; the last entry,
+    -1, is the ground's, read at index GROUND)."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    facing: np.ndarray
+    offset: np.ndarray
+
+    @classmethod
+    def of(cls, surfaces: Sequence[Surface]) -> "_Casters":
+        casters = [s for s in surfaces if s.casts_shadows]
+        if len(casters) == 1:
+            verts, faces = casters[0].vertices, casters[0].faces
+        elif casters:
+            start = np.cumsum([0] + [len(s.vertices) for s in casters])
+            verts = np.vstack([s.vertices for s in casters])
+            faces = np.vstack([s.faces + start[i] for i, s in enumerate(casters)])
+        else:
+            verts, faces = np.zeros((0, 3)), np.zeros((0, 3), np.int64)
+        facing = (np.concatenate([np.full(len(s.faces), -1 if s.closed else 0, np.int8) for s in casters])
+                  if casters else np.zeros(0, np.int8))
+        offset = np.full(len(surfaces) + 1, -1, np.int64)
+        start = 0
+        for i, s in enumerate(surfaces):
+            if s.casts_shadows:
+                offset[i] = start
+                start += len(s.faces)
+        return cls(verts, faces, facing, offset)
+
+
+def _projector_maps(projectors: Sequence[Projector], casters: _Casters, scratch: Scratch | None) -> list:
+    """Each projector's shadow map of the casters (``projector_light``'s)."""
+    return [projector_shadow_map(proj, casters.vertices, casters.faces, facing=casters.facing, scratch=scratch,
+                                 name=f"projector{j}") for j, proj in enumerate(projectors)]
+
+
+def _projector_light(vis: VisibleSurfaces, own: np.ndarray, projectors: Sequence[Projector], maps,
+                     scratch: Scratch | None) -> np.ndarray:
+    """``projector_light``: the projectors' irradiance (N, 3) at the visible points through their
+    maps (own: each point's face among the casters', -1 none)."""
+    light = scratch_array(scratch, "projectors.light", (len(vis.pixel), 3))
+    light.fill(0.0)
+    points = np.ascontiguousarray(vis.points, np.float64)
+    for proj, smap in zip(projectors, _result(maps)):
+        proj.add_irradiance(points, vis.normals, smap, light, faces=own)
+    return light
+
+
+@functools.cache
+def _point_faces_kernel():
+    """Per visible point (numba): its surface, its face on the object (surface 0; else -1), and
+    its face among the casters' (offset[surface] + face; -1 where offset is -1)."""
+    import numba
+
+    @numba.njit(cache=True, nogil=True)
+    def kernel(pixel, surface_img, face_img, offset, surface, on_object, own):
+        last = offset.shape[0] - 1
+        for i in range(pixel.shape[0]):
+            s = surface_img[pixel[i]]
+            f = face_img[pixel[i]]
+            surface[i] = s
+            on_object[i] = f if s == 0 else -1
+            o = offset[s] if s >= 0 else offset[last]
+            own[i] = o + f if o >= 0 else -1
+
+    return kernel
+
+
 def _submit(pool: ThreadPoolExecutor | None, fn, *args, **kwargs):
     """fn(...) on the pool's thread (a Future), or here and now without a pool."""
     return fn(*args, **kwargs) if pool is None else pool.submit(fn, *args, **kwargs)
@@ -168,9 +258,9 @@ def band_alpha(plan: DensePlan, points: np.ndarray, model: SoftShadowModel, pose
     return np.asarray(alpha, np.float64)[:m]
 
 
-def _lap(ms: dict, step: str, start: float) -> float:
+def _lap(ms: dict, step: str, start: float, add: bool = False) -> float:
     now = time.perf_counter()
-    ms[step] = 1e3 * (now - start)
+    ms[step] = 1e3 * (now - start) + (ms.get(step, 0.0) if add else 0.0)
     return now
 
 

@@ -113,7 +113,7 @@ def _outward(occ: Occluder) -> bool:
 
 
 def prepare_scene(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pose: Pose,
-                  sun: Sun | None = None, projectors: Sequence[Projector] = (),
+                  sun: Sun | None = None, projectors: Sequence[Projector] = (), *,
                   receivers: Sequence[Surface] = (), object_albedo=0.8, ground_albedo=0.8,
                   range_k_max: float = 0.03, smooth: bool = False) -> SceneSetup:
     """The visible surfaces, the projectors' light and the sun's plan (NumPy).
@@ -193,7 +193,7 @@ def shade_scene(setup: SceneSetup, model: SoftShadowModel, lights: SceneLights, 
 
 def render_scene(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pose: Pose | None = None,
                  lights: SceneLights | None = None, sun: Sun | None = None,
-                 projectors: Sequence[Projector] = (), receivers: Sequence[Surface] = (),
+                 projectors: Sequence[Projector] = (), *, receivers: Sequence[Surface] = (),
                  object_albedo=0.8, ground_albedo=0.8, range_k_max: float | None = None,
                  background=0.0, smooth: bool = False, supersample: int = 1) -> SceneRender:
     """``prepare_scene`` then ``shade_scene``: the scene's image (H, W, 3) in linear radiance.
@@ -212,8 +212,8 @@ def render_scene(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
     if s < 1:
         raise ValueError(f"supersample must be a whole number >= 1, got {supersample!r}")
     fine = camera if s == 1 else _finer(camera, s)
-    setup = prepare_scene(fine, model, pose, sun, projectors, receivers, object_albedo, ground_albedo,
-                          range_k_max, smooth)
+    setup = prepare_scene(fine, model, pose, sun, projectors, receivers=receivers, object_albedo=object_albedo,
+                          ground_albedo=ground_albedo, range_k_max=range_k_max, smooth=smooth)
     image = shade_scene(setup, model, lights, sun, pose, background)
     if s > 1:
         image = image.reshape(camera.height, s, camera.width, s, 3).mean(axis=(1, 3))

@@ -41,6 +41,7 @@ import functools
 import numpy as np
 
 from .camera import GroundGrid
+from .scratch import Scratch, scratch_array
 
 __all__ = ["LightFrame", "ShadowMap", "rasterise_depth", "shadow_map", "depth_bias", "faces_away",
            "BIAS_PX", "SLOPE_PX", "TAN_MAX", "PRECISION_ULPS", "FACING_TOL"]
@@ -187,14 +188,19 @@ def _zbuffer_kernel():
             x0, y0, z0 = xy[a, 0], xy[a, 1], depth[a]
             x1, y1, z1 = xy[b, 0], xy[b, 1], depth[b]
             x2, y2, z2 = xy[c, 0], xy[c, 1], depth[c]
-            if not (np.isfinite(x0) and np.isfinite(y0) and np.isfinite(z0) and np.isfinite(x1)
-                    and np.isfinite(y1) and np.isfinite(z1) and np.isfinite(x2) and np.isfinite(y2)
-                    and np.isfinite(z2)):
-                continue
             e1x, e1y = x1 - x0, y1 - y0
             e2x, e2y = x2 - x0, y2 - y0
             area = e1x * e2y - e1y * e2x
-            if abs(area) <= 1e-12 or area * facing[i] < 0:
+            # Culled first (about half a closed mesh's faces); one test for the nine coordinates
+            # (a sum is finite only if they all are, but may overflow: then each is tested).
+            if area * facing[i] < 0:
+                continue
+            if not np.isfinite(x0 + y0 + z0 + x1 + y1 + z1 + x2 + y2 + z2) and not (
+                    np.isfinite(x0) and np.isfinite(y0) and np.isfinite(z0) and np.isfinite(x1)
+                    and np.isfinite(y1) and np.isfinite(z1) and np.isfinite(x2) and np.isfinite(y2)
+                    and np.isfinite(z2)):
+                continue
+            if abs(area) <= 1e-12:
                 continue
             xmin, xmax = min(x0, x1, x2), max(x0, x1, x2)
             ymin, ymax = min(y0, y1, y2), max(y0, y1, y2)
@@ -204,6 +210,8 @@ def _zbuffer_kernel():
             c1 = int(min(max(np.floor(xmax + 1e-9), -1.0), w - 1))
             r0 = int(min(max(np.ceil(ymin - 1e-9), 0.0), h))
             r1 = int(min(max(np.floor(ymax + 1e-9), -1.0), h - 1))
+            if c0 > c1 or r0 > r1:  # no pixel centre in its box (a face smaller than a pixel)
+                continue
             # Depth plane in pixel coordinates: z = z0 + gx (x - x0) + gy (y - y0).
             dz1, dz2 = z1 - z0, z2 - z0
             gx = (dz1 * e2y - dz2 * e1y) / area
@@ -329,56 +337,65 @@ _NEAREST_OFFSETS = np.array(sorted(((dr, dc) for dr in range(-2, 3) for dc in ra
 
 
 @functools.cache
-def _depth_kernel():
-    """The compiled lookup of ``ShadowMap.occluder_depth`` (numba): per point, its pixel (the
-    nearest centre), then the first face among that pixel's and its 8 neighbours' whose
-    triangle contains it (its plane at the point, exact), else the face of the nearest covered
-    pixel within 2 (its plane extrapolated, with its slope), else +inf. Arithmetic on the
-    depths in the map's float type."""
+def face_depth_at():
+    """The compiled lookup of one point's occluder depth (numba), shared by ``ShadowMap``'s
+    lookup and the dense plan's depth test: ``(u, v, row, col, face_id, triangle, plane,
+    face_slope, tol, upper, one) -> (depth, slope, exact)``. (row, col): the point's map pixel
+    (the nearest centre). The first face among that pixel's and its 8 neighbours' whose triangle
+    contains the point (barycentric coordinates >= tol, summing to <= upper): its plane at the
+    point, exact, slope 0. Else the face of the nearest covered pixel within 2: its plane
+    extrapolated, with its slope. Else +inf. Arithmetic in the map's float type (``one``: 1 in it)."""
     import numba
 
     @numba.njit(cache=True, nogil=True)
-    def kernel(uv, ox, oy, pixel_m, face_id, triangle, plane, face_slope, const, best, slope, exact):
+    def depth_at(u, v, row, col, face_id, triangle, plane, face_slope, tol, upper, one):
         h, w = face_id.shape
+        for k in range(_LOOKUP_OFFSETS.shape[0]):
+            r, c = row + _LOOKUP_OFFSETS[k, 0], col + _LOOKUP_OFFSETS[k, 1]
+            if r < 0 or r >= h or c < 0 or c >= w:
+                continue
+            f = face_id[r, c]
+            if f < 0:
+                continue
+            t0u, t0v = triangle[f, 0, 0], triangle[f, 0, 1]
+            ex1, ey1 = triangle[f, 1, 0] - t0u, triangle[f, 1, 1] - t0v
+            ex2, ey2 = triangle[f, 2, 0] - t0u, triangle[f, 2, 1] - t0v
+            px, py = u - t0u, v - t0v
+            area = ex1 * ey2 - ey1 * ex2
+            if area == 0:
+                area = one
+            b1 = (px * ey2 - py * ex2) / area
+            b2 = (ex1 * py - ey1 * px) / area
+            if b1 >= tol and b2 >= tol and b1 + b2 <= upper:
+                return np.float64(plane[f, 2] + plane[f, 0] * (u - t0u) + plane[f, 1] * (v - t0v)), 0.0, True
+        for k in range(_NEAREST_OFFSETS.shape[0]):
+            r, c = row + _NEAREST_OFFSETS[k, 0], col + _NEAREST_OFFSETS[k, 1]
+            if r < 0 or r >= h or c < 0 or c >= w:
+                continue
+            f = face_id[r, c]
+            if f >= 0:
+                depth = plane[f, 2] + plane[f, 0] * (u - triangle[f, 0, 0]) + plane[f, 1] * (v - triangle[f, 0, 1])
+                return np.float64(depth), np.float64(face_slope[f]), False
+        return np.inf, 0.0, False
+
+    return depth_at
+
+
+@functools.cache
+def _depth_kernel():
+    """The compiled lookup of ``ShadowMap.occluder_depth`` (numba): ``face_depth_at`` at each point."""
+    import numba
+    depth_at = face_depth_at()
+
+    @numba.njit(cache=True, nogil=True)
+    def kernel(uv, ox, oy, pixel_m, face_id, triangle, plane, face_slope, const, best, slope, exact):
         tol, upper, one = const[0], const[1], const[2]
         for i in range(uv.shape[0]):
             u, v = uv[i, 0], uv[i, 1]
             col = int(np.rint((np.float64(u) - ox) / pixel_m))
             row = int(np.rint((oy - np.float64(v)) / pixel_m))
-            best[i] = np.inf
-            slope[i] = 0.0
-            exact[i] = False
-            for k in range(_LOOKUP_OFFSETS.shape[0]):
-                r, c = row + _LOOKUP_OFFSETS[k, 0], col + _LOOKUP_OFFSETS[k, 1]
-                if r < 0 or r >= h or c < 0 or c >= w:
-                    continue
-                f = face_id[r, c]
-                if f < 0:
-                    continue
-                t0u, t0v = triangle[f, 0, 0], triangle[f, 0, 1]
-                ex1, ey1 = triangle[f, 1, 0] - t0u, triangle[f, 1, 1] - t0v
-                ex2, ey2 = triangle[f, 2, 0] - t0u, triangle[f, 2, 1] - t0v
-                px, py = u - t0u, v - t0v
-                area = ex1 * ey2 - ey1 * ex2
-                if area == 0:
-                    area = one
-                b1 = (px * ey2 - py * ex2) / area
-                b2 = (ex1 * py - ey1 * px) / area
-                if b1 >= tol and b2 >= tol and b1 + b2 <= upper:
-                    best[i] = plane[f, 2] + plane[f, 0] * (u - t0u) + plane[f, 1] * (v - t0v)
-                    exact[i] = True
-                    break
-            if exact[i]:
-                continue
-            for k in range(_NEAREST_OFFSETS.shape[0]):
-                r, c = row + _NEAREST_OFFSETS[k, 0], col + _NEAREST_OFFSETS[k, 1]
-                if r < 0 or r >= h or c < 0 or c >= w:
-                    continue
-                f = face_id[r, c]
-                if f >= 0:
-                    best[i] = plane[f, 2] + plane[f, 0] * (u - triangle[f, 0, 0]) + plane[f, 1] * (v - triangle[f, 0, 1])
-                    slope[i] = face_slope[f]
-                    break
+            best[i], slope[i], exact[i] = depth_at(u, v, row, col, face_id, triangle, plane, face_slope, tol, upper,
+                                                   one)
 
     return kernel
 
@@ -436,18 +453,55 @@ def _planes_kernel():
 
 def shadow_map(grid: GroundGrid, uv: np.ndarray, depth: np.ndarray, faces: np.ndarray,
                dtype=np.float64, *, facing: np.ndarray | None = None,
-               out: tuple[np.ndarray, np.ndarray] | None = None) -> ShadowMap:
+               out: tuple[np.ndarray, np.ndarray] | None = None, scratch: Scratch | None = None,
+               name: str = "shadow_map") -> ShadowMap:
     """The shadow map of faces (F, 3) with light-space vertices uv (V, 2) and depths (V,) on grid.
 
     dtype: the float type of the depth buffer and the planes (float32 to measure precision);
     facing: back-face culling per face, out: the depth and face-id arrays to fill
-    (``rasterise_depth``).
+    (``rasterise_depth``); scratch, name: keep the per-face arrays (triangles, planes, slopes)
+    in these buffers under this name (``softshadow.scratch``: the map is then overwritten by the
+    next one made with them).
     """
-    uv = np.asarray(uv, dtype)
-    depth = np.asarray(depth, dtype)
+    uv = np.ascontiguousarray(uv, dtype)
+    depth = np.ascontiguousarray(depth, dtype)
+    faces = np.ascontiguousarray(faces, np.int64)
     zbuf, fid = rasterise_depth(grid.to_pixel(uv).astype(dtype), depth, faces,
                                 (grid.height, grid.width), facing=facing, out=out)
-    uvd = np.column_stack([uv, depth])
-    plane, slope = _face_planes(uvd, faces)
-    scale = float(np.abs(uvd).max(initial=1.0))
-    return ShadowMap(grid, zbuf, fid, plane, slope, uv[faces], scale)
+    # Each face's light-space triangle, depth plane and slope (``_face_planes``) and the
+    # coordinates' magnitude, in one compiled pass.
+    f = len(faces)
+    triangle = scratch_array(scratch, f"{name}.triangle", (f, 3, 2), dtype)
+    plane = scratch_array(scratch, f"{name}.plane", (f, 3), dtype)
+    slope = scratch_array(scratch, f"{name}.slope", f, dtype)
+    scale = _map_faces_kernel()(uv, depth, faces, np.array([1e-300], dtype), triangle, plane, slope)
+    return ShadowMap(grid, zbuf, fid, plane, slope, triangle, float(scale))
+
+
+@functools.cache
+def _map_faces_kernel():
+    """``shadow_map``'s per-face pass (numba): uv[faces] into triangle, ``_face_planes``' planes
+    and slopes (its arithmetic, in uv's float type); returns the largest |u|, |v|, |depth| of
+    the vertices, at least 1."""
+    import numba
+
+    @numba.njit(cache=True, nogil=True, error_model="numpy")
+    def kernel(uv, depth, faces, tiny, triangle, plane, slope):
+        scale = 1.0  # in float64: float32 values convert exactly
+        for i in range(uv.shape[0]):
+            scale = max(scale, abs(np.float64(uv[i, 0])), abs(np.float64(uv[i, 1])), abs(np.float64(depth[i])))
+        for f in range(faces.shape[0]):
+            i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
+            triangle[f, 0, 0], triangle[f, 0, 1] = uv[i0, 0], uv[i0, 1]
+            triangle[f, 1, 0], triangle[f, 1, 1] = uv[i1, 0], uv[i1, 1]
+            triangle[f, 2, 0], triangle[f, 2, 1] = uv[i2, 0], uv[i2, 1]
+            ux, uy, uz = uv[i1, 0] - uv[i0, 0], uv[i1, 1] - uv[i0, 1], depth[i1] - depth[i0]
+            vx, vy, vz = uv[i2, 0] - uv[i0, 0], uv[i2, 1] - uv[i0, 1], depth[i2] - depth[i0]
+            nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+            nd = nz if abs(nz) > tiny[0] else tiny[0]
+            a, b = -nx / nd, -ny / nd
+            plane[f, 0], plane[f, 1], plane[f, 2] = a, b, depth[i0]
+            slope[f] = np.hypot(a, b)
+        return scale
+
+    return kernel

@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
+from jaxtyping import Float
+
+from ._typing import AnyArray
 
 __all__ = ["sun_direction", "light_direction", "check_sun_above_horizon", "SunBelowHorizonError"]
 
@@ -18,8 +20,8 @@ class SunBelowHorizonError(ValueError):
     """The sun is at or below the horizon: there is no direct-sun shadow."""
 
 
-def sun_direction(azimuth_deg, elevation_deg, xp=jnp) -> Float[Array, "3"]:
-    """Unit vector towards the sun, shape (3,), from angles in degrees.
+def sun_direction(azimuth_deg, elevation_deg, xp=jnp) -> Float[AnyArray, "3 ..."]:
+    """Unit vector towards the sun, shape (3, *batch) for angles of shape batch, in degrees.
 
     xp: the array module, ``jax.numpy`` (differentiable) or ``numpy`` (for the discrete
     steps, which must not dispatch eager JAX ops)."""
@@ -28,8 +30,8 @@ def sun_direction(azimuth_deg, elevation_deg, xp=jnp) -> Float[Array, "3"]:
     return xp.stack([xp.sin(a) * xp.cos(e), xp.cos(a) * xp.cos(e), xp.sin(e)])
 
 
-def light_direction(azimuth_deg, elevation_deg, xp=jnp) -> Float[Array, "3"]:
-    """Unit direction the sunlight travels, L = -s, shape (3,) (xp as in ``sun_direction``)."""
+def light_direction(azimuth_deg, elevation_deg, xp=jnp) -> Float[AnyArray, "3 ..."]:
+    """Unit direction the sunlight travels, L = -s, shape (3, *batch) (as ``sun_direction``)."""
     return -sun_direction(azimuth_deg, elevation_deg, xp)
 
 

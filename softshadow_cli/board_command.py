@@ -9,8 +9,9 @@ __all__ = ["add_arguments", "run_board"]
 
 
 def _squares(text: str) -> tuple[int, int]:
+    from .validate import whole_pair
     try:
-        cols, rows = (int(v) for v in text.lower().split("x"))
+        cols, rows = whole_pair(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"squares must look like 7x5, got {text!r}") from None
     if cols < 3 or rows < 3:

@@ -56,7 +56,7 @@ def run_demo(args) -> int:
     t1 = time.perf_counter()
     truth = json.loads((photos / "truth.json").read_text())
     print(f"  synthesised in {t1 - t0:.1f} s; fitting ...", flush=True)
-    results = fit_and_report(photos, out / "fit", FitOptions(), force=True, truth=truth,
+    results = fit_and_report(photos, out / "fit", options=FitOptions(), force=True, truth=truth,
                              reference=PAPER_TABLE2, progress=progress_bar("fitting"))
     t2 = time.perf_counter()
     print(format_table(results, reference=PAPER_TABLE2, truth=truth))

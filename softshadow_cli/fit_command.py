@@ -128,7 +128,7 @@ def run_fit(args) -> int:
               "photos, scene, options and software); --force refits them", file=sys.stderr)
 
     try:
-        results = fit_and_report(args.photo_dir, out, fit_options(args), force=args.force,
+        results = fit_and_report(args.photo_dir, out, options=fit_options(args), force=args.force,
                                  half_size=args.half_size, jobs=max(1, args.jobs),
                                  progress=progress_bar("fitting"), on_resume=resumed)
     except FolderError as exc:

@@ -141,7 +141,7 @@ def _add_fit(sub):
                    help="how the silhouette expands: edge (each edge along its outward normal) or paper "
                         "(the paper's vertex normals)")
     p.add_argument("--range-k-max", type=float, default=0.03, help="largest k searched (default 0.03)")
-    p.add_argument("--half-size", action="store_true", help="decode RAW at half size (faster)")
+    p.add_argument("--half-size", action="store_true", help="read every photo at half its width and height (RAW decoded at half size, others shrunk): faster, for large photos")
     p.add_argument("--no-plots", dest="plots", action="store_false",
                    help="write results.json and the tables only (no plots, no index.html figures)")
     p.add_argument("--overlays", default=None, choices=("first", "all"),
@@ -241,9 +241,10 @@ def _add_bench(sub):
                         "the stated errors: groups drawn from a documented prior, rendered by the physical "
                         "renderer, fitted and compared with their truth, hours of CPU for 300 groups, resumable "
                         "(coverage)")
-    p.add_argument("--report", help="with overview, sweep, lod-grid or coverage: also write the Markdown report "
-                                    "here (and its images in img/ beside it), e.g. docs/benchmarks.md, "
-                                    "docs/speed_vs_error.md, docs/lod_masking.md, docs/uncertainty_study.md")
+    p.add_argument("--report", help="with overview, sweep, lod-grid, startup or coverage: also write the Markdown "
+                                    "report here (and its images in img/ beside it), e.g. docs/benchmarks.md, "
+                                    "docs/speed_vs_error.md, docs/lod_masking.md, docs/startup.md, "
+                                    "docs/uncertainty_study.md")
     p.add_argument("--groups", type=int, default=300, help="with coverage: how many groups to draw (default 300)")
     p.add_argument("--seed", type=int, default=0, help="with coverage: the study's seed (group i is drawn from "
                                                       "numpy's default_rng([seed, i]))")

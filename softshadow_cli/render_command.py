@@ -159,7 +159,7 @@ def _cli_projectors(args) -> list[Projector]:
     fovs = _per_projector(args.projector_fov, 30.0, "--projector-fov", n)
     slides = _per_projector(args.slide, "spot", "--slide", n)
     levels = _per_projector(args.projector_intensity, 1.0, "--projector-intensity", n)
-    return [Projector(_xyz(p, "--projector"), _xyz(t, "--projector-target"), slide_from_text(s), float(f),
+    return [Projector(_xyz(p, "--projector"), _xyz(t, "--projector-target"), slide_from_text(s), fov_deg=float(f),
                       intensity=float(i))
             for p, t, f, s, i in zip(positions, targets, fovs, slides, levels)]
 
@@ -232,7 +232,7 @@ def _render_lit_scene(args, scene, model, pose, sun, projectors, name, k=0.01, r
             lights = SceneLights(args.ambient, lights.sun_irradiance, k)
     else:
         lights = SceneLights(0.3 if args.ambient is None else args.ambient, 0.0, k)
-    rendered = render_scene(camera, model, pose, lights, sun, projectors, receivers, object_albedo=PAPER_ALBEDO,
+    rendered = render_scene(camera, model, pose, lights, sun, projectors, receivers=receivers, object_albedo=PAPER_ALBEDO,
                             ground_albedo=ground, range_k_max=max(k, 0.03), smooth=args.smooth,
                             supersample=args.supersample)
     radiance = np.asarray(rendered.image, np.float64)

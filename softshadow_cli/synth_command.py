@@ -10,8 +10,9 @@ __all__ = ["add_arguments", "run", "parse_size"]
 
 def parse_size(text: str) -> tuple[int, int]:
     """'1600x1200' -> (1600, 1200)."""
+    from .validate import whole_pair
     try:
-        w, h = (int(v) for v in text.lower().split("x"))
+        w, h = whole_pair(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"size must look like 1600x1200, got {text!r}") from None
     if w < 16 or h < 16:

@@ -67,10 +67,16 @@ def _whole(option: str, value, low: int, high: int | None = None, why: str = "")
         raise OptionError(f"{option} must be {span}, got {value}" + (f" ({why})" if why else ""))
 
 
+def whole_pair(text) -> tuple[int, int]:
+    """'640x480' -> (640, 480); ValueError unless the text is two whole numbers joined by an x."""
+    first, second = (int(v) for v in str(text).lower().split("x"))
+    return first, second
+
+
 def parse_size(text: str, option: str = "--size") -> tuple[int, int]:
     """'640x480' -> (640, 480): whole numbers from 1 to RENDER_MAX_SIDE."""
     try:
-        w, h = (int(v) for v in str(text).lower().split("x"))
+        w, h = whole_pair(text)
     except ValueError:
         raise OptionError(f"{option} must look like 640x480 (width x height in pixels), got {text!r}") from None
     for side in (w, h):

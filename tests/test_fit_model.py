@@ -81,7 +81,7 @@ def test_residual_jacobian_matches_finite_differences():
     config = FitConfig.make("disk", True, True, 0.05, "edge")
     grad_t, _ = _prepare(params, jnp.asarray(raw_from_k(np.array([K]))), group, Pose(), config)
     group = dataclasses.replace(group, grad_t_pixel=grad_t)
-    params = dataclasses.replace(params, raw_k=jnp.asarray(float(raw_from_k(0.008))), raw_blur=jnp.asarray(0.4),
+    params = dataclasses.replace(params, raw_k=jnp.asarray(float(raw_from_k(0.008))), raw_blur=jnp.asarray([0.4]),
                                  sun_delta_deg=jnp.asarray([0.1, -0.05]))
     flat = params.vector()
     fn = lambda x: residuals(FitParams.from_vector(x, 1), (group, Pose(), config))

@@ -10,6 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from fitting.samples.photo_samples import PhotoSamples
 from fitting.solve.model import FitParams, Prediction, k_from_raw, rho_from_raw
 from fitting.solve.evidence import no_ramp_k
 from fitting.solve.group import (UMBRA_ALPHA, SampleCounts, covariance, k_rho_with_errors, penumbra_width_px,
@@ -93,7 +94,9 @@ def test_k_rho_errors_follow_the_reparameterisation(raw_k, raw_rho):
     assert est.rho_stderr == pytest.approx(abs(drho) * np.sqrt(cov[lay["raw_rho"], lay["raw_rho"]][0, 0]), rel=1e-6)
 
 
-class _Samples:
+class _Samples(PhotoSamples):
+    """A photo's samples of which only the count matters (``observed``)."""
+
     def __init__(self, n):
         self.observed = np.zeros(n)
 

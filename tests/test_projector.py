@@ -113,6 +113,30 @@ def test_projector_lit_side_of_a_ball_has_no_acne_and_its_far_side_is_dark():
     assert occ[far_side].all()
 
 
+@pytest.mark.parametrize("position", [(3.0, -2.0, 3.5), (0.3, 0.2, 1.2)])  # the second cuts faces at its plane
+def test_projector_map_faces_are_the_shadow_maps_own(position):
+    """The map's per-face arrays, made in one compiled pass, equal ``shadow_map``'s triangles,
+    planes and scale and the lookup's packed rows computed from them (bit for bit)."""
+    from softshadow.clip import clip_near
+    from softshadow.projector import NEAR_M
+    from softshadow.shadowmap import shadow_map
+    surf = Surface.from_trimesh(builtin_mesh("ball"))
+    proj = Projector(position, (0.0, 0.0, 0.5), spot_slide(32), fov_deg=60.0, shadow_px=64)
+    pm = projector_shadow_map(proj, surf.vertices, surf.faces, scratch=ss.internal.Scratch())
+    world, faces = surf.vertices, surf.faces
+    if not pm.faces_as_given:
+        world, faces, _ = clip_near(world, proj.image_coordinates(world)[1], faces, NEAR_M)
+    ab, z = proj.image_coordinates(world)
+    ref = shadow_map(pm.smap.grid, np.column_stack([ab[:, 0], -ab[:, 1]]), -1.0 / np.maximum(z, NEAR_M), faces)
+    for name in ("depth", "face_id", "plane", "triangle"):
+        np.testing.assert_array_equal(getattr(pm.smap, name), getattr(ref, name))
+    assert pm.smap.scale == ref.scale
+    packed = pm._packed_faces.copy()
+    del pm.__dict__["_packed_faces"]  # recomputed by the property from the triangles and planes
+    np.testing.assert_array_equal(pm._packed_faces, packed)
+    assert np.all(pm.smap.slope >= 0) and np.all(np.isfinite(pm.smap.slope))
+
+
 def test_no_occluder_in_front_of_the_projector_means_no_shadow():
     surf = Surface.from_trimesh(builtin_mesh("pillar"))
     proj = Projector((0.0, -3.0, 1.0), (0.0, -6.0, 0.0), spot_slide(32))  # looking away

@@ -5,7 +5,8 @@
 - ``render_frame`` draws ``render_scene``'s image (same lights and band k) to rounding: the sun,
   a projector, a receiver mesh, the ground; no sun; a top-down map.
 - ``FrameRenderer`` keeps its buffers between frames without mixing frames up (images equal to
-  fresh ``render_frame`` calls, across a change of image size).
+  fresh ``render_frame`` calls, across a change of image size), and the background where a
+  frame sees nothing.
 - Back-face culling of a closed mesh changes no pixel of the z-buffer.
 """
 
@@ -77,9 +78,9 @@ def test_render_frame_equals_render_scene(mesh, with_sun, receiver):
     sun = Sun(230.0, 40.0) if with_sun else None
     lights = SceneLights(0.15, 0.9, 0.02)
     receivers = [_step()] if receiver else []
-    args = (cam, model, Pose(), lights, sun, [proj], receivers)
-    ref = render_scene(*args, object_albedo=0.85, ground_albedo=0.8, range_k_max=0.02)
-    frame = render_frame(*args, object_albedo=0.85, ground_albedo=0.8)
+    args = (cam, model, Pose(), lights, sun, [proj])
+    ref = render_scene(*args, receivers=receivers, object_albedo=0.85, ground_albedo=0.8, range_k_max=0.02)
+    frame = render_frame(*args, receivers=receivers, object_albedo=0.85, ground_albedo=0.8)
     ref_image = np.asarray(ref.image)
     assert ref_image.max() > 0.5 and np.ptp(ref_image) > 0.3
     np.testing.assert_allclose(frame.image, ref_image, rtol=0, atol=1e-12)
@@ -104,9 +105,30 @@ def test_frame_renderer_reuses_its_buffers_without_mixing_frames():
         for size, azimuth, k in (((120, 90), 200.0, 0.01), ((120, 90), 240.0, 0.03), ((80, 60), 210.0, 0.02),
                                  ((120, 90), 200.0, 0.01)):
             cam, proj = _scene(size)
-            args = (cam, model, Pose(), SceneLights(0.2, 0.8, k), Sun(azimuth, 40.0), [proj], [_step()])
-            got = renderer.render(*args).image.copy()
-            np.testing.assert_array_equal(got, render_frame(*args).image)
+            args = (cam, model, Pose(), SceneLights(0.2, 0.8, k), Sun(azimuth, 40.0), [proj])
+            got = renderer.render(*args, receivers=[_step()]).image.copy()
+            np.testing.assert_array_equal(got, render_frame(*args, receivers=[_step()]).image)
+    finally:
+        renderer.close()
+
+
+def test_frame_renderer_paints_the_background_where_a_frame_sees_nothing():
+    """A view with sky pixels after one that sees something everywhere (the buffers hold its
+    pixels): the sky is the background, the rest render_scene's image."""
+    model = model_of("ball")
+    lights = SceneLights(0.2, 0.8, 0.01)
+    down = look_at_camera((3.0, -3.0, 3.0), (0.0, 0.0, 0.5), 64, 48, 40.0)
+    horizon = look_at_camera((3.0, -3.0, 1.0), (-3.0, 3.0, 1.5), 64, 48, 60.0)
+    renderer = ss.FrameRenderer(threads=1)
+    try:
+        first = renderer.render(down, model, Pose(), lights, Sun(200.0, 40.0), background=0.5)
+        assert len(first.visible.pixel) == 64 * 48
+        frame = renderer.render(horizon, model, Pose(), lights, Sun(200.0, 40.0), background=0.3)
+        sky = frame.visible.surface == ss.internal.NOTHING
+        assert sky.any() and (~sky).any()
+        np.testing.assert_array_equal(frame.image[sky], 0.3)
+        ref = render_scene(horizon, model, Pose(), lights, Sun(200.0, 40.0), background=0.3, range_k_max=0.01)
+        np.testing.assert_allclose(frame.image, np.asarray(ref.image), rtol=0, atol=1e-12)
     finally:
         renderer.close()
 

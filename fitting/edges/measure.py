@@ -268,7 +268,7 @@ class _Images:
     rgb: np.ndarray | None      # (H, W, 3) linear, or None
 
 
-def _fit_candidates(images: _Images, candidates) -> list[EdgeProfile]:
+def _fit_candidates(images: _Images, candidates) -> list[EdgeProfile | None]:
     """Sample, fit and screen every candidate (two passes: the second spans the fitted ramp).
 
     Candidates go through in chunks of similar profile length, each chunk as
@@ -293,7 +293,7 @@ def _fit_candidates(images: _Images, candidates) -> list[EdgeProfile]:
     return profiles
 
 
-def _fit_chunk(images: _Images, points, normals, half1, max_half) -> list[EdgeProfile]:
+def _fit_chunk(images: _Images, points, normals, half1, max_half) -> list[EdgeProfile | None]:
     """Both passes and the shadow-edge tests for (N, 2) points and normals with first-pass half-spans (N,)."""
     first = _sampled_fits(images, points, normals, half1)
     out: list[EdgeProfile | None] = [None] * len(points)

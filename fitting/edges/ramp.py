@@ -180,7 +180,8 @@ def fit_edge_profiles(s: np.ndarray, y: np.ndarray, present: np.ndarray, max_wid
                                          LOSS_SCALE_PER_NOISE * noise[b], prior[b], blur)
     a, b, s0, w, rho = params.T
     fitted = np.full(y.shape, np.nan)
-    fitted[idx] = ramp_log_model(s[None, :], *(v[idx, None] for v in (a, b, s0, w, rho)), blur_px=blur)
+    fitted[idx] = ramp_log_model(s[None, :], a[idx, None], b[idx, None], s0[idx, None], w[idx, None], rho[idx, None],
+                                 blur_px=blur)
     sq = np.where(present, (fitted - y) ** 2, 0.0)
     rms = np.where(ok, np.sqrt(sq.sum(axis=1) / np.maximum(present.sum(axis=1), 1)), np.nan)
     return RampFits(a, b, s0, w, rho, rms, fitted, ok)

@@ -29,7 +29,7 @@ from .resume import GroupStore
 __all__ = ["fit_folder", "fit_photos", "fit_and_report", "FolderError"]
 
 
-def fit_photos(photos: list[Photo], scene: SceneSpec | None = None, options: FitOptions | None = None,
+def fit_photos(photos: list[Photo], scene: SceneSpec | None = None, *, options: FitOptions | None = None,
                half_size: bool = False, progress: Callable | None = None,
                store: GroupStore | None = None,
                on_group: Callable[[GroupResult], None] | None = None, jobs: int = 1) -> FitResults:
@@ -78,7 +78,7 @@ def _fit_photos(photos, scene, options, half_size, progress, store, on_group, jo
     return FitResults(groups_out, skipped, software)
 
 
-def fit_folder(path, scene: SceneSpec | str | Path | None = None, options: FitOptions | None = None,
+def fit_folder(path, scene: SceneSpec | str | Path | None = None, *, options: FitOptions | None = None,
                out_dir=None, force: bool = False, half_size: bool = False,
                progress: Callable | None = None, jobs: int = 1,
                on_group: Callable[[GroupResult], None] | None = None,
@@ -113,14 +113,15 @@ def fit_folder(path, scene: SceneSpec | str | Path | None = None, options: FitOp
             # stopped half-way leaves only the new groups, which the next run resumes.
             store.clear()
             clear_report(out_dir)
-    results = fit_photos(photos, scene, options, half_size, progress, store, on_group, jobs)
+    results = fit_photos(photos, scene, options=options, half_size=half_size, progress=progress, store=store,
+                         on_group=on_group, jobs=jobs)
     if store is not None and store.reused and on_resume is not None:
         on_resume(store.reused, len(results.groups))
     results.skipped = skipped + results.skipped
     return results
 
 
-def fit_and_report(photo_dir, out_dir, options: FitOptions | None = None, force: bool = False,
+def fit_and_report(photo_dir, out_dir, *, options: FitOptions | None = None, force: bool = False,
                    half_size: bool = False, truth=None, reference=None, jobs: int = 1,
                    progress: Callable | None = None,
                    on_resume: Callable[[int, int], None] | None = None) -> FitResults:

@@ -7,8 +7,6 @@ from __future__ import annotations
 import dataclasses
 import time as _time
 
-from softshadow import SunBelowHorizonError
-
 from ..photos.grouping import PhotoGroup
 from ..photos.views import PhotoView
 from ..report.results import GroupResult
@@ -33,6 +31,8 @@ def _fit_group_with_sun(model, pose, views, group: PhotoGroup, options: FitOptio
     changed in place (their sun). samples: the group's samples already drawn for these views
     (``fit_group``; used when the sun is not fitted). Returns the result and, for a fitted sun,
     its last move (degrees, azimuth plus elevation; None: the sun was not fitted)."""
+    from softshadow import SunBelowHorizonError  # with JAX, as fit_group
+
     from ..solve.group import fit_group  # with JAX (see groups.fit_groups)
     if not fit_sun and all(v.sun_source != "fitted" for v in views):
         return fit_group(model, pose, views, group.label, group.time, options, sky_model, samples=samples), None
@@ -41,7 +41,8 @@ def _fit_group_with_sun(model, pose, views, group: PhotoGroup, options: FitOptio
         az, el, _ = search_sun(model, pose, views[0])
         for v in views:
             v.sun_azimuth_deg, v.sun_elevation_deg = az, el
-    result, moved = None, None
+    result: GroupResult | None = None
+    moved: float | None = None
     # Re-plan around the refined sun: each solve moves it by about 2 deg at the most, since the
     # samples' band is planned around the sun it starts from (a table2 sun searched 5 deg high took
     # 7 re-plans to settle; stopped after 3, it read k 1.7 times the truth).
@@ -61,6 +62,7 @@ def _fit_group_with_sun(model, pose, views, group: PhotoGroup, options: FitOptio
             v.sun_azimuth_deg, v.sun_elevation_deg = result.sun_azimuth_deg, result.sun_elevation_deg
         if moved < _SUN_SETTLED_DEG:
             break
+    assert result is not None  # replans >= 1
     return result, moved
 
 
@@ -91,7 +93,8 @@ def fit_checked(model, pose, views: list[PhotoView], group: PhotoGroup, options:
     (``fitting.solve.lod``), used by the first fit."""
     start = _time.perf_counter()
     level_of_detail = level_of_detail or LevelOfDetail()
-    given, left_out = max(len(views), len(group.photos)), []
+    given = max(len(views), len(group.photos))
+    left_out: list[tuple[str, str]] = []
     while True:
         result, sun_moved = _fit_group_with_sun(model, pose, views, PhotoGroup(group.label, group.time,
                                                                                [v.name for v in views]), options,

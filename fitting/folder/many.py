@@ -135,7 +135,7 @@ def fit_one_folder(folder, out_dir, options: FitOptions | None = None, force: bo
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / DONE_MARKER).unlink(missing_ok=True)  # not done while it is being refitted
     key = folder_key(folder, options, software_versions(), half_size)
-    results: FitResults = fit_and_report(folder, out_dir, options, force=force, half_size=half_size, jobs=jobs)
+    results: FitResults = fit_and_report(folder, out_dir, options=options, force=force, half_size=half_size, jobs=jobs)
     seconds = _time.perf_counter() - start
     marker = {"finished": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
               "groups": len(results.groups), "fitted": results.n_fitted, "seconds": round(seconds, 3),
@@ -294,7 +294,7 @@ def write_summary(rows: list[dict], out) -> Path:
     return path
 
 
-def fit_many(root, out, scheduler: str = "local", workers: int | None = None,
+def fit_many(root, out, *, scheduler: str = "local", workers: int | None = None,
              options: FitOptions | None = None, force: bool = False, progress: bool = True,
              cache_dir=None, plot: bool = True, log: Callable[[str], None] | None = None,
              half_size: bool = False, jobs: int = 1):

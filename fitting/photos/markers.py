@@ -19,6 +19,7 @@ intrinsic fixed; a board seen nearly face-on does not constrain f and is refused
 from __future__ import annotations
 
 import dataclasses
+from typing import Literal
 
 import cv2
 import numpy as np
@@ -59,8 +60,8 @@ class Registration:
     camera: PinholeCamera
     reprojection_error_px: float
     n_points: int
-    intrinsics_source: str
-    detection: str = "charuco"
+    intrinsics_source: Literal["given", "scene", "exif", "fitted"]
+    detection: Literal["charuco", "markers"] = "charuco"
 
 
 def board_from_spec(camera_spec: CameraSpec) -> cv2.aruco.CharucoBoard:
@@ -263,7 +264,7 @@ def _fit_focal(world: np.ndarray, image: np.ndarray, width: int, height: int) ->
     return _k(f, width, height)
 
 
-def register_board(gray_or_rgb_image, camera_spec: CameraSpec, K=None, exif: dict | None = None,
+def register_board(gray_or_rgb_image, camera_spec: CameraSpec, *, K=None, exif: dict | None = None,
                    dist=None) -> Registration:
     """Find the camera from a ChArUco board on the ground.
 

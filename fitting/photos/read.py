@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 
@@ -272,7 +273,7 @@ def _half(x: np.ndarray) -> np.ndarray:
     return 0.25 * (x[0::2, 0::2] + x[1::2, 0::2] + x[0::2, 1::2] + x[1::2, 1::2])
 
 
-def read_photo(path, half_size: bool = False, assume_16bit: str = "linear") -> Photo:
+def read_photo(path, *, half_size: bool = False, assume_16bit: Literal["linear", "srgb"] = "linear") -> Photo:
     """Read one photo into linear radiometry.
 
     path: an image file (``IMAGE_EXTENSIONS`` or ``RAW_EXTENSIONS``).

@@ -370,7 +370,7 @@ def write_table2(results: FitResults, out_dir, reference=None, truth=None) -> tu
 
 # --------------------------------------------------------------------------- everything
 
-def write_report(results: FitResults, out_dir, reference=None, truth=None,
+def write_report(results: FitResults, out_dir, *, reference=None, truth=None,
                  plots: bool = True, group_plots: list[Path] | None = None) -> dict[str, Path]:
     """Write results.json, table2.md/.csv, (unless ``plots`` is False) the plots, and index.html (the
     page that shows them all) into OUT_DIR.

@@ -22,6 +22,7 @@ from softshadow.internal import (PosedOccluder, edge_band_widths, object_mask, p
 from softshadow.internal import hidden_sky_fraction
 from ..photos.views import PhotoView
 from .photo_samples import NoShadowInView, PhotoSamples, paper_mask, stable_pick
+from .receiver_points import ReceiverSurface
 
 __all__ = ["select_samples"]
 
@@ -63,9 +64,10 @@ def select_samples(model: SoftShadowModel, pose: Pose, view: PhotoView, range_k_
     Raises NoShadowInView when no usable boundary pixel is in the frame. A view whose
     receiver is not the plane is sampled on it (``fitting.samples.receiver``).
     """
-    if view.receiver is not None and view.receiver.kind != "plane":
+    receiver: ReceiverSurface | None = view.receiver  # PhotoView, a floor below, cannot name the type
+    if receiver is not None and receiver.kind != "plane":
         from .receiver import RECEIVER_SAMPLES_FACTOR, select_receiver_samples
-        return select_receiver_samples(model, pose, view, view.receiver, range_k_max, sun_margin_deg,
+        return select_receiver_samples(model, pose, view, receiver, range_k_max, sun_margin_deg,
                                        RECEIVER_SAMPLES_FACTOR * max_samples, seed, min_band_px, max_band_px,
                                        sky_occlusion)
     h, w = view.shape

@@ -60,7 +60,7 @@ def visible_object_pixels(model: SoftShadowModel, pose: Pose, camera: PinholeCam
     posed object before anything else (the receiver's mesh, when given, can hide it)."""
     obj = _posed_mesh(model, pose)
     n_obj = len(obj.faces)
-    scene = obj if receiver is None else trimesh.util.concatenate([obj, receiver])
+    scene: trimesh.Trimesh = obj if receiver is None else trimesh.util.concatenate([obj, receiver])
     rows, cols = np.mgrid[0:camera.height:step, 0:camera.width:step]
     rows, cols = rows.ravel(), cols.ravel()
     dirs = camera.pixel_rays(cols.astype(np.float64), rows.astype(np.float64))

@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
-from jaxtyping import Array, Bool, Float, Int
+from jaxtyping import ArrayLike, Bool, Float, Int
 from scipy.stats import median_abs_deviation
 
 from softshadow import GroundGrid, Pose, SoftShadowModel, Sun
@@ -138,12 +138,12 @@ class Solution(eqx.Module):
     """
 
     params: FitParams
-    converged: Bool[Array, ""]
-    steps: Int[Array, ""]
-    residuals: Float[Array, " n"]
-    jacobian: Float[Array, "n p"]
+    converged: Bool[ArrayLike, ""]
+    steps: Int[ArrayLike, ""]
+    residuals: Float[ArrayLike, " n"]
+    jacobian: Float[ArrayLike, "n p"]
     prediction: Prediction
-    grad_t_pixel: Float[Array, " n"]
+    grad_t_pixel: Float[ArrayLike, " n"]
 
 
 class Trial(NamedTuple):
@@ -209,8 +209,8 @@ def _solve_arrays(params: FitParams, args, max_steps: int, start_raw_ks, prepare
     group = dataclasses.replace(group, grad_t_pixel=grad_t_pixel)
     params = dataclasses.replace(params, raw_k=raw_k)
     args = (group, pose, config)
-    solver = optx.LevenbergMarquardt(rtol=LM_RTOL, atol=LM_ATOL)
-    sol = optx.least_squares(residuals, solver, params, args=args, max_steps=max_steps, throw=False)
+    solver: optx.LevenbergMarquardt = optx.LevenbergMarquardt(rtol=LM_RTOL, atol=LM_ATOL)
+    sol: optx.Solution = optx.least_squares(residuals, solver, params, args=args, max_steps=max_steps, throw=False)
     n_photos = params.n_photos
 
     def at(x):  # residuals, with the prediction they come from (one trace of the edge geometry)
@@ -302,6 +302,7 @@ def choose_model(arrays: GroupArrays, pose: Pose, start: FitParams, options: Fit
         trial = run(profile, blur_first, start if best is None else best.solution.params)
         if best is None or trial.bic < best.bic:
             best = trial
+    assert best is not None  # FitOptions.profiles is never empty
     cov, s2 = covariance(best.solution.residuals, best.solution.jacobian, n_eff)
     if blur_first and False in options.blur:
         # BIC without blur, from the fit with it: the nested model's residual sum of squares is

@@ -29,7 +29,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float, Int
+from jaxtyping import Array, ArrayLike, Float, Int
 
 from softshadow import Pose, blurred_profile_alpha, light_direction
 from softshadow.internal import PROFILES, PointPlan, plan_coordinate_light
@@ -101,12 +101,12 @@ class FitParams(eqx.Module):
     which the covariance and its named entries use.
     """
 
-    raw_k: Float[Array, ""]
-    raw_rho: Float[Array, ""]
-    raw_blur: Float[Array, " P"]
-    sun_delta_deg: Float[Array, "2"]
-    log_level: Float[Array, "P 2"]
-    gradient: Float[Array, "P 2"]
+    raw_k: Float[ArrayLike, ""]
+    raw_rho: Float[ArrayLike, ""]
+    raw_blur: Float[ArrayLike, " P"]
+    sun_delta_deg: Float[ArrayLike, "2"]
+    log_level: Float[ArrayLike, "P 2"]
+    gradient: Float[ArrayLike, "P 2"]
 
     @staticmethod
     def layout(n_photos: int) -> dict[str, slice]:
@@ -193,7 +193,7 @@ def angular_pixel_gradient(group: GroupArrays, pose: Pose, k, rule: str = "edge"
     return jnp.where(ok, slope / jnp.where(ok, dudt, 1.0), 0.0)
 
 
-def _shape_vector(params: FitParams) -> Float[Array, "3+P"]:  # noqa: F821 (a jaxtyping shape)
+def _shape_vector(params: FitParams) -> Float[Array, " shape"]:  # (3 + P,)
     """The parameters the shadow's shape depends on: raw_k, sun azimuth and elevation
     corrections (degrees), then each photo's raw_blur (P,). The rest (levels, gradients, rho)
     enter linearly."""
@@ -216,13 +216,13 @@ def _edge_terms_per_sample(geometry: Float[Array, "3"], raw_blur: Float[Array, "
     return blurred_profile_alpha(u, tau, config.profile), u, slope
 
 
-def edge_terms(shape: Float[Array, "3+P"], group: GroupArrays, pose: Pose, config: FitConfig):  # noqa: F821
+def edge_terms(shape: Float[Array, " shape"], group: GroupArrays, pose: Pose, config: FitConfig):
     """Alpha (n,), penumbra coordinate u (n,) and |du/dpixel| (n,) from the shape vector."""
     return _edge_terms_per_sample(shape[:3], shape[3:][group.photo], group, pose, config)
 
 
 @jax.custom_jvp
-def shadow_terms(shape: Float[Array, "3+P"], group: GroupArrays, pose: Pose, config: FitConfig):  # noqa: F821
+def shadow_terms(shape: Float[Array, " shape"], group: GroupArrays, pose: Pose, config: FitConfig):
     """Alpha, u and |du/dpixel| (n,) each, as ``edge_terms``, differentiable in ``shape`` only
     (the fit's constants group, pose and config get no derivative).
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from typing import Literal
 
 __all__ = ["FitOptions"]
 
@@ -16,7 +17,7 @@ class FitOptions:
     choose; a linear ramp fitted to a real sun reads about 0.854 of that k.
     """
 
-    profiles: tuple[str, ...] = ("disk",)
+    profiles: tuple[Literal["linear", "disk"], ...] = ("disk",)
     blur: tuple[bool, ...] = (False, True)
     rule: str = "edge"
     range_k_max: float = 0.03
@@ -26,10 +27,10 @@ class FitOptions:
     seed: int = 0
     sky_occlusion: bool = True  # model the sky the object hides from each sample (softshadow.sky)
     plots: bool = True
-    overlays: str = "first"  # overlay plots for the "first" photo of each group, "all", or "none"
+    overlays: Literal["first", "all", "none"] = "first"  # overlay plots for the "first" photo of each group, "all", or "none"
     verbose: bool = False
     # Level of detail of the object's mesh (``fitting.solve.lod``): "auto" (the coarsest level that moves
     # k and rho by at most lod_tolerance of their stated standard errors), "off" (the mesh as it is), or
     # a face count (that level, decimated).
-    lod: str | int = "auto"
+    lod: Literal["auto", "off"] | int = "auto"
     lod_tolerance: float = 0.1
