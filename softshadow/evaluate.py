@@ -13,7 +13,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from .params import Pose, Sun
-from .penumbra import edge_alpha, edge_coordinate, footprint_bump
+from .penumbra import Profile, Rule, edge_alpha, edge_coordinate, footprint_bump
 from .plan import PointPlan
 from .wedge import pixel_mean_alpha, wedge_alpha
 
@@ -27,7 +27,7 @@ def _as_jax(plan: PointPlan) -> PointPlan:
 
 
 def plan_alpha(points: Float[Array, "n 3"], plan: PointPlan, pose: Pose, sun: Sun, range_k,
-               rule: str = "edge", profile: str = "linear",
+               rule: Rule = "edge", profile: Profile = "linear",
                pixel_axes: Float[Array, "*n 2 3"] | None = None, corners: bool = False) -> Float[Array, " n"]:
     """Alpha (n,) at the plan's points: the penumbra formula in bands, the hard shadow elsewhere.
 
@@ -68,7 +68,7 @@ def _wedge_plan_alpha(points, plan: PointPlan, ev, light, range_k, profile, pixe
 
 
 def plan_coordinate(points: Float[Array, "n 3"], plan: PointPlan, pose: Pose, sun: Sun, range_k,
-                    rule: str = "edge", with_slope: bool = False):
+                    rule: Rule = "edge", with_slope: bool = False):
     """Normalised penumbra coordinate u (n,) at the plan's points (+1 outer, -1 inner silhouette).
 
     Outside the penumbra bands u is +-1e6 from the hard shadow, so any profile
@@ -79,7 +79,7 @@ def plan_coordinate(points: Float[Array, "n 3"], plan: PointPlan, pose: Pose, su
 
 
 def plan_coordinate_light(points: Float[Array, "n 3"], plan: PointPlan, pose: Pose,
-                          light: Float[Array, "*n 3"], range_k, rule: str = "edge",
+                          light: Float[Array, "*n 3"], range_k, rule: Rule = "edge",
                           with_slope: bool = False):
     """``plan_coordinate`` with the light direction given directly, (3,) or one per point (n, 3)."""
     plan = _as_jax(plan)

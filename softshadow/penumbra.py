@@ -29,19 +29,25 @@ at k = 0, at points on the edge line, and for points upstream of the edge.
 from __future__ import annotations
 
 import functools
-from typing import NamedTuple
+import typing
+from typing import Literal, NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
-__all__ = ["PROFILES", "RULES", "penumbra_coordinate", "profile_alpha", "edge_alpha", "edge_coordinate",
+__all__ = ["Profile", "Rule", "PROFILES", "RULES", "penumbra_coordinate", "profile_alpha", "edge_alpha", "edge_coordinate",
            "profile_slope", "profile_integral", "footprint_profile_alpha", "footprint_bump",
            "occluded_disk_fraction", "corner_mass", "corner_alpha", "shade"]
 
-PROFILES = ("linear", "disk")
-RULES = ("edge", "paper", "wedge")  # wedge: softshadow.wedge (the sun's hidden fraction)
+#: The penumbra profiles: "linear" (the seed's ramp) or "disk" (the occluded fraction of a disk).
+Profile = Literal["linear", "disk"]
+#: The rules that draw the penumbra: "edge", "paper" (the expanded volume) or "wedge" (the sun's
+#: hidden fraction, softshadow.wedge).
+Rule = Literal["edge", "paper", "wedge"]
+PROFILES: tuple[Profile, ...] = typing.get_args(Profile)
+RULES: tuple[Rule, ...] = typing.get_args(Rule)
 
 _K_MIN = 1e-9       # below this the ramp is a step; keeps 1/k finite
 _TINY = 1e-30
@@ -73,7 +79,7 @@ def _occluded_disk_fraction_jvp(primals, tangents):
     return occluded_disk_fraction(u), slope * du
 
 
-def profile_alpha(u, profile: str = "linear"):
+def profile_alpha(u, profile: Profile = "linear"):
     """Alpha (0 lit, 1 umbra) from the normalised penumbra coordinate u (+1 outer, -1 inner)."""
     if profile == "linear":
         return jnp.clip(0.5 * (1.0 - u), 0.0, 1.0)
@@ -189,7 +195,7 @@ def _range_k(range_k, dtype):
 
 def penumbra_coordinate(points: Float[Array, "n 3"], a: Float[Array, "n 3"], b: Float[Array, "n 3"],
                         outward_sign: Float[Array, " n"], light: Float[Array, "*n 3"], range_k,
-                        inside: Float[Array, " n"], rule: str = "edge",
+                        inside: Float[Array, " n"], rule: Rule = "edge",
                         paper_normal: Float[Array, "n 3"] | None = None, with_slope: bool = False,
                         near_boundary: Float[Array, " n"] | None = None):
     """Normalised penumbra coordinate u (n,) of each point against its own edge segment (a, b).
@@ -248,7 +254,7 @@ def _pixel_directions(pixel_axes, x, dtype):
 
 def edge_coordinate(points, edge_ids: Int[Array, "n K"], edge_vertices_world: Float[Array, "s 2 3"],
                     outward_sign: Float[Array, " s"], light, range_k, inside: Float[Array, " n"],
-                    rule: str = "edge", paper_normal_world: Float[Array, "s 3"] | None = None,
+                    rule: Rule = "edge", paper_normal_world: Float[Array, "s 3"] | None = None,
                     with_slope: bool = False, near_boundary: Float[Array, " n"] | None = None,
                     pixel_axes: Float[Array, "*n 2 3"] | None = None):
     """Penumbra coordinate u (n,) at points (n, 3) against their candidate edges (n, K).
@@ -290,7 +296,7 @@ def edge_coordinate(points, edge_ids: Int[Array, "n K"], edge_vertices_world: Fl
 
 def edge_alpha(points, edge_ids: Int[Array, "n K"], edge_vertices_world: Float[Array, "s 2 3"],
                outward_sign: Float[Array, " s"], light, range_k, inside: Float[Array, " n"],
-               rule: str = "edge", profile: str = "linear",
+               rule: Rule = "edge", profile: Profile = "linear",
                paper_normal_world: Float[Array, "s 3"] | None = None,
                near_boundary: Float[Array, " n"] | None = None,
                pixel_axes: Float[Array, "*n 2 3"] | None = None,
@@ -314,7 +320,7 @@ def edge_alpha(points, edge_ids: Int[Array, "n K"], edge_vertices_world: Float[A
     return footprint_profile_alpha(u, du_a, du_b, profile)
 
 
-def profile_slope(u, profile: str = "linear"):
+def profile_slope(u, profile: Profile = "linear"):
     """d alpha / d u of ``profile_alpha`` (0 outside the ramp)."""
     if profile == "linear":
         return jnp.where(jnp.abs(u) < 1.0, -0.5, 0.0)
@@ -325,7 +331,7 @@ def profile_slope(u, profile: str = "linear"):
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(1,))
-def profile_integral(u, profile: str = "linear"):
+def profile_integral(u, profile: Profile = "linear"):
     """The antiderivative of ``profile_alpha`` in u: 0 for u >= 1, u for u <= -1 (where alpha is 1).
 
     linear: -(1 - u)^2 / 4 on [-1, 1]; disk: (u acos u - sqrt(1 - u^2) + (1 - u^2)^(3/2) / 3) / pi.
@@ -355,7 +361,7 @@ _BOX_MIN = 1e-3      # half-widths (u units) below this: the box is its centre v
 _FOOTPRINT_NODES = 3  # Gauss-Legendre nodes across the pixel's narrower direction
 
 
-def _box_profile_alpha(v, half, profile: str):
+def _box_profile_alpha(v, half, profile: Profile):
     """Mean of ``profile_alpha`` over [v - half, v + half], exactly (difference of its integral)."""
     ok = half > _BOX_MIN
     h = jnp.where(ok, half, 1.0)
@@ -363,7 +369,7 @@ def _box_profile_alpha(v, half, profile: str):
     return jnp.where(ok, mean, profile_alpha(v, profile))
 
 
-def footprint_profile_alpha(u, du_a, du_b, profile: str = "linear"):
+def footprint_profile_alpha(u, du_a, du_b, profile: Profile = "linear"):
     """Alpha averaged over a pixel's footprint, in penumbra units; u, du_a, du_b broadcast.
 
     u: the penumbra coordinate at the pixel's centre; du_a, du_b: its change across the
@@ -397,7 +403,7 @@ def _box_step(v, half):
     return jnp.where(ok, jnp.clip((h - v) / (2.0 * h), 0.0, 1.0), (v < 0).astype(jnp.result_type(v)))
 
 
-def footprint_bump(u, du_a, du_b, profile: str = "linear"):
+def footprint_bump(u, du_a, du_b, profile: Profile = "linear"):
     """The footprint mean (as ``footprint_profile_alpha``) of profile_alpha(u) - [u < 0]: the
     penumbra's departure from the hard shadow of one straight edge, over a pixel. It is 0 where
     the pixel does not reach the ramp, and tends to 0 as the ramp narrows within the pixel (the
@@ -431,7 +437,7 @@ def _fan_parts(y, d, h):
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(3,))
-def _fan(y, d, h, profile: str):
+def _fan(y, d, h, profile: Profile):
     """Gamma(psi, h) = int_0^psi g(h / cos p) dp over the part where h / cos p < 1 (0 for h >= 1).
 
     The light's deficit along a straight line at distance h >= 0 from the sun's centre (in sun
@@ -480,7 +486,7 @@ def _fan_jvp(profile, primals, tangents):
 _VERTEX_U = 1e-6  # both lines nearer the sun's centre than this (sun radii): the vertex's own value
 
 
-def corner_mass(u1, u2, cos_n, sin_n, convex, profile: str = "linear"):
+def corner_mass(u1, u2, cos_n, sin_n, convex, profile: Profile = "linear"):
     """Occluded fraction of the light behind a corner of two straight edges; all args broadcast.
 
     u1, u2: the sun centre's signed distances (in penumbra units, +1 outer, -1 inner
@@ -524,7 +530,7 @@ _APEX_REACH = 4.0  # sun radii from the corner's apex within which the wedge rep
 
 def corner_alpha(points, edge_ids: Int[Array, "n K"], edge_vertices_world: Float[Array, "s 2 3"],
                  outward_sign: Float[Array, " s"], light, range_k, inside: Float[Array, " n"],
-                 neighbours: Int[Array, "s 2"], rule: str = "edge", profile: str = "linear",
+                 neighbours: Int[Array, "s 2"], rule: Rule = "edge", profile: Profile = "linear",
                  paper_normal_world: Float[Array, "s 3"] | None = None,
                  near_boundary: Float[Array, " n"] | None = None,
                  pixel_axes: Float[Array, "*n 2 3"] | None = None):

@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.scipy.special import ndtr
 
-from .penumbra import PROFILES, profile_alpha, profile_slope
+from .penumbra import PROFILES, Profile, profile_alpha, profile_slope
 
 __all__ = ["WIDE_BLUR_TAU", "blurred_profile_alpha"]
 
@@ -84,7 +84,7 @@ def _expected_positive_part(y):
     return y * ndtr(y) + jnp.exp(-0.5 * y * y) * _INV_SQRT_2PI
 
 
-def blurred_profile_alpha(u, tau, profile: str = "linear"):
+def blurred_profile_alpha(u, tau, profile: Profile = "linear"):
     """Alpha of ``profile`` seen through a Gaussian of standard deviation ``tau`` (u units).
 
     u, tau: arrays that broadcast (tau >= 0), float32 or float64; returns alpha of their

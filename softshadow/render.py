@@ -23,7 +23,7 @@ from .meshes import load_mesh
 from .evaluate import plan_alpha
 from .occluder import Occluder
 from .params import Pose, ShadowParams, Sun
-from .penumbra import PROFILES, RULES, shade
+from .penumbra import PROFILES, RULES, Profile, Rule, shade
 from .plan import GridPlan, PointPlan, bucket_size, plan_grid, plan_points
 from .posed import posed_vertices
 from .sky import SkyNodes, hidden_sky_nodes
@@ -147,8 +147,8 @@ class SoftShadowModel:
     """
 
     occluder: Occluder
-    rule: str = "edge"
-    profile: str = "linear"
+    rule: Rule = "edge"
+    profile: Profile = "linear"
     footprint: bool = True
     hidden_sky: bool = True
     corners: bool = False
@@ -161,7 +161,7 @@ class SoftShadowModel:
             raise ValueError(f"unknown penumbra profile {self.profile!r}; choose one of {PROFILES}")
 
     @classmethod
-    def from_mesh(cls, mesh: str | trimesh.Trimesh, rule: str = "edge", profile: str = "linear",
+    def from_mesh(cls, mesh: str | trimesh.Trimesh, rule: Rule = "edge", profile: Profile = "linear",
                   base_dir=None, footprint: bool = True, hidden_sky: bool = True,
                   corners: bool = False) -> "SoftShadowModel":
         """From a built-in name, a mesh file path, or a trimesh.Trimesh."""
