@@ -77,10 +77,8 @@ def mitsuba_sweep(scenes: dict, out: dict, settings: SweepSettings, progress=pri
     result = {}
     for name in settings.mitsuba_meshes:
         progress(f"bench sweep: Mitsuba 3 on {name}")
-        targets = {"softshadow": out[name]}
-        if name in out.get("wedge", {}):
-            targets["softshadow (wedge)"] = out["wedge"][name]
-        result[name] = bench_mitsuba(scenes[name], settings.mitsuba_spps, repeats=1, targets=targets)
+        result[name] = bench_mitsuba(scenes[name], settings.mitsuba_spps, repeats=1,
+                                     targets={"softshadow": out[name]})
     return result
 
 
