@@ -21,8 +21,8 @@ import numpy as np
 from .camera import GroundGrid
 from .occluder import Occluder
 from .params import Pose, Sun
-from .plan import (BAND_FRACTION, CANDIDATE_RADII_PX, CANDIDATE_REACH_PX, MAX_RASTER_SIDE, N_CANDIDATES, EdgeSet,
-                   PointPlan, _pack_edges, bucket_size, light_band_widths)
+from .plan import (BAND_FRACTION, CANDIDATE_RADII_PX, CANDIDATE_REACH_PX, N_CANDIDATES, EdgeSet,
+                   PointPlan, _pack_edges, bucket_size, light_band_widths, raster_grid)
 from .posed import PosedOccluder
 from .raster import candidate_labels, rasterise_shadow
 from .scratch import Scratch, scratch_array
@@ -151,11 +151,7 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
     hi = np.minimum(hi_occ + pad_m, hi_pts + pad_m)
     if np.any(hi <= lo):
         return _empty(edges, hard)
-    pixel_m = max(pixel_m, float((hi - lo).max()) / MAX_RASTER_SIDE)
-    map_pixel_m = max(min(map_pixel_m, pixel_m), float((hi - lo).max()) / MAX_RASTER_SIDE, 1e-5)
-    width = int(np.ceil((hi[0] - lo[0]) / pixel_m)) + 1
-    height = int(np.ceil((hi[1] - lo[1]) / pixel_m)) + 1
-    grid = GroundGrid(pixel_m, (float(lo[0]), float(hi[1])), width, height)
+    grid, map_pixel_m = raster_grid(lo, hi, pixel_m, map_pixel_m)
     raster = rasterise_shadow(grid, world, light, sil, uv_v)
     m = len(cand)
     in_view = scratch_array(scratch, "sun.in_view", m, np.uint8)
@@ -208,7 +204,7 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
     band = cand[sel]
     edge_id = np.zeros((len(sel), N_CANDIDATES), np.int32)
     if len(sel):
-        cr = np.clip(np.rint(grid.to_pixel(uv_p[sel])).astype(np.int64), 0, [width - 1, height - 1])
+        cr = np.clip(np.rint(grid.to_pixel(uv_p[sel])).astype(np.int64), 0, [grid.width - 1, grid.height - 1])
         edge_id[:] = np.maximum(candidate_labels(raster.edge_label, cr[:, 1], cr[:, 0], radii=CANDIDATE_RADII_PX,
                                                  max_candidates=N_CANDIDATES, neighbours=raster.edge_neighbours), 0)
     near_b = near_b[:n_band]

@@ -251,6 +251,18 @@ def _spacing(uv: np.ndarray, cell_m: float) -> float:
     return cell_m * float(np.sqrt(np.count_nonzero(taken) / len(uv)))
 
 
+def raster_grid(lo: np.ndarray, hi: np.ndarray, pixel_m: float, map_pixel_m: float) -> tuple[GroundGrid, float]:
+    """The light-space raster's grid over [lo, hi] (2,) metres at ``pixel_m`` (coarsened to at most
+    MAX_RASTER_SIDE pixels a side), and the shadow map's pixel (no coarser than the raster's,
+    within the same cap)."""
+    side = float((hi - lo).max())
+    pixel_m = max(pixel_m, side / MAX_RASTER_SIDE)
+    map_pixel_m = max(min(map_pixel_m, pixel_m), side / MAX_RASTER_SIDE, 1e-5)
+    width = int(np.ceil((hi[0] - lo[0]) / pixel_m)) + 1
+    height = int(np.ceil((hi[1] - lo[1]) / pixel_m)) + 1
+    return GroundGrid(pixel_m, (float(lo[0]), float(hi[1])), width, height), map_pixel_m
+
+
 def light_band_widths(depth_behind: np.ndarray | float, range_k: float) -> np.ndarray | float:
     """Width (m, perpendicular to the light) of a penumbra wedge at ``depth_behind`` metres
     behind its edge along the light: 2 k d for the ``edge`` rule (L +- k n, n perpendicular
@@ -312,11 +324,7 @@ def _plan_points_light(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, 
     hi = np.minimum(hi_occ + pad_m, hi_pts + pad_m)
     if np.any(hi <= lo):
         return PointPlan(edges, edge_id, hard, active, near_boundary)
-    pixel_m = max(pixel_m, float((hi - lo).max()) / MAX_RASTER_SIDE)
-    map_pixel_m = max(min(map_pixel_m, pixel_m), float((hi - lo).max()) / MAX_RASTER_SIDE, 1e-5)
-    width = int(np.ceil((hi[0] - lo[0]) / pixel_m)) + 1
-    height = int(np.ceil((hi[1] - lo[1]) / pixel_m)) + 1
-    grid = GroundGrid(pixel_m, (float(lo[0]), float(hi[1])), width, height)
+    grid, map_pixel_m = raster_grid(lo, hi, pixel_m, map_pixel_m)
     # The ground's raster code with light-space vertex positions: hard = the occluder's
     # silhouette region, labels and distances to its outline.
     raster = rasterise_shadow(grid, world, light, sil, uv_v)
@@ -362,7 +370,7 @@ def _plan_points_light(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, 
     near_boundary[cand] = act & (dist <= 0.25 * widths + 1.5 * pixel_m) & _clean_outline(raster, label)
     sel = np.flatnonzero(act)
     if len(sel):
-        cr = np.clip(np.rint(grid.to_pixel(uv_p[sel])).astype(np.int64), 0, [width - 1, height - 1])
+        cr = np.clip(np.rint(grid.to_pixel(uv_p[sel])).astype(np.int64), 0, [grid.width - 1, grid.height - 1])
         edge_id[cand[sel]] = np.maximum(candidate_labels(raster.edge_label, cr[:, 1], cr[:, 0],
                                                          radii=CANDIDATE_RADII_PX, max_candidates=N_CANDIDATES,
                                                          neighbours=raster.edge_neighbours), 0)

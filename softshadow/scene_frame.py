@@ -39,7 +39,7 @@ from .posed import PosedOccluder
 from .projector import Projector, projector_shadow_map
 from .render import SoftShadowModel
 from .scratch import Scratch, scratch_array
-from .scene_render import SceneLights, _object_surface
+from .scene_render import SceneLights, _object_surface, caster_face_offsets
 from .visibility import Surface, VisibleSurfaces, visible_surfaces
 
 __all__ = ["FRAME_STEPS", "FrameRenderer", "SceneFrame", "band_alpha", "render_frame"]
@@ -187,13 +187,7 @@ class _Casters:
             verts, faces = np.zeros((0, 3)), np.zeros((0, 3), np.int64)
         facing = (np.concatenate([np.full(len(s.faces), -1 if s.closed else 0, np.int8) for s in casters])
                   if casters else np.zeros(0, np.int8))
-        offset = np.full(len(surfaces) + 1, -1, np.int64)
-        start = 0
-        for i, s in enumerate(surfaces):
-            if s.casts_shadows:
-                offset[i] = start
-                start += len(s.faces)
-        return cls(verts, faces, facing, offset)
+        return cls(verts, faces, facing, caster_face_offsets(surfaces))
 
 
 def _projector_maps(projectors: Sequence[Projector], casters: _Casters, scratch: Scratch | None) -> list:

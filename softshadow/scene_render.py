@@ -112,6 +112,19 @@ def _outward(occ: Occluder) -> bool:
     return bool(np.einsum("ij,ij->i", t[:, 0], np.cross(t[:, 1], t[:, 2])).sum() > 0)
 
 
+def caster_face_offsets(surfaces) -> np.ndarray:
+    """(len(surfaces) + 1,) int64: where each surface's faces start among the shadow casters' faces
+    (the casting surfaces' faces in order), -1 for a surface that casts nothing and in the last
+    entry (the ground, surface -1)."""
+    offset = np.full(len(surfaces) + 1, -1, np.int64)
+    start = 0
+    for i, s in enumerate(surfaces):
+        if s.casts_shadows:
+            offset[i] = start
+            start += len(s.faces)
+    return offset
+
+
 def prepare_scene(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pose: Pose,
                   sun: Sun | None = None, projectors: Sequence[Projector] = (), *,
                   receivers: Sequence[Surface] = (), object_albedo=0.8, ground_albedo=0.8,
@@ -153,12 +166,7 @@ def projector_light(visible: VisibleSurfaces, surfaces: Sequence[Surface],
         verts, faces, facing = np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int8)
     points = np.ascontiguousarray(visible.points, np.float64)
     # Each point's face among the casters' faces (-1: the ground, a surface that casts nothing).
-    offset = np.full(len(surfaces) + 1, -1, np.int64)
-    start = 0
-    for i, s in enumerate(surfaces):
-        if s.casts_shadows:
-            offset[i] = start
-            start += len(s.faces)
+    offset = caster_face_offsets(surfaces)
     surface = visible.surface.reshape(-1)[visible.pixel]
     own = offset[surface]  # surface -1 (the ground) takes the last entry, -1
     own = np.where(own >= 0, own + visible.face.reshape(-1)[visible.pixel], -1)
