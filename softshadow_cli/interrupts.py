@@ -155,12 +155,13 @@ def ctrl_c_never_swallowed():
     """Within the block, a Ctrl-C raises KeyboardInterrupt in the main thread wherever it lands
     (see the module's text). Leaves SIGINT alone when it is not Python's default handler
     (ignored by the parent, or set by the caller) or when not on the main thread."""
+    # A press from an earlier block (an earlier command in the same process) is not this block's.
+    _state.pressed = False
     if (threading.current_thread() is not threading.main_thread()
             or signal.getsignal(signal.SIGINT) is not signal.default_int_handler):
         yield
         return
     previous_hook = sys.unraisablehook
-    _state.pressed = False
     _state.active = True
     sys.unraisablehook = _unraisable(previous_hook)
     previous = signal.signal(signal.SIGINT, _interrupt)

@@ -70,6 +70,23 @@ def test_ignored_sigint_stays_ignored():
         signal.signal(signal.SIGINT, previous)
 
 
+def test_a_press_in_an_earlier_block_is_not_the_next_ones(python_sigint):
+    """A Ctrl-C an earlier command of the same process saw is forgotten by the next block, also
+    when that block leaves SIGINT alone (ignored, or set by the caller)."""
+    from softshadow_cli.interrupts import ctrl_c_pressed
+    with pytest.raises(KeyboardInterrupt):
+        with ctrl_c_never_swallowed():
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(5.0)
+    assert ctrl_c_pressed()
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        with ctrl_c_never_swallowed():
+            assert not ctrl_c_pressed()
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 def test_ctrl_c_in_a_ctypes_callback_is_delivered_not_printed(python_sigint, monkeypatch):
     """numba's compilation cache calls Python through llvmlite's ctypes callbacks: a Ctrl-C landing
     there was printed as "Exception ignored on calling ctypes callback function" and the command
