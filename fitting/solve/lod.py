@@ -388,7 +388,7 @@ class LevelsOfDetail:
         if any(v.sun_source == "fitted" for v in views):
             # The sun moves during the fit: no fixed shadow to compare.
             return GroupLevel(self.full, self.full_faces, sky)
-        from .group import initial_params, sample_views
+        from .group import sample_views
         # The fit's own samples on the full mesh (its hidden sky from the coarse level it will be
         # cast from): the choice's reference, and the fit's samples when the full mesh is kept.
         samples, used, warnings = sample_views(self.full, pose, views, options, sky)
@@ -396,8 +396,7 @@ class LevelsOfDetail:
         if not samples:
             return GroupLevel(self.full, self.full_faces, sky, drawn)  # the fit says why
         profile = options.profiles[0]
-        reference = ShadowReference(self.full.with_options(profile=profile), pose, used, samples,
-                                    initial_params(samples)[1], options.range_k_max)
+        reference = self._reference(pose, used, samples, options)
         log = (lambda line: print(f"  {line}")) if options.verbose else None
         choice = self.choose(reference, options.lod_tolerance, profile, log)
         if choice.faces == self.full_faces:
@@ -409,16 +408,17 @@ class LevelsOfDetail:
         no fixed shadow to compare (the sun is fitted) or none in view (the fit says so)."""
         if any(v.sun_source == "fitted" for v in views):
             return None  # the sun moves during the fit: no fixed shadow to compare
-        from .group import initial_params
         counts = fitter_face_counts(self.full_faces)
         # The object's mask from the finest decimated level, which the choice checks first anyway.
         samples, used = choice_samples(self.full, pose, views, options.range_k_max,
                                        options.max_samples_per_photo, options.seed,
                                        mask_model=self.level(counts[1])[1] if len(counts) > 1 else None)
-        if not samples:
-            return None
-        profile = options.profiles[0]
-        return ShadowReference(self.full.with_options(profile=profile), pose, used, samples,
+        return self._reference(pose, used, samples, options) if samples else None
+
+    def _reference(self, pose: Pose, used: list[PhotoView], samples, options) -> ShadowReference:
+        """The full mesh's shadow (under the fit's first profile) in these samples of ``used``."""
+        from .group import initial_params
+        return ShadowReference(self.full.with_options(profile=options.profiles[0]), pose, used, samples,
                                initial_params(samples)[1], options.range_k_max)
 
 
