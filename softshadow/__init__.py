@@ -9,9 +9,21 @@ The names here are the public API. ``softshadow.internal`` holds the building bl
 synthesiser use (plans, occluders, shadow maps): usable, but they may change between releases.
 """
 
+import os as _os
+import sys as _sys
+
 import lazy_loader as _lazy
 
 from ._version import __version__ as __version__
+
+# numba's cache of the compiled loops goes to the user's cache folder, not beside the installed
+# modules: an installed package may be read-only, and cache files pip does not know of would outlive
+# an uninstall as a bare ``softshadow/`` folder that hides a later editable install. NUMBA_CACHE_DIR,
+# when set, wins.
+if not _os.environ.get("NUMBA_CACHE_DIR"):
+    _os.environ["NUMBA_CACHE_DIR"] = _os.path.join(_os.path.expanduser("~"), ".cache", "softshadow", "numba")
+    if "numba.core.config" in _sys.modules:  # numba read its settings already
+        _sys.modules["numba.core.config"].CACHE_DIR = _os.environ["NUMBA_CACHE_DIR"]
 
 # The public names are listed in ``__init__.pyi`` (which type checkers and the API reference read too).
 # Each module is imported when one of its names is first used (PEP 562, ``lazy_loader``): a process

@@ -134,3 +134,17 @@ def test_no_plots_asks_the_fit_for_no_plot_data(monkeypatch):
     for plots in (False, True):
         checked.fit_checked(None, None, views, PhotoGroup("10:30", "10:30", ["a.jpg"]), FitOptions(plots=plots))
     assert asked == [False, True]
+
+
+def test_numba_caches_go_to_the_users_cache_folder_not_beside_the_modules(tmp_path):
+    """A cache file beside an installed module outlives its uninstall as a bare ``softshadow/`` folder,
+    which hides a later editable install; NUMBA_CACHE_DIR, when set, wins."""
+    code = ("import os\nimport softshadow\nimport numba.core.config as c\nprint(c.CACHE_DIR)\n")
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env.update(HOME=str(tmp_path), PYTHONPATH=str(ROOT))
+    run = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120, env=env)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert run.stdout.strip() == str(tmp_path / ".cache" / "softshadow" / "numba")
+    env["NUMBA_CACHE_DIR"] = str(tmp_path / "mine")
+    run = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120, env=env)
+    assert run.stdout.strip() == str(tmp_path / "mine")
