@@ -9,6 +9,11 @@ corners (the renderer until 2026-11-24), ``footprint`` and ``sky`` add one term 
 left out) plus the share of the squared error within 1 m of the pillar; times are the median
 forward render (plan included, as a caller without a plan pays) after compilation, with the
 hidden sky kept from the first call (``first_call_s`` is that call, which casts it).
+
+``wedge``: the same 512 x 512 scene for the pillar, the ball and the real dragon, the default
+model (footprint and hidden sky) with the ``edge`` rule (linear and disk profiles) against the
+``wedge`` rule (disk and linear), timed round-robin per mesh; ``times_edge`` is each case's time
+over the edge rule's linear case on the same mesh.
 """
 
 from __future__ import annotations
@@ -21,11 +26,54 @@ import numpy as np
 from .meshes import bench_mesh
 from .scenes import SUN_RADIUS_DEG, BenchScene, SweepSettings, image_error, linear_equivalent_k
 
-__all__ = ["VARIANTS", "bench_floor"]
+__all__ = ["RULE_CASES", "VARIANTS", "bench_floor", "bench_rules"]
 
 # (footprint, hidden sky, corners); "corners" adds the outline corners' wedge (off by default).
 VARIANTS = {"before": (False, False, False), "footprint": (True, False, False), "sky": (False, True, False),
             "after": (True, True, False), "corners": (True, True, True)}
+
+
+# (rule, profile) of ``bench_rules``: the first is the baseline of ``times_edge``.
+RULE_CASES = (("edge", "linear"), ("edge", "disk"), ("wedge", "disk"), ("wedge", "linear"))
+
+
+def bench_rules(meshes=("pillar", "ball", "dragon"), quick: bool = False, repeats: int | None = None,
+                progress=print) -> dict:
+    """Per mesh, error and forward time of each of ``RULE_CASES`` (default model), round-robin."""
+    from softshadow import ShadowParams
+    settings = SweepSettings(quick=quick)
+    repeats = repeats or (3 if quick else 15)
+    k_true = math.tan(math.radians(SUN_RADIUS_DEG))
+    out = {}
+    for mesh in meshes:
+        progress(f"bench floor: the rules on {mesh}")
+        scene = BenchScene(bench_mesh(mesh), settings, name=mesh)
+        grid = scene.grid(settings.base_pixels)
+        cases = {}
+        for rule, profile in RULE_CASES:
+            params = ShadowParams(k_true if profile == "disk" else linear_equivalent_k(k_true), scene.light.rho)
+            model = scene.model_for(profile, rule)
+            forward = (lambda m=model, p=params: m.ground_map(p, scene.sun, scene.pose, grid).block_until_ready())
+            forward()  # compiles, and casts the hidden sky
+            cases[(rule, profile)] = (forward, [], [])
+        for _ in range(repeats):
+            for forward, wall, cpu in cases.values():
+                t0, c0 = time.perf_counter(), time.process_time()
+                forward()
+                wall.append(time.perf_counter() - t0)
+                cpu.append(time.process_time() - c0)
+        rows = {}
+        for (rule, profile), (forward, wall, cpu) in cases.items():
+            err = image_error(np.asarray(forward()), grid, scene.reference, scene.ref_grid, scene.footprint)
+            rows[f"{rule}_{profile}"] = {"rule": rule, "profile": profile, "forward_ms": 1e3 * float(np.median(wall)),
+                                         "cpu_ms": 1e3 * float(np.median(cpu)), **err}
+        base = rows["edge_linear"]
+        for r in rows.values():
+            r["times_edge"] = r["forward_ms"] / base["forward_ms"]
+            r["cpu_times_edge"] = r["cpu_ms"] / base["cpu_ms"]
+        out[mesh] = {"faces": scene.faces, "pixels": settings.base_pixels, "reference_samples": scene.samples,
+                     **rows}
+    return out
 
 
 def _near_share(image, scene, grid, metres: float = 1.0) -> float:
@@ -72,7 +120,7 @@ def bench_floor(quick: bool = False, progress=print) -> dict:
         err["near_1m_share"] = _near_share(image, scene, grid)
         out.setdefault(profile, {})[name] = {"forward_ms": 1e3 * float(np.median(samples[(profile, name)])),
                                              "first_call_s": first, **err}
-    for rows in out.values():
+    for rows in list(out.values()):
         rows["after_over_before_time"] = rows["after"]["forward_ms"] / rows["before"]["forward_ms"]
         rows["corners_time_ratio"] = rows["corners"]["forward_ms"] / rows["after"]["forward_ms"]
     return {"scene": {"mesh": "pillar", "pixels": settings.base_pixels, "pixel_m": grid.pixel_m,
@@ -80,4 +128,4 @@ def bench_floor(quick: bool = False, progress=print) -> dict:
                       "rho": scene.light.rho, "reference_samples": scene.samples,
                       "reference_noise_rms_band": scene.reference.noise_rms, "repeats": repeats,
                       "dtype": str(jax.numpy.result_type(float))},
-            **out}
+            **out, "wedge": bench_rules(quick=quick, progress=progress)}

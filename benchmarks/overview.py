@@ -5,6 +5,8 @@ pillar, the ball and the real dragon at 128 x 128 against a 1,024-ray physical t
 map (cached on disk), rendered by
 
 - this renderer (linear profile, float32), top-level keys ``pillar``, ``ball``, ``dragon``;
+- its ``wedge`` rule (the sun's hidden fraction from the silhouette edges, disk profile, float32),
+  ``wedge`` (one case per mesh);
 - the Shoji paper's own algorithm, hard and soft (its range and expansion fitted to the truth),
   ``paper`` (laid out as the sweep's ``paper.table3``);
 - the naive renderer (every pixel against every silhouette edge), ``naive``;
@@ -69,6 +71,9 @@ def summary_rows(result: dict) -> list[dict]:
     for mesh in OVERVIEW_MESHES:
         ours = result[mesh]
         cases = [("softshadow", f"{ours['profile']}, {ours['dtype']}", ours)]
+        wedge = result.get("wedge", {}).get(mesh)
+        if wedge:
+            cases.append(("softshadow (wedge)", f"{wedge['profile']}, {wedge['dtype']}", wedge))
         paper = result["paper"]["table3"][mesh]
         fit = paper["fitted_to_truth"]
         cases += [("paper (hard)", "stencil volume", paper["hard"]),
@@ -91,6 +96,10 @@ def run_overview(settings: SweepSettings, progress=print) -> dict:
     for name, scene in scenes.items():
         progress(f"bench: this renderer on {name}")
         out[name] = scene.case(settings.base_pixels, repeats=settings.repeats)
+    out["wedge"] = {}
+    for name, scene in scenes.items():
+        progress(f"bench: this renderer's wedge rule on {name}")
+        out["wedge"][name] = scene.case(settings.base_pixels, profile="disk", rule="wedge", repeats=settings.repeats)
     progress("bench: the paper's algorithm (hard, and soft fitted to the truth)")
     out["paper"] = {"table3": bench_paper_table3(scenes, settings)}
     out["naive"] = {}

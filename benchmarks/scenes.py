@@ -155,24 +155,25 @@ class BenchScene:
         centre = (g.origin_m[0] + (g.width - 1) / 2 * g.pixel_m, g.origin_m[1] - (g.height - 1) / 2 * g.pixel_m)
         return GroundGrid.around(centre, extent, pixels)
 
-    def model_for(self, profile: str):
-        """The model with ``profile``, one per profile: each holds its hidden-sky maps (a second or
-        so of ray casting on the dragon), so the cases and the paper's comparison share them."""
-        if profile not in self._models:
-            self._models[profile] = self.model.with_options(profile=profile)
-        return self._models[profile]
+    def model_for(self, profile: str, rule: str = "edge"):
+        """The model with ``profile`` and ``rule``, one per pair: each holds its hidden-sky maps (a
+        second or so of ray casting on the dragon), so the cases and the paper's comparison share them."""
+        if (profile, rule) not in self._models:
+            self._models[(profile, rule)] = self.model.with_options(profile=profile, rule=rule)
+        return self._models[(profile, rule)]
 
     def footprint(self, grid) -> np.ndarray:
         return self._object_mask(self.truth_model.occluder, self.pose, grid)
 
-    def case(self, pixels: int, profile: str = "linear", dtype: str = "float32", repeats: int = 7) -> dict:
-        """Time and error of one render."""
+    def case(self, pixels: int, profile: str = "linear", dtype: str = "float32", repeats: int = 7,
+             rule: str = "edge") -> dict:
+        """Time and error of one render (plan included, as a caller without a plan pays)."""
         import jax
         from softshadow import ShadowParams
         k_true = math.tan(math.radians(SUN_RADIUS_DEG))
         k = k_true if profile == "disk" else linear_equivalent_k(k_true)
         grid = self.grid(pixels)
-        model = self.model_for(profile)
+        model = self.model_for(profile, rule)
         with jax.enable_x64(dtype == "float64"):
             params = ShadowParams(k, self.light.rho)
 
@@ -181,7 +182,8 @@ class BenchScene:
 
             timing = timed(forward, repeats)
             image = np.asarray(forward())
-        out = {"renderer": "softshadow", "mesh": self.name, "faces": self.faces, "pixels": pixels, "profile": profile,
+        out = {"renderer": "softshadow", "rule": rule, "mesh": self.name, "faces": self.faces, "pixels": pixels,
+               "profile": profile,
                "dtype": dtype, "range_k": k, "rho": self.light.rho, **timing}
         out["error"] = image_error(image, grid, self.reference, self.ref_grid, self.footprint)
         return out

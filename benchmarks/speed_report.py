@@ -479,6 +479,8 @@ def write_overview_report(result: dict, md_path: Path, json_name: str | None = N
           "The full sweep (resolutions, profiles, precision, level of detail, fits, Tables 1-3, scaling) "
           "is `--what sweep`: [speed_vs_error.md](speed_vs_error.md).", "",
           "- softshadow: this renderer (linear profile, float32); its JSON keys are the mesh names.",
+          "- softshadow (wedge): its `wedge` rule, the sun's hidden fraction from the silhouette edges "
+          "(disk profile, float32, [renderer.md](renderer.md#the-wedge-rule)); key `wedge`.",
           "- paper (hard) / paper: the Shoji paper's own algorithm (section 3.2, NumPy/OpenCV), the "
           "stencil volume alone and the whole soft algorithm with its range and expansion fitted to the "
           "truth; key `paper`.",
@@ -497,9 +499,11 @@ def write_overview_report(result: dict, md_path: Path, json_name: str | None = N
               "| mesh | error measure | this renderer's error | Mitsuba (ms) | how | ratio |",
               "|---|---|---:|---:|---|---:|"]
         for name, run in runs.items():
-            for metric, r in run["time_to_reach"]["softshadow"].items():
-                L.append(f"| {name} | {'whole map' if metric == 'rms' else 'penumbra band'} | {r['target']:.4f} | "
-                         f"{r['mitsuba_ms']:.0f} | {r['how']} | {r['ratio']:.0f} |")
+            for renderer, reach in run["time_to_reach"].items():
+                for metric, r in reach.items():
+                    label = name if renderer == "softshadow" else f"{name} ({renderer})"
+                    L.append(f"| {label} | {'whole map' if metric == 'rms' else 'penumbra band'} | "
+                             f"{r['target']:.4f} | {r['mitsuba_ms']:.0f} | {r['how']} | {r['ratio']:.0f} |")
     else:
         L += ["", f"Mitsuba: skipped: {result['mitsuba'].get('skipped', 'not run')} "
               "(`pip install 'softshadow[peers]'`)."]

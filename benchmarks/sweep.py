@@ -77,8 +77,10 @@ def mitsuba_sweep(scenes: dict, out: dict, settings: SweepSettings, progress=pri
     result = {}
     for name in settings.mitsuba_meshes:
         progress(f"bench sweep: Mitsuba 3 on {name}")
-        result[name] = bench_mitsuba(scenes[name], settings.mitsuba_spps, repeats=1,
-                                     targets={"softshadow": out[name]})
+        targets = {"softshadow": out[name]}
+        if name in out.get("wedge", {}):
+            targets["softshadow (wedge)"] = out["wedge"][name]
+        result[name] = bench_mitsuba(scenes[name], settings.mitsuba_spps, repeats=1, targets=targets)
     return result
 
 

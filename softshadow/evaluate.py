@@ -13,8 +13,9 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from .params import Pose, Sun
-from .penumbra import Profile, Rule, edge_alpha, edge_coordinate
+from .penumbra import Profile, Rule, edge_alpha, edge_coordinate, footprint_bump
 from .plan import PointPlan
+from .wedge import pixel_mean_alpha, wedge_alpha
 
 __all__ = ["plan_alpha", "plan_alpha_jit", "plan_coordinate", "plan_coordinate_light"]
 
@@ -31,19 +32,39 @@ def plan_alpha(points: Float[Array, "n 3"], plan: PointPlan, pose: Pose, sun: Su
     """Alpha (n,) at the plan's points: the penumbra formula in bands, the hard shadow elsewhere.
 
     pixel_axes: (2, 3) or (n, 2, 3) offsets (m) across a pixel along its two sides: alpha
-    is then the mean over each pixel's footprint (``footprint_profile_alpha``), else the
-    value at the point. corners: near a corner of the outline, the light's mass behind the
+    is then the mean over each pixel's footprint, else the value at the point. With the plan's
+    pixel pieces (``PointPlan.wedge``, planned with the pixels) the mean is the hard shadow's
+    exact area in the pixel plus the chosen edge's penumbra over it (``footprint_bump``);
+    without, the chosen edge's profile over it (``footprint_profile_alpha``). corners: near a corner of the outline, the light's mass behind the
     corner's wedge (``corner_alpha``, when the plan holds the outline's neighbours), else
     the nearest edge's half-plane alone.
     """
     plan = _as_jax(plan)
     edges = plan.edges
     ev = pose.apply(edges.vertices_local)
+    if rule == "wedge":
+        alpha = _wedge_plan_alpha(points, plan, ev, sun.light, range_k, profile, pixel_axes)
+        return jnp.where(plan.active, alpha, plan.hard)
     paper = pose.apply_direction(edges.paper_normal_local) if rule == "paper" else None
+    if pixel_axes is not None and not corners and plan.wedge is not None and plan.wedge.pixel_side_start is not None:
+        # The hard shadow's exact area in the pixel plus the chosen edge's penumbra over it: the
+        # exact mean for one straight edge, and continuous where the nearest edge changes or the
+        # ramp narrows below the pixel (at the foot of an object: a ground-level edge).
+        u, du_a, du_b = edge_coordinate(points, plan.edge_id, ev, edges.outward_sign, sun.light, range_k,
+                                        plan.hard, rule, paper, near_boundary=plan.near_boundary,
+                                        pixel_axes=pixel_axes)
+        alpha = pixel_mean_alpha(points, ev, sun.light, plan.wedge, pixel_axes) \
+            + footprint_bump(u, du_a, du_b, profile)
+        return jnp.where(plan.active, jnp.clip(alpha, 0.0, 1.0), plan.hard)
     alpha = edge_alpha(points, plan.edge_id, ev, edges.outward_sign, sun.light, range_k,
                        plan.hard, rule, profile, paper, near_boundary=plan.near_boundary,
                        pixel_axes=pixel_axes, neighbours=edges.neighbours if corners else None)
     return jnp.where(plan.active, alpha, plan.hard)
+
+
+def _wedge_plan_alpha(points, plan: PointPlan, ev, light, range_k, profile, pixel_axes):
+    """The ``wedge`` rule's alpha at the plan's points (``softshadow.wedge``)."""
+    return wedge_alpha(points, ev, light, range_k, plan.wedge, profile, pixel_axes)
 
 
 def plan_coordinate(points: Float[Array, "n 3"], plan: PointPlan, pose: Pose, sun: Sun, range_k,

@@ -147,7 +147,8 @@ class Silhouette:
     faces whose union is the hard shadow (the lit faces; for open meshes also the
     faces turned away), its boundary as (edges (B, 2) in sorted vertex order,
     winding weights (B,)): the net count of faces running along each edge;
-    normal_local (S, 3): the outward normal sign * normalize(t x L) in the mesh frame.
+    normal_local (S, 3): the outward normal sign * normalize(t x L) in the mesh frame;
+    edge_index (S,): the mesh edge (``Occluder.edges``) of each, for a merged chain its first.
     """
 
     vertex_ids: np.ndarray
@@ -156,6 +157,7 @@ class Silhouette:
     lit: np.ndarray
     fill_edges: tuple[tuple[np.ndarray, np.ndarray], ...] = ()
     normal_local: np.ndarray | None = None
+    edge_index: np.ndarray | None = None
 
 
 def silhouette(occ: Occluder, world_vertices: np.ndarray, rotation: np.ndarray,
@@ -208,6 +210,7 @@ def silhouette(occ: Occluder, world_vertices: np.ndarray, rotation: np.ndarray,
     sign = np.where(np.einsum("ij,ij->i", n, inward) > 0, -1.0, 1.0)
     ids = occ.edges[idx]
     normal = sign[:, None] * n
+    edge_index = idx
     pairs = occ.collinear_pairs
     if len(pairs):
         # The mesh's collinear pairs with both edges on the silhouette, at a vertex no other
@@ -223,6 +226,7 @@ def silhouette(occ: Occluder, world_vertices: np.ndarray, rotation: np.ndarray,
                                                      tangent=t, normal=normal,
                                                      pairs=(e1[both], e2[both]), return_lead=True)
             normal = normal[lead]
+            edge_index = idx[lead]
     layers = [lit] if occ.watertight else [lit, (~lit) & (np.abs(ndotl) > PARALLEL_TOL)]
     fill = []
     for faces in layers:
@@ -238,7 +242,7 @@ def silhouette(occ: Occluder, world_vertices: np.ndarray, rotation: np.ndarray,
         net = np.where(on, occ.edge_face_dir, 0).sum(1)
         keep_e = np.flatnonzero(net)
         fill.append((occ.edges[keep_e], net[keep_e].astype(np.float64)))
-    return Silhouette(ids, sign, paper, lit, tuple(fill), normal)
+    return Silhouette(ids, sign, paper, lit, tuple(fill), normal, edge_index)
 
 
 def merge_collinear(ids: np.ndarray, world: np.ndarray, light: np.ndarray, sign: np.ndarray,

@@ -37,14 +37,15 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
-__all__ = ["Profile", "Rule", "PROFILES", "RULES", "penumbra_coordinate", "profile_alpha", "edge_alpha",
-           "edge_coordinate", "profile_slope", "profile_integral", "footprint_profile_alpha",
+__all__ = ["Profile", "Rule", "PROFILES", "RULES", "penumbra_coordinate", "profile_alpha", "edge_alpha", "edge_coordinate",
+           "profile_slope", "profile_integral", "footprint_profile_alpha", "footprint_bump",
            "occluded_disk_fraction", "corner_mass", "corner_alpha", "shade"]
 
 #: The penumbra profiles: "linear" (the seed's ramp) or "disk" (the occluded fraction of a disk).
 Profile = Literal["linear", "disk"]
-#: The rules that draw the penumbra: "edge" or "paper" (the expanded volume).
-Rule = Literal["edge", "paper"]
+#: The rules that draw the penumbra: "edge", "paper" (the expanded volume) or "wedge" (the sun's
+#: hidden fraction, softshadow.wedge).
+Rule = Literal["edge", "paper", "wedge"]
 PROFILES: tuple[Profile, ...] = typing.get_args(Profile)
 RULES: tuple[Rule, ...] = typing.get_args(Rule)
 
@@ -393,6 +394,32 @@ def footprint_profile_alpha(u, du_a, du_b, profile: Profile = "linear"):
     z, w = jnp.asarray(z, dtype), jnp.asarray(0.5 * w, dtype)
     values = _box_profile_alpha(v[..., None] + narrow[..., None] * z, wide[..., None], profile)
     return values @ w
+
+
+def _box_step(v, half):
+    """Mean of the hard step [u < 0] over [v - half, v + half]."""
+    ok = half > _BOX_MIN
+    h = jnp.where(ok, half, 1.0)
+    return jnp.where(ok, jnp.clip((h - v) / (2.0 * h), 0.0, 1.0), (v < 0).astype(jnp.result_type(v)))
+
+
+def footprint_bump(u, du_a, du_b, profile: Profile = "linear"):
+    """The footprint mean (as ``footprint_profile_alpha``) of profile_alpha(u) - [u < 0]: the
+    penumbra's departure from the hard shadow of one straight edge, over a pixel. It is 0 where
+    the pixel does not reach the ramp, and tends to 0 as the ramp narrows within the pixel (the
+    ramp's departure is odd about its middle), so a footprint mean of alpha is the hard
+    shadow's area in the pixel plus this (``wedge.wedge_alpha``)."""
+    u, du_a, du_b = jnp.asarray(u), jnp.abs(jnp.asarray(du_a)), jnp.abs(jnp.asarray(du_b))
+    wide = 0.5 * jnp.maximum(du_a, du_b)
+    narrow = 0.5 * jnp.minimum(du_a, du_b)
+    reach = 2.0 + wide + narrow
+    v = jnp.clip(u, -reach, reach)
+    z, w = np.polynomial.legendre.leggauss(_FOOTPRINT_NODES)
+    dtype = jnp.result_type(v)
+    z, w = jnp.asarray(z, dtype), jnp.asarray(0.5 * w, dtype)
+    nodes = v[..., None] + narrow[..., None] * z
+    half = wide[..., None]
+    return (_box_profile_alpha(nodes, half, profile) - _box_step(nodes, half)) @ w
 
 
 def _fan_parts(y, d, h):

@@ -23,8 +23,10 @@ from .camera import GroundGrid
 from .occluder import Occluder
 from .params import Pose, Sun
 from .posed import PosedOccluder
-from .raster import ShadowRaster, candidate_labels, rasterise_shadow
+from .raster import ShadowRaster, candidate_labels, rasterise_shadow, winding_count_fill
 from .shadowmap import LightFrame, depth_bias, faces_away, shadow_map
+from .wedge_plan import (REACH_MARGIN, WedgeArrays, WedgeEdges, arrangement, concatenate_wedge, gather_candidates,
+                         wedge_edges)
 
 __all__ = ["EdgeSet", "PointPlan", "GridPlan", "plan_points", "plan_grid", "concatenate_plans",
            "edge_band_widths", "bucket_size", "grid_bucket_size", "light_band_widths", "BACKENDS"]
@@ -49,13 +51,16 @@ class EdgeSet(eqx.Module):
     vertices_local (s, 2, 3) metres; outward_sign (s,); paper_normal_local (s, 3);
     neighbours (s, 2) int32: the outline edge sharing each edge's first and second vertex
     (-1: none; ``raster.ShadowRaster.edge_neighbours``), for the outline's corners
-    (``penumbra.corner_alpha``); None where the plan has none.
+    (``penumbra.corner_alpha``); None where the plan has none. jump (s,): the depth
+    complexity's change across each edge (``wedge_plan.edge_jumps``; the ``wedge`` rule's),
+    None for the other rules.
     """
 
     vertices_local: Float[np.ndarray, "s 2 3"]
     outward_sign: Float[np.ndarray, " s"]
     paper_normal_local: Float[np.ndarray, "s 3"]
     neighbours: Int[np.ndarray, "s 2"] | None = None
+    jump: Float[np.ndarray, " s"] | None = None
 
 
 class PointPlan(eqx.Module):
@@ -64,7 +69,9 @@ class PointPlan(eqx.Module):
     edge_id (n, K) candidate governing edges; hard (n,) 0/1 in the hard shadow;
     active (n,) in a penumbra band (elsewhere alpha is ``hard``); near_boundary (n,)
     0/1 within a quarter penumbra of the hard shadow's boundary, where the side may
-    follow the edge's plane as the sun or pose moves.
+    follow the edge's plane as the sun or pose moves. For the ``wedge`` rule: edge_id holds
+    every edge the point's sun disk may meet (-1: none; ``wedge_plan``), and ``wedge`` the
+    arrangement's discrete choices (``wedge_plan.WedgeArrays``); None for the other rules.
     """
 
     edges: EdgeSet
@@ -72,6 +79,7 @@ class PointPlan(eqx.Module):
     hard: Float[np.ndarray, " n"]
     active: Bool[np.ndarray, " n"]
     near_boundary: Float[np.ndarray, " n"]
+    wedge: WedgeArrays | None = None
 
 
 def edge_band_widths(world_a: np.ndarray, world_b: np.ndarray, outward: np.ndarray,
@@ -86,8 +94,10 @@ def edge_band_widths(world_a: np.ndarray, world_b: np.ndarray, outward: np.ndarr
     return height * np.hypot(r[:, 0], r[:, 1])
 
 
-def _pack_edges(occ: Occluder, sil, dtype=np.float64, raster: ShadowRaster | None = None) -> EdgeSet:
-    """The silhouette's EdgeSet padded to a bucket, with the raster's outline neighbours."""
+def _pack_edges(occ: Occluder, sil, dtype=np.float64, raster: ShadowRaster | None = None,
+                jump: np.ndarray | None = None) -> EdgeSet:
+    """The silhouette's EdgeSet padded to a bucket, with the raster's outline neighbours (and
+    the ``wedge`` rule's jumps, 0 on padding edges)."""
     s = len(sil.vertex_ids)
     size = bucket_size(s, 16)
     neighbours = -np.ones((size, 2), np.int32)
@@ -102,7 +112,11 @@ def _pack_edges(occ: Occluder, sil, dtype=np.float64, raster: ShadowRaster | Non
         verts[:s] = occ.vertices[sil.vertex_ids]
         sign[:s] = sil.outward_sign
         paper[:s] = sil.paper_normal_local
-    return EdgeSet(verts, sign, paper, neighbours)
+    packed_jump = None
+    if jump is not None:
+        packed_jump = np.zeros(size, dtype)
+        packed_jump[:s] = jump
+    return EdgeSet(verts, sign, paper, neighbours, packed_jump)
 
 
 def _clean_outline(raster: ShadowRaster, label: np.ndarray) -> np.ndarray:
@@ -145,7 +159,8 @@ def _empty_plan_arrays(size: int):
 def plan_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k_max: float,
                 rule: str = "edge", pixel_m: float | None = None,
                 margin_px: float = 2.5, pad_to: int | None = None, normals: np.ndarray | None = None,
-                backend: str = "auto", dtype=np.float64, receiver_tolerance_m: float = 0.0) -> PointPlan:
+                backend: str = "auto", dtype=np.float64, receiver_tolerance_m: float = 0.0,
+                pixel_axes: np.ndarray | None = None) -> PointPlan:
     """Discrete choices for receiver points (N, 3) anywhere: the ground, a range image, a mesh,
     the object itself.
 
@@ -162,6 +177,11 @@ def plan_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k
     dtype: the float type of the light-space depth test (float32 to measure precision).
     receiver_tolerance_m: the receiver points' own depth error (a range image's
     quantisation), added to the depth test's bias (``softshadow.shadowmap``).
+    pixel_axes (2, 3) or (N, 2, 3): the points' pixel footprints, for pixel means: the plan then
+    holds the hard shadow's pieces in each pixel (its exact area there), which the ``wedge``
+    rule's means need and the other rules' use (without, their means take the chosen edge's
+    profile alone). The ``wedge`` rule needs no raster for points and tests depth by ray
+    casting, not a shadow map (pixel_m, margin_px, dtype and receiver_tolerance_m do not apply).
     """
     if backend not in BACKENDS:
         raise ValueError(f"unknown receiver back end {backend!r}; choose one of {BACKENDS}")
@@ -174,9 +194,17 @@ def plan_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k
         flat = not np.any(points[:, 2]) and (normals is None or (
             not np.any(normals[:, :2]) and np.all(normals[:, 2] > 0)))
         backend = "ground" if flat else "light"
+    if rule == "wedge":
+        return _plan_points_wedge(occ, pose, sun, points, range_k_max, pad_to, normals, backend == "ground",
+                                  pixel_axes)
     if backend == "light":
-        return _plan_points_light(occ, pose, sun, points, range_k_max, rule, pixel_m, margin_px, pad_to,
+        plan = _plan_points_light(occ, pose, sun, points, range_k_max, rule, pixel_m, margin_px, pad_to,
                                   normals, dtype, receiver_tolerance_m)
+        return plan if pixel_axes is None else _with_pixel_area(plan, occ, pose, sun, points, pixel_axes, False)
+    if pixel_axes is not None:
+        plan = plan_points(occ, pose, sun, points, range_k_max, rule, pixel_m, margin_px, pad_to, normals,
+                           backend, dtype, receiver_tolerance_m)
+        return _with_pixel_area(plan, occ, pose, sun, points, pixel_axes, True)
     posed = PosedOccluder.make(occ, pose, sun)
     sil, light = posed.silhouette, posed.light
     a, b, direction = posed.edge_geometry(rule)
@@ -407,12 +435,16 @@ class GridPlan:
 
 
 def plan_grid(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, range_k_max: float,
-              rule: str = "edge", margin_px: float = 2.5, dtype=np.float64) -> GridPlan:
+              rule: str = "edge", margin_px: float = 2.5, dtype=np.float64, footprint: bool = False) -> GridPlan:
     """Discrete choices for every pixel of a ground map; only band pixels go to JAX.
 
     dtype: the float type of the plan's arrays (the evaluation's, so a jitted call takes
-    them without a conversion).
+    them without a conversion). footprint: plan the pixel means too (the hard shadow's exact
+    area in each band pixel, ``PointPlan.wedge``'s pixel part); without it the map can only be
+    point-sampled.
     """
+    if rule == "wedge":
+        return _plan_grid_wedge(occ, pose, sun, grid, range_k_max, dtype, footprint)
     posed = PosedOccluder.make(occ, pose, sun)
     sil, light, world = posed.silhouette, posed.light, posed.world
     a, b, direction = posed.edge_geometry(rule)
@@ -476,9 +508,24 @@ def plan_grid(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, range_k_max
     hard_band[:m] = hard.ravel()[band_idx]
     near = np.zeros(size, ftype)
     near[:m] = near_b
+    wedge = None
+    if footprint:  # the pixel means take the hard shadow's exact area in each pixel
+        if m:
+            # Only pixels near the outline can hold part of it (a raster pixel is the map's).
+            near_outline = np.flatnonzero(raster.boundary_dist_px.reshape(-1)[index_w] <= 2.0)
+            rows_g, cols_g = np.divmod(band_idx[near_outline], w)
+            band_pts = grid.to_world(cols_g, rows_g).reshape(-1, 3)
+            part = _pixel_area_choices(posed, band_pts, raster.depth_count.reshape(-1)[index_w[near_outline]]
+                                       .astype(np.float64), np.eye(2, 3) * grid.pixel_m, len(near_outline))
+            default = np.zeros(size)
+            default[:m] = hard_band[:m]
+            wedge = part.select(np.arange(len(near_outline)), pad_points=size, place=near_outline,
+                                default_offset=default).astype(ftype)
+        else:
+            wedge = _no_wedge(size, True).astype(ftype)
     # NumPy arrays, not device arrays: a jitted call takes them far more cheaply than
     # jax.device_put or jnp.asarray would.
-    plan = PointPlan(_pack_edges(occ, sil, ftype, raster), edge_id, hard_band, active, near)
+    plan = PointPlan(_pack_edges(occ, sil, ftype, raster), edge_id, hard_band, active, near, wedge)
     return GridPlan(grid, hard, index, plan, raster, m, len(sil.vertex_ids))
 
 
@@ -491,14 +538,19 @@ def grid_bucket_size(n: int, minimum: int = 256) -> int:
 
 
 def concatenate_plans(plans: list[PointPlan], counts: list[int], pad_to: int | None = None,
-                      edge_pad_to: int | None = None) -> PointPlan:
+                      edge_pad_to: int | None = None, pairs_to: int | None = None,
+                      cross_to: int | None = None) -> PointPlan:
     """One plan for several point sets (each with its own sun): edges stacked, ids offset.
 
-    counts: how many leading points of each plan are real (the rest is padding).
+    counts: how many leading points of each plan are real (the rest is padding). pairs_to,
+    cross_to: the ``wedge`` rule's pairs and crossings padded to these sizes (at least), for
+    a fixed compiled shape.
     """
     verts, signs, papers, ids, hards, actives, nears, neighbours = [], [], [], [], [], [], [], []
+    edge_offsets = []
     offset = 0
     for plan, n in zip(plans, counts):
+        edge_offsets.append(offset)
         e = plan.edges
         if e.neighbours is not None:
             nbr = np.asarray(e.neighbours)
@@ -521,6 +573,288 @@ def concatenate_plans(plans: list[PointPlan], counts: list[int], pad_to: int | N
     paper = pad(np.concatenate(papers), e_size, 0.0)
     paper[offset:, 2] = 1.0
     nbr = pad(np.concatenate(neighbours), e_size, -1) if len(neighbours) == len(plans) and plans else None
-    edges = EdgeSet(v, pad(np.concatenate(signs), e_size, 1.0), paper, nbr)
+    jumps = [p.edges.jump for p in plans]
+    jump = None
+    if plans and all(j is not None for j in jumps):
+        jump = pad(np.concatenate([np.asarray(j) for j in jumps]), e_size, 0.0)
+    edges = EdgeSet(v, pad(np.concatenate(signs), e_size, 1.0), paper, nbr, jump)
+    wedge = None
+    if plans and all(p.wedge is not None for p in plans):
+        # Each plan's pairs point at its own edges: offset them as the edge ids are.
+        shifted = [_shift_edges(p.wedge, off) for p, off in zip(plans, edge_offsets)]
+        wedge = concatenate_wedge(shifted, counts, size, pairs_to, cross_to)
     return PointPlan(edges, pad(np.concatenate(ids), size, 0), pad(np.concatenate(hards), size, 0.0),
-                     pad(np.concatenate(actives), size, False), pad(np.concatenate(nears), size, 0.0))
+                     pad(np.concatenate(actives), size, False), pad(np.concatenate(nears), size, 0.0), wedge)
+
+
+def _shift_edges(arrays: WedgeArrays, offset: int) -> WedgeArrays:
+    """The choices with their pairs' edge ids moved by ``offset`` (plans concatenated)."""
+    return WedgeArrays(**{**arrays.fields(), "pair_edge": np.asarray(arrays.pair_edge) + offset})
+
+
+def _with_pixel_area(plan: PointPlan, occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, pixel_axes,
+                     ground: bool) -> PointPlan:
+    """``plan`` with the hard shadow's pieces in the pixels of its active points (``_pixel_area_choices``)."""
+    posed = PosedOccluder.make(occ, pose, sun)
+    n = len(points)
+    size = len(plan.hard)
+    act = np.flatnonzero(np.asarray(plan.active)[:n])
+    if ground:
+        winding = posed.winding_count_at(points[act, :2])
+    else:
+        winding = np.asarray(plan.hard)[act].astype(np.float64)
+        cast = np.flatnonzero(winding > 0)
+        winding[cast] = _layers_in_front(posed, points[act[cast]])
+    axes = np.asarray(pixel_axes, np.float64)
+    axes = axes[act] if axes.ndim == 3 else axes
+    part = _pixel_area_choices(posed, points[act], winding, axes, len(act))
+    default = np.zeros(size)
+    default[:n] = np.asarray(plan.hard)[:n]
+    wedge = part.select(np.arange(len(act)), pad_points=size, place=act, default_offset=default)
+    return dataclasses.replace(plan, wedge=wedge)
+
+
+def _pixel_area_choices(posed: PosedOccluder, points: np.ndarray, winding: np.ndarray, pixel_axes: np.ndarray,
+                        size: int) -> WedgeArrays:
+    """The hard shadow's pieces in each point's pixel (the pixel part of ``WedgeArrays``, for the
+    ``edge`` and ``paper`` rules' pixel means), for points (m, 3) with depth complexity winding
+    (m,) and pixel axes (2, 3) or (m, 2, 3), padded to ``size`` points. The pairs index the
+    silhouette edges in their order (``_pack_edges``)."""
+    m = len(points)
+    hard = (np.asarray(winding) >= 0.5).astype(np.float64)
+    edges = wedge_edges(posed.occluder, posed.silhouette, posed.world, posed.rotation, posed.light, 0.0)
+    centre = np.flatnonzero(edges.centre)  # the silhouette from the sun's centre, first
+    reach_px = np.broadcast_to(_pixel_reach(np.asarray(pixel_axes, np.float64), posed.light), (m,))
+    cand = gather_candidates(points, edges.a[centre], edges.b[centre],
+                             np.full(len(centre), float(reach_px.max(initial=0.0))), posed.light, 0.0, reach_px)
+    axes = np.asarray(pixel_axes, np.float64)
+    axes = axes[cand.index] if axes.ndim == 3 else axes
+    ids = cand.ids[:, :max(1, int(cand.count.max(initial=0)))]
+    arrays, boundary, _ = arrangement(points[cand.index], ids, edges, posed.light, winding[cand.index], -1.0,
+                                      reach_px[cand.index], axes)
+    on = np.flatnonzero(boundary)
+    default = np.zeros(size)
+    default[:m] = hard
+    return arrays.select(on, pad_points=size, place=cand.index[on], default_offset=default)
+
+
+# -- the ``wedge`` rule -------------------------------------------------------------------------
+
+def _pixel_reach(axes: np.ndarray, light: np.ndarray) -> np.ndarray:
+    """How far across the light (metres) a pixel's box reaches from its centre, (...,) for axes
+    (..., 2, 3): half the sum of its two sides seen along the light (the reach of the footprint's
+    box in penumbra units, ``wedge._line_share``), with a margin."""
+    across = axes - (axes @ light)[..., None] * light
+    return 0.5 * (1.0 + REACH_MARGIN) * np.linalg.norm(across, axis=-1).sum(-1)
+
+
+def _wedge_edges(posed: PosedOccluder, range_k_max: float) -> WedgeEdges:
+    """The edges the ``wedge`` rule may need under this sun (``wedge_plan.wedge_edges``)."""
+    return wedge_edges(posed.occluder, posed.silhouette, posed.world, posed.rotation, posed.light, range_k_max)
+
+
+def _pack_wedge_edges(occ: Occluder, edges: WedgeEdges, dtype=np.float64) -> EdgeSet:
+    """The wedge edges as an EdgeSet padded to a bucket (jump 0 on padding edges; the other
+    rules' fields are unused)."""
+    s = len(edges.jump)
+    size = bucket_size(s, 16)
+    verts = np.zeros((size, 2, 3), dtype)
+    verts[:, 1, 0] = 1.0
+    verts[:s] = occ.vertices[edges.vertex_ids]
+    paper = np.zeros((size, 3), dtype)
+    paper[:, 2] = 1.0
+    jump = np.zeros(size, dtype)
+    jump[:s] = edges.jump
+    return EdgeSet(verts, np.ones(size, dtype), paper, None, jump)
+
+
+def _wedge_choices(posed: PosedOccluder, edges, points, edge_reach: np.ndarray, range_k_max: float,
+                   pixel_reach, winding_at, pixel_axes=None):
+    """The ``wedge`` rule's choices: (active (m,) indices of the points to evaluate, the
+    ``WedgeArrays`` of the points the arrangement saw, which of them are active (m,)).
+
+    points: (n, 3), or a ground window (``gather_candidates``); winding_at:
+    W(0) at point indices (m,) -> (m,). A point is evaluated when the boundary of {W >= 1} passes
+    through its disk (of the plan's largest radius, widened by the pixel's reach) or its pixel;
+    elsewhere the disk is wholly hidden or wholly seen, and alpha is the hard shadow.
+    pixel_axes (2, 3) or (n, 2, 3): each point's pixel (``arrangement``), for the hard shadow's
+    area within it."""
+    cand = gather_candidates(points, edges.a, edges.b, edge_reach, posed.light, range_k_max, pixel_reach)
+    winding = winding_at(cand.index)
+    w = np.where(cand.ids >= 0, edges.jump[np.maximum(cand.ids, 0)], 0.0)
+    keep = np.flatnonzero(w.sum(axis=1) >= winding)
+    index = cand.index[keep]
+    if isinstance(points, np.ndarray):
+        pts = points[index]
+    else:
+        rows, cols = np.divmod(index, points.width)
+        pts = points.to_world(cols, rows).reshape(-1, 3)
+    axes = None
+    if pixel_axes is not None:
+        axes = np.asarray(pixel_axes, np.float64)
+        axes = axes[index] if axes.ndim == 3 else axes
+    reach = np.asarray(pixel_reach, np.float64)
+    reach = reach[index] if reach.ndim else reach
+    ids = cand.ids[keep, :max(1, int(cand.count[keep].max(initial=0)))]
+    arrays, boundary, _ = arrangement(pts, ids, edges, posed.light, winding[keep], range_k_max * (1.0 + REACH_MARGIN),
+                                      reach, axes)
+    on = np.flatnonzero(boundary)
+    return index[on], arrays, on
+
+
+def _ground_reach(posed: PosedOccluder, edges: WedgeEdges, range_k_max: float, pixel_reach: float) -> np.ndarray:
+    """How far (metres across the light) from an edge its candidates on the ground can lie (S,):
+    the sun's cone at the edge's height above them, widened by the pixel's reach."""
+    lz = max(abs(float(posed.light[2])), 1e-9)
+    kappa = range_k_max * (1.0 + REACH_MARGIN)
+    z = np.maximum(np.maximum(edges.a[:, 2], edges.b[:, 2]), 0.0)
+    return kappa * (z + pixel_reach) / max(lz - kappa, 1e-9) + pixel_reach
+
+
+def _no_wedge(size: int, pixel: bool) -> WedgeArrays:
+    """The choices of ``size`` points without any pair."""
+    none = dict(pair_point=np.zeros(0, np.int32), pair_edge=np.zeros(0, np.int32), flip=np.zeros(0),
+                side_start=np.zeros(0), side_end=np.zeros(0), cross=np.zeros((0, 2), np.int32), cross_change=np.zeros(0))
+    if pixel:
+        none.update(pixel_hard_offset=np.zeros(0), pixel_flip=np.zeros(0), pixel_side_start=np.zeros(0),
+                    pixel_side_end=np.zeros(0),
+                    pixel_cross=np.zeros((0, 2), np.int32), pixel_cross_change=np.zeros(0))
+    return WedgeArrays(hard_offset=np.zeros(0), **none).select(np.zeros(0, np.int64), pad_points=size)
+
+
+def _layers_in_front(posed: PosedOccluder, points: np.ndarray) -> np.ndarray:
+    """The depth complexity (N,) between points (N, 3) and the sun: how many layers of the mesh
+    the ray from each point towards the sun crosses (lit faces for a closed mesh, every face not
+    edge-on for an open one; ray casting, trimesh/embree)."""
+    import trimesh
+    occ, light = posed.occluder, posed.light
+    count = np.zeros(len(points))
+    if not len(points):
+        return count
+    ndotl = (occ.face_normals @ posed.rotation.T) @ light
+    faces = occ.faces[ndotl < 0] if occ.watertight else occ.faces[np.abs(ndotl) > 1e-7]
+    if not len(faces):
+        return count
+    mesh = trimesh.Trimesh(posed.world, faces, process=False)
+    scale = float(np.abs(posed.world).max(initial=1.0))
+    origins = points - (1e-6 * scale) * light  # off the receiver's own surface, towards the sun
+    _, ray = mesh.ray.intersects_id(origins, np.broadcast_to(-light, points.shape), multiple_hits=True)
+    np.add.at(count, ray, 1.0)
+    return count
+
+
+def _plan_points_wedge(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k_max: float,
+                       pad_to: int | None, normals: np.ndarray | None, ground: bool,
+                       pixel_axes: np.ndarray | None = None) -> PointPlan:
+    """``plan_points`` for the ``wedge`` rule: points on the ground (``ground``: z = 0, the depth
+    complexity from the fill layers' winding counts) or anywhere (normals: attached shadow; the
+    depth complexity in front of each point by ray casting where the occluder may lie behind it,
+    else from the winding counts in the sun's view)."""
+    posed = PosedOccluder.make(occ, pose, sun)
+    light = posed.light
+    n = len(points)
+    size = pad_to or bucket_size(n)
+    hard = np.zeros(size)
+    active = np.zeros(size, bool)
+    wedge = _wedge_edges(posed, range_k_max)
+    edges = _pack_wedge_edges(occ, wedge)
+    none = np.zeros((size, 0), np.int32)
+    attached = np.zeros(n, bool) if normals is None else faces_away(normals, light)
+    hard[:n] = attached
+    if not (n and len(wedge.jump)):
+        return PointPlan(edges, none, hard, active, np.zeros(size), _no_wedge(size, pixel_axes is not None))
+    if ground:
+        winding = posed.winding_count_at(points[:, :2], posed.ground_vertices())
+    else:
+        frame = LightFrame.of_light(light, 0.5 * (posed.world.min(0) + posed.world.max(0)))
+        uv_v, d_v = frame.project(posed.world)
+        uv_p, d_p = frame.project(points)
+        winding = posed.winding_count_at(uv_p, projected=uv_v)
+        # Farther from the sun than the whole occluder: every layer in the view lies in front.
+        among = np.flatnonzero((winding > 0) & (d_p <= d_v.max() + 1e-9 * float(np.abs(posed.world).max())))
+        winding[among] = _layers_in_front(posed, points[among])
+    winding[attached] = 0.0
+    hard[:n] = hard[:n] + (1 - hard[:n]) * (winding >= 0.5)
+    reach_px = np.zeros(n)  # point sampling: the disk alone
+    if pixel_axes is not None:  # the pixels' own reach (the footprint's box)
+        reach_px = np.broadcast_to(_pixel_reach(np.asarray(pixel_axes, np.float64), light), (n,)).copy()
+    r = float(reach_px.max())
+    kappa = range_k_max * (1.0 + REACH_MARGIN)
+    if ground:
+        reach = _ground_reach(posed, wedge, range_k_max, r)
+    else:
+        d_e = np.minimum(wedge.a @ frame.light, wedge.b @ frame.light) - frame.origin @ frame.light
+        reach = kappa * np.maximum(float(d_p.max()) - d_e, 0.0) + r
+    free = np.flatnonzero(~attached)
+    sel, arrays, on = _wedge_choices(posed, wedge, points[free], reach, range_k_max,
+                                     reach_px[free], lambda i: winding[free][i],
+                                     None if pixel_axes is None else (
+                                         pixel_axes if np.ndim(pixel_axes) == 2 else np.asarray(pixel_axes)[free]))
+    active[free[sel]] = True
+    return PointPlan(edges, none, hard, active, np.zeros(size),
+                     _placed(arrays, on, free[sel], size, hard[:n]))
+
+
+def _placed(arrays: WedgeArrays, on: np.ndarray, rows: np.ndarray, size: int, hard: np.ndarray) -> WedgeArrays:
+    """The choices of the arrangement's points ``on`` placed at rows ``rows`` of ``size`` points
+    whose other offsets are their hard shadow (n,)."""
+    default = np.zeros(size)
+    default[:len(hard)] = hard
+    return arrays.select(on, pad_points=size, place=rows, default_offset=default)
+
+
+def _plan_grid_wedge(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, range_k_max: float,
+                     dtype, footprint: bool = True) -> GridPlan:
+    """``plan_grid`` for the ``wedge`` rule: the depth complexity of the window's pixels from the
+    winding counts of the fill layers, and the pixels whose disk or pixel the shadow's boundary
+    passes in the band."""
+    posed = PosedOccluder.make(occ, pose, sun)
+    sil = posed.silhouette
+    h, w = grid.height, grid.width
+    hard = np.zeros((h, w), np.uint8)
+    wedge = _wedge_edges(posed, range_k_max)
+    ftype = np.dtype(dtype)
+    band_idx = np.zeros(0, np.int64)
+    arrays = None
+    hard_band = np.zeros(0)
+    if len(wedge.jump):
+        ground = posed.ground_vertices()
+        axes = np.eye(2, 3) * grid.pixel_m if footprint else None
+        reach_m = float(_pixel_reach(axes, posed.light)) if footprint else 0.0
+        reach = _ground_reach(posed, wedge, range_k_max, reach_m)
+        ids_v = wedge.vertex_ids
+        # The window: the shadow's outline (the silhouette's shadow) padded by the widest reach.
+        seg = np.concatenate([ground[ids_v[:, 0]], ground[ids_v[:, 1]]])
+        px = grid.to_pixel(seg)
+        pad = float(reach.max()) / grid.pixel_m + 2.0
+        c0 = int(max(np.floor(px[:, 0].min() - pad), 0))
+        c1 = int(min(np.ceil(px[:, 0].max() + pad), w - 1))
+        r0 = int(max(np.floor(px[:, 1].min() - pad), 0))
+        r1 = int(min(np.ceil(px[:, 1].max() + pad), h - 1))
+        if c1 >= c0 and r1 >= r0:
+            window = GroundGrid(grid.pixel_m, (grid.origin_m[0] + c0 * grid.pixel_m,
+                                               grid.origin_m[1] - r0 * grid.pixel_m), c1 - c0 + 1, r1 - r0 + 1)
+            vpx = window.to_pixel(ground)
+            count = np.zeros((window.height, window.width), np.float32)
+            for edges_f, weights in sil.fill_edges:
+                count += np.abs(winding_count_fill((window.height, window.width), vpx[edges_f[:, 0]],
+                                                   vpx[edges_f[:, 1]], weights))
+            hard[r0:r1 + 1, c0:c1 + 1] = count >= 0.5
+            flat_count = count.reshape(-1)
+            sel, arrays, on = _wedge_choices(posed, wedge, window, reach, range_k_max, reach_m,
+                                             lambda i: flat_count[i].astype(np.float64), axes)
+            rows, cols = np.divmod(sel, window.width)
+            band_idx = (rows + r0) * w + (cols + c0)
+            hard_band = flat_count[sel] >= 0.5
+    m = len(band_idx)
+    size = grid_bucket_size(m)
+    index = np.full(size, h * w, np.int32)
+    index[:m] = band_idx
+    active = np.zeros(size, bool)
+    active[:m] = True
+    hb = np.zeros(size, ftype)
+    hb[:m] = hard_band
+    choices = _no_wedge(size, footprint) if arrays is None else arrays.select(on, pad_points=size)
+    plan = PointPlan(_pack_wedge_edges(occ, wedge, ftype), np.zeros((size, 0), np.int32), hb, active,
+                     np.zeros(size, ftype), choices.astype(ftype))
+    return GridPlan(grid, hard, index, plan, None, m, len(wedge.jump))

@@ -15,7 +15,7 @@ from scipy.spatial.transform import Rotation
 
 from .occluder import Occluder, Silhouette, silhouette
 from .params import Pose, Sun
-from .raster import project_to_ground, winding_at_points
+from .raster import project_to_ground, winding_at_points, winding_count_at_points
 from .sun import check_sun_above_horizon, light_direction
 
 __all__ = ["PosedOccluder", "pose_matrix", "posed_vertices"]
@@ -73,12 +73,12 @@ class PosedOccluder:
     def edge_geometry(self, rule: str = "edge") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Silhouette edges in the world: ends a, b (S, 3) and expansion directions (S, 3).
 
-        The direction is the outward edge normal for the ``edge`` rule and the seed's
+        The direction is the outward edge normal for the ``edge`` and ``wedge`` rules and the seed's
         normalize(N1 + N2) for the ``paper`` rule.
         """
         sil = self.silhouette
         ids = sil.vertex_ids
-        local = sil.normal_local if rule == "edge" else sil.paper_normal_local
+        local = sil.paper_normal_local if rule == "paper" else sil.normal_local
         return self.world[ids[:, 0]], self.world[ids[:, 1]], local @ self.rotation.T
 
     def ground_vertices(self, plane_z: float = 0.0) -> np.ndarray:
@@ -98,3 +98,13 @@ class PosedOccluder:
         for edges, weights in self.silhouette.fill_edges:
             inside |= winding_at_points(points_xy, ground[edges[:, 0]], ground[edges[:, 1]], weights)
         return inside
+
+    def winding_count_at(self, points_xy: np.ndarray, projected: np.ndarray | None = None) -> np.ndarray:
+        """The depth complexity (N,) at points (N, 2): how many layers of the mesh the sun's ray
+        through each crosses, the sum over the fill layers of their winding counts' magnitudes
+        (for a closed mesh, the lit faces' count). ``projected`` as ``hard_shadow_at``."""
+        ground = self.ground_vertices() if projected is None else projected
+        total = np.zeros(len(points_xy))
+        for edges, weights in self.silhouette.fill_edges:
+            total += np.abs(winding_count_at_points(points_xy, ground[edges[:, 0]], ground[edges[:, 1]], weights))
+        return total

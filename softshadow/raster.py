@@ -28,8 +28,8 @@ import numpy as np
 
 from .camera import GroundGrid
 
-__all__ = ["ShadowRaster", "project_to_ground", "rasterise_shadow", "winding_fill", "winding_at_points",
-           "draw_segment_labels", "candidate_labels"]
+__all__ = ["ShadowRaster", "project_to_ground", "rasterise_shadow", "winding_fill", "winding_count_fill",
+           "winding_at_points", "winding_count_at_points", "draw_segment_labels", "candidate_labels"]
 
 
 def project_to_ground(points: np.ndarray, light: np.ndarray, plane_z: float = 0.0) -> np.ndarray:
@@ -56,6 +56,7 @@ class ShadowRaster:
     boundary_dist_px: np.ndarray
     edge_neighbours: np.ndarray | None = None  # (S, 2) outline edges sharing each end vertex, -1: none
     edge_outline_fraction: np.ndarray | None = None  # (S,) how much of each edge is on the outline
+    depth_count: np.ndarray | None = None  # (H, W) float32: how many layers of the mesh each pixel's ray crosses
 
     def lookup(self, xy: np.ndarray):
         """(hard, edge_label, boundary distance in metres) at world points (N, 2+), nearest pixel.
@@ -75,7 +76,15 @@ class ShadowRaster:
 
 def winding_fill(shape: tuple[int, int], start: np.ndarray, end: np.ndarray,
                  weight: np.ndarray) -> np.ndarray:
-    """Pixels (H, W) bool with non-zero winding number of weighted directed segments.
+    """Pixels (H, W) bool with non-zero winding number of weighted directed segments
+    (``winding_count_fill`` != 0)."""
+    return winding_count_fill(shape, start, end, weight) != 0
+
+
+def winding_count_fill(shape: tuple[int, int], start: np.ndarray, end: np.ndarray,
+                       weight: np.ndarray) -> np.ndarray:
+    """Winding number (H, W) float32 (integer-valued) of weighted directed segments at the pixel
+    centres.
 
     start, end (B, 2) in pixel coordinates (col, row), pixel centres at integers;
     weight (B,) how many times (an integer) each segment is traversed start -> end. A pixel
@@ -88,7 +97,7 @@ def winding_fill(shape: tuple[int, int], start: np.ndarray, end: np.ndarray,
     counts = np.maximum(hi_row - lo_row, 0)
     total = int(counts.sum())
     if not total:
-        return np.zeros((h, w), bool)
+        return np.zeros((h, w), np.float32)
     seg = np.repeat(np.arange(len(start)), counts)
     rows = lo_row[seg] + (np.arange(total) - np.repeat(np.cumsum(counts) - counts, counts))
     x0, dx = start[:, 0], end[:, 0] - start[:, 0]
@@ -102,7 +111,7 @@ def winding_fill(shape: tuple[int, int], start: np.ndarray, end: np.ndarray,
     acc = np.zeros((h, w + 1), dtype)
     np.add.at(acc.reshape(-1), rows * (w + 1) + cols, signed.astype(dtype))
     integral = cv2.integral(acc, sdepth=cv2.CV_32F if dtype == np.float32 else cv2.CV_64F)
-    return np.not_equal(integral[1:, 1:w + 1], integral[:-1, 1:w + 1])
+    return (integral[1:, 1:w + 1] - integral[:-1, 1:w + 1]).astype(np.float32)
 
 
 def draw_segment_labels(shape: tuple[int, int], start: np.ndarray, end: np.ndarray,
@@ -190,11 +199,10 @@ def rasterise_shadow(grid: GroundGrid, world_vertices: np.ndarray, light: np.nda
     """
     h, w = grid.height, grid.width
     px = grid.to_pixel(project_to_ground(world_vertices, light) if ground is None else ground)
-    hard = None
+    count = np.zeros((h, w), np.float32)
     for edges, weights in silhouette.fill_edges:
-        layer = winding_fill((h, w), px[edges[:, 0]], px[edges[:, 1]], weights)
-        hard = layer if hard is None else hard | layer
-    hard = np.zeros((h, w), np.uint8) if hard is None else hard.view(np.uint8)
+        count += np.abs(winding_count_fill((h, w), px[edges[:, 0]], px[edges[:, 1]], weights))
+    hard = (count > 0.5).view(np.uint8)
 
     ids = silhouette.vertex_ids
     start, end = px[ids[:, 0]], px[ids[:, 1]]
@@ -215,7 +223,7 @@ def rasterise_shadow(grid: GroundGrid, world_vertices: np.ndarray, light: np.nda
     seed_index = np.flatnonzero(src.reshape(-1) == 0)  # row-major, as OpenCV numbers them
     if not len(seed_index):
         return ShadowRaster(grid, hard, -np.ones((h, w), np.int32),
-                            np.full((h, w), np.inf, np.float32))
+                            np.full((h, w), np.inf, np.float32), depth_count=count)
     dist, nearest = cv2.distanceTransformWithLabels(src, cv2.DIST_L2, cv2.DIST_MASK_5,
                                                     labelType=cv2.DIST_LABEL_PIXEL)
     # DT label l > 0 is the l-th seed; the lookup table maps it to its edge index.
@@ -223,7 +231,7 @@ def rasterise_shadow(grid: GroundGrid, world_vertices: np.ndarray, light: np.nda
     lut[0] = -1
     lut[1:] = label_img.reshape(-1)[seed_index] - 1
     edge_label = lut[nearest]
-    return ShadowRaster(grid, hard, edge_label, dist, _end_neighbours(ids, on_outline), outline_fraction)
+    return ShadowRaster(grid, hard, edge_label, dist, _end_neighbours(ids, on_outline), outline_fraction, count)
 
 
 def _end_neighbours(ids: np.ndarray, keep: np.ndarray) -> np.ndarray:
@@ -304,7 +312,14 @@ def candidate_labels(edge_label: np.ndarray, rows: np.ndarray, cols: np.ndarray,
 
 def winding_at_points(points: np.ndarray, start: np.ndarray, end: np.ndarray,
                       weight: np.ndarray) -> np.ndarray:
-    """Non-zero winding test (N,) bool of points (N, 2) against weighted directed segments.
+    """Non-zero winding test (N,) bool of points (N, 2) against weighted directed segments
+    (``winding_count_at_points`` != 0)."""
+    return np.abs(winding_count_at_points(points, start, end, weight)) > 0.5
+
+
+def winding_count_at_points(points: np.ndarray, start: np.ndarray, end: np.ndarray,
+                            weight: np.ndarray) -> np.ndarray:
+    """Winding number (N,) float (integer-valued) of points (N, 2) against weighted directed segments.
 
     The exact twin of ``winding_fill`` at arbitrary points (same half-open rule: a segment
     counts for a point when ymin <= y < ymax and it crosses the point's row at or left of
@@ -312,7 +327,7 @@ def winding_at_points(points: np.ndarray, start: np.ndarray, end: np.ndarray,
     y they span, so each point tests only those of its bin: O(points x segments crossing
     its row + segments x bins spanned), compiled (numba).
     """
-    out = np.zeros(len(points), bool)
+    out = np.zeros(len(points))
     if not len(start) or not len(points):
         return out
     points = np.ascontiguousarray(points[:, :2], np.float64)
@@ -367,6 +382,6 @@ def _winding_kernel():
                 # Without branches: which segments count is unpredictable.
                 crosses = (py >= seg[j, 0]) & (py < seg[j, 1]) & (seg[j, 2] + (py - seg[j, 3]) * seg[j, 4] <= px)
                 total += seg[j, 5] * crosses
-            out[i] = abs(total) > 0.5
+            out[i] = total
 
     return kernel

@@ -127,8 +127,12 @@ def object_mask(occ: Occluder, pose: Pose, camera: PinholeCamera | GroundGrid) -
 class SoftShadowModel:
     """The expanded-shadow-volume soft shadow of one occluder.
 
-    rule: "edge" (default, docs/formats.md) or "paper" (the seed's vertex normals).
-    profile: "linear" (the seed's ramp) or "disk" (occluded fraction of a disk).
+    rule: "edge" (default, docs/formats.md), "paper" (the seed's vertex normals), or "wedge" (the
+    fraction of the sun's disk the mesh hides, from every silhouette edge near the point, the
+    overlaps of the mesh's parts counted once: ``softshadow.wedge``; the same k as ``edge``).
+    profile: "linear" (the seed's ramp) or "disk" (occluded fraction of a disk); for ``wedge``,
+    the light: the uniform disk of radius tan r = k, or the light whose straight edge casts the
+    linear ramp of half-width k.
     footprint: images (``ground_map``) average alpha over each pixel's footprint, in
     penumbra units (``footprint_profile_alpha``), instead of sampling pixel centres
     (default on: a penumbra narrower than a pixel otherwise aliases).
@@ -176,7 +180,7 @@ class SoftShadowModel:
     # -- discrete plans (NumPy) -------------------------------------------------------------
     def plan_grid(self, sun: Sun, pose: Pose, grid: GroundGrid, range_k_max: float) -> GridPlan:
         plan = plan_grid(self.occluder, pose, sun, grid, range_k_max, self.rule,
-                         dtype=jnp.result_type(float))
+                         dtype=jnp.result_type(float), footprint=self.footprint)
         if self.hidden_sky:
             plan = dataclasses.replace(plan, sky_hidden=self.sky_map(pose, grid))
         return plan
@@ -252,6 +256,8 @@ class SoftShadowModel:
             pixel_axes = np.asarray(pixel_axes, np.float64)
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         if plan is None:
+            if pixel_axes is not None:  # pixel means are planned (the hard shadow's area in each)
+                plan_kwargs = {**plan_kwargs, "pixel_axes": pixel_axes}
             plan = self.plan_points(sun, pose, points, _band_k(params, range_k_max), normals=normals,
                                     **plan_kwargs)
         n = len(points)
@@ -265,7 +271,8 @@ class SoftShadowModel:
             index = np.full(size, len(plan.hard), np.int64)  # padding: one past the end, dropped
             index[:m] = band
             sub = PointPlan(plan.edges, plan.edge_id[take], plan.hard[take], np.arange(size) < m,
-                            plan.near_boundary[take])
+                            plan.near_boundary[take],
+                            None if plan.wedge is None else plan.wedge.select(band, pad_points=size))
             axes = None
             if pixel_axes is not None:
                 axes = jnp.asarray(pixel_axes if pixel_axes.ndim == 2 else pixel_axes[take], dtype)
@@ -298,8 +305,9 @@ class SoftShadowModel:
         pixel_m = camera.fine_footprint_m(ground, valid, use)
         shading = jnp.full(camera.height * camera.width, jnp.nan)
         if len(pts):
-            plan = self.plan_points(sun, pose, pts, _band_k(params, range_k_max), pixel_m=max(pixel_m, 1e-4))
             axes = _camera_pixel_axes(ground, camera.height, camera.width)[use] if self.footprint else None
+            plan = self.plan_points(sun, pose, pts, _band_k(params, range_k_max), pixel_m=max(pixel_m, 1e-4),
+                                    pixel_axes=axes)
             values = self.at_points(params, sun, pose, pts, plan=plan, pixel_axes=axes)
             if self.hidden_sky:
                 sky = self.sky_nodes(pose, max(pixel_m, 1e-4)).at(pts)

@@ -26,6 +26,7 @@ STEPS = np.array([1e-7, 1e-6, 1e-6, 1e-6, 1e-7, 1e-7, 1e-7, 1e-6, 1e-6, 1e-6])
 # a count crosses a power of two.
 EDGE_PAD = 256
 POINT_PAD = 2048
+PAIR_PAD, CROSS_PAD = 4096, 512  # the wedge rule's pairs and crossings
 
 
 def unpack(theta):
@@ -34,12 +35,13 @@ def unpack(theta):
             Pose(position=theta[4:7], rotation_deg=theta[7:10]))
 
 
-def fixed_shape_plan(mdl, sun, pose, points, range_k_max):
-    """plan_points padded to EDGE_PAD edges and POINT_PAD points (same values, one compiled shape)."""
-    plan = mdl.plan_points(sun, pose, points, range_k_max=range_k_max)
+def fixed_shape_plan(mdl, sun, pose, points, range_k_max, pixel_axes=None):
+    """plan_points padded to EDGE_PAD edges and POINT_PAD points (same values, one compiled shape);
+    pixel_axes: the pixel footprints the plan holds the pixel means for."""
+    plan = mdl.plan_points(sun, pose, points, range_k_max=range_k_max, pixel_axes=pixel_axes)
     n_edges = int(np.asarray(plan.edges.outward_sign).shape[0])
     return concatenate_plans([plan], [len(points)], pad_to=max(POINT_PAD, int(plan.edge_id.shape[0])),
-                             edge_pad_to=max(EDGE_PAD, n_edges))
+                             edge_pad_to=max(EDGE_PAD, n_edges), pairs_to=PAIR_PAD, cross_to=CROSS_PAD)
 
 
 def check_point_gradients(mdl, theta0: np.ndarray, points: np.ndarray, range_k_max: float,
@@ -55,7 +57,7 @@ def check_point_gradients(mdl, theta0: np.ndarray, points: np.ndarray, range_k_m
     """
     theta0 = np.asarray(theta0, np.float64)
     sun, pose = unpack(jnp.asarray(theta0))[1:]
-    plan = fixed_shape_plan(mdl, sun, pose, points, range_k_max)
+    plan = fixed_shape_plan(mdl, sun, pose, points, range_k_max, pixel_axes)
 
     def shading(theta):
         p, s, q = unpack(theta)
@@ -99,5 +101,6 @@ def fixed_shape_grid_plan(mdl, sun, pose, grid, range_k_max):
     index = np.full(size, size, np.int32)
     index[:plan.n_band] = np.asarray(plan.band_index)[:plan.n_band]
     n_edges = int(np.asarray(plan.plan.edges.outward_sign).shape[0])
-    points = concatenate_plans([plan.plan], [plan.n_band], pad_to=size, edge_pad_to=max(EDGE_PAD, n_edges))
+    points = concatenate_plans([plan.plan], [plan.n_band], pad_to=size, edge_pad_to=max(EDGE_PAD, n_edges),
+                               pairs_to=PAIR_PAD, cross_to=CROSS_PAD)
     return dataclasses.replace(plan, band_index=index, plan=points)

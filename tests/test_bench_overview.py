@@ -54,12 +54,14 @@ def test_plain_bench_json_has_every_renderer_and_its_error(tmp_path, monkeypatch
         row = result["paper"]["table3"][mesh]
         assert row["hard"]["renderer"] == "paper (hard)" and row["soft"]["renderer"] == "paper"
     timed = list(_timed_cases(result))
-    # softshadow, paper hard and soft, naive on each mesh.
-    assert len(timed) == 12
+    # softshadow (edge and wedge rules), paper hard and soft, naive on each mesh.
+    assert len(timed) == 15
     assert all(c["median_ms"] > 0 and c["error"]["rms"] >= 0 and c["error"]["band_pixels"] > 0 for c in timed)
     rows = result["summary"]
     assert [(r["mesh"], r["renderer"]) for r in rows] == [
-        (m, r) for m in ("pillar", "ball", "dragon") for r in ("softshadow", "paper (hard)", "paper", "naive")]
+        (m, r) for m in ("pillar", "ball", "dragon")
+        for r in ("softshadow", "softshadow (wedge)", "paper (hard)", "paper", "naive")]
+    assert all(result["wedge"][m]["rule"] == "wedge" for m in ("pillar", "ball", "dragon"))
     assert all(r["times_softshadow"] == 1.0 for r in rows if r["renderer"] == "softshadow")
     naive = result["naive"]["pillar"]
     assert [r["rms_band"] for r in rows if r["mesh"] == "pillar" and r["renderer"] == "naive"] == [

@@ -19,7 +19,7 @@ class FitOptions:
 
     profiles: tuple[Literal["linear", "disk"], ...] = ("disk",)
     blur: tuple[bool, ...] = (False, True)
-    rule: Literal["edge", "paper"] = "edge"
+    rule: Literal["edge", "paper", "wedge"] = "edge"
     range_k_max: float = 0.03
     max_samples_per_photo: int = 1300  # three photos fill a 4,096 bucket
     robust: bool = True
