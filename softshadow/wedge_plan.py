@@ -112,7 +112,8 @@ class WedgeArrays(eqx.Module):
         where = -np.ones(len(self.hard_offset), np.int64)
         where[keep] = target
         pair_point = np.asarray(self.pair_point)
-        real = np.flatnonzero((pair_point >= 0) & (where[np.maximum(pair_point, 0)] >= 0))
+        own = np.flatnonzero(pair_point >= 0)  # (padding pairs belong to no point, also when there is none)
+        real = own[where[pair_point[own]] >= 0]
         remap = -np.ones(self.n_pairs, np.int64)
         remap[real] = np.arange(len(real))
         def per_point(values):

