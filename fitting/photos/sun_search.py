@@ -16,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import cv2
 import numpy as np
@@ -79,8 +80,9 @@ def _probe(model: SoftShadowModel, pose: Pose, view: PhotoView, width: int) -> _
     rows, cols = np.mgrid[0:size[1], 0:size[0]]
     full_c = (cols.ravel() + 0.5) * (w / size[0]) - 0.5
     full_r = (rows.ravel() + 0.5) * (h / size[1]) - 0.5
-    if view.receiver is not None:
-        points, _, valid, _ = view.receiver.at_pixels(view, full_c, full_r)
+    receiver: Any = view.receiver  # a ReceiverSurface of fitting.samples, the layer above
+    if receiver is not None:
+        points, _, valid, _ = receiver.at_pixels(view, full_c, full_r)
     else:
         points, valid, _ = view.ground_of_pixels(full_c, full_r)
     usable = valid.reshape(size[::-1]) & np.isfinite(gray) & (gray > 0)
