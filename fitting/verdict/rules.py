@@ -135,9 +135,10 @@ MIN_PENUMBRA_SAMPLES, NARROW_PENUMBRA_PX = 40, 2.0
 #: sun measured rho within 0.005 from 15).
 MIN_UMBRA_SAMPLES = 5
 #: A penumbra narrower than this many standard deviations of the pixel's area plus the camera's
-#: blur (the blur spot, sqrt(1/12 + blur^2) px) is not resolved by the photo: k then rests on the
-#: blur model (physical 400x300 folders, penumbrae of 1.1-1.6 px under 0.6-0.9 px of blur: k errors
-#: of -14 % to +13 %, within the stated error).
+#: blur (the blur spot, sqrt(1/12 + blur^2) px) is not resolved by the photo: the fitted blur and k
+#: trade off, and k is an upper bound (physical 400x300 folders, penumbrae of 1.1-1.6 px under
+#: 0.6-0.9 px of blur: k -14 % to +13 %; in the calibration study the knot at 344x258, a 1.1 px
+#: penumbra under a 1.2 px spot, read k 2.6 times the truth, 3.7 stated errors).
 RESOLVED_BLUR_WIDTHS = 2.0
 # On a receiver that is not the plane (range images, a mesh) such a penumbra makes the group
 # unreliable: the steps at 416x312 (a 1.5 px penumbra under a 2.1 px spot) read rho 5.4 sigma low, a
@@ -570,6 +571,9 @@ def judge_fit(fit: FitEvidence, context: GroupContext | None = None) -> tuple[Es
         flags.append(f"the penumbra ({fit.penumbra_px:.2g} px) is under the photo's blur spot on a {fit.receiver} "
                      "receiver, whose relief shares its pixels: rho and k rest on the blur model; photograph "
                      "closer or at full size")
+        unresolved = None
+    elif unresolved and bound is None:
+        bound = "the penumbra is under the photo's blur spot"  # RESOLVED_BLUR_WIDTHS
         unresolved = None
     notes.append(f"range not identifiable: {bound}; range_k is an upper bound" if bound else unresolved)
 
