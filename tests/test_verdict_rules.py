@@ -257,6 +257,14 @@ def test_photos_that_disagree_widen_the_error_and_beyond_a_limit_flag_the_group(
     far = [_photo("a.jpg", rho=0.16, rho_stderr=0.001), _photo("b.jpg", rho=0.30, rho_stderr=0.001)]
     _, verdict = rules.judge_fit(_fit(far, rho=0.2), GroupContext(2))
     assert not verdict.reliable and any(w.startswith("the photos disagree on rho") for w in verdict.warnings)
+    # Photos that disagree on k flag the group, unless no photo resolves the penumbra (calibration
+    # study group 90: 0.0025 +- 0.0002 against 0.056 +- 0.003 for a 1 px penumbra): k is then a bound.
+    on_k = [_photo("a.jpg", k=0.0025, k_stderr=0.0002), _photo("b.jpg", k=0.056, k_stderr=0.003)]
+    _, verdict = rules.judge_fit(_fit(on_k, k=0.0027, k_stderr_stat=0.0002), GroupContext(2))
+    assert not verdict.reliable and any(w.startswith("the photos disagree on k") for w in verdict.warnings)
+    estimate, verdict = rules.judge_fit(_fit(on_k, k=0.0027, k_stderr_stat=0.0002, penumbra_px=1.0), GroupContext(2))
+    assert verdict.reliable and not verdict.identifiable and estimate.range_k > 0.0027
+    assert not any("the photos disagree on k" in w for w in verdict.warnings)
     # Photos without umbra samples are not compared on rho.
     blind = [_photo("a.jpg"), _photo("b.jpg", rho=0.8, rho_stderr=0.001, n_umbra=4)]
     estimate, _ = rules.judge_fit(_fit(blind), GroupContext(2))

@@ -538,6 +538,10 @@ def judge_fit(fit: FitEvidence, context: GroupContext | None = None) -> tuple[Es
     notes: list[str | None] = []  # the others
     # 4. Agreement: photos that disagree widen the statistical errors.
     (k_ratio, k_disagree), (rho_ratio, rho_disagree) = _birge_ratio(fit, "k"), _birge_ratio(fit, "rho")
+    if _identifiability(fit) or resolution_warning(fit.penumbra_px, fit.blur_px):
+        # A penumbra the photos do not resolve: each photo's own k is no measurement, and the group's
+        # k is a bound (widened by the disagreement), not a compromise between photos.
+        k_disagree = None
     flags += [w for w in (k_disagree, rho_disagree) if w]
     k_stat, rho_stat = fit.k_stderr_stat * k_ratio, fit.rho_stderr_stat * rho_ratio
     k_err = math.hypot(k_stat, fit.k_stderr_sys) if _finite(fit.k_stderr_sys) else k_stat
