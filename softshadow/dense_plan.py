@@ -25,6 +25,7 @@ from .plan import (BAND_FRACTION, CANDIDATE_RADII_PX, CANDIDATE_REACH_PX, N_CAND
                    PointPlan, _pack_edges, bucket_size, light_band_widths, raster_grid)
 from .posed import PosedOccluder
 from .raster import candidate_labels, rasterise_shadow
+from .parallel_loops import parallel_numba
 from .scratch import Scratch, scratch_array
 from .shadowmap import (BIAS_PX, FACING_TOL, PRECISION_ULPS, SLOPE_PX, TAN_MAX, LightFrame, face_depth_at, faces_away,
                         shadow_map)
@@ -291,18 +292,18 @@ def _depth_test_kernel():
     and its 8 neighbours, else the nearest covered pixel's within 2, extrapolated) against
     the point's depth plus ``depth_bias`` (the receiver's slope from its normal), into
     behind[test]. A point on the occluder whose own face is the nearest at its pixel is lit."""
-    import numba
+    numba = parallel_numba()
     depth_at = face_depth_at()
 
-    @numba.njit(cache=True, nogil=True)
+    @numba.njit(cache=True, nogil=True, parallel=True)
     def kernel(cand, test, uv, depth, points, normals, faces, lit_ids, light, ox, oy, pixel_m, face_id, triangle,
                plane, face_slope, scale, behind):
         h, w = face_id.shape
-        for j in range(test.shape[0]):
+        for j in numba.prange(test.shape[0]):
             p = cand[test[j]]
-            scale = max(scale, abs(points[p, 0]), abs(points[p, 1]), abs(points[p, 2]))
+            scale = max(scale, max(abs(points[p, 0]), abs(points[p, 1]), abs(points[p, 2])))
         rounding = PRECISION_ULPS * np.finfo(np.float64).eps * scale
-        for j in range(test.shape[0]):
+        for j in numba.prange(test.shape[0]):
             q = test[j]
             p = cand[q]
             u, v = uv[q, 0], uv[q, 1]

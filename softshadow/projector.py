@@ -42,6 +42,7 @@ import numpy as np
 
 from .camera import GroundGrid, PinholeCamera, look_at_camera
 from .clip import clip_near
+from .parallel_loops import parallel_numba
 from .scratch import Scratch, scratch_array
 from .shadowmap import (_LOOKUP_OFFSETS, _NEAREST_OFFSETS, BIAS_PX, FACING_TOL, PRECISION_ULPS, SLOPE_PX, TAN_MAX,
                         ShadowMap, rasterise_depth)
@@ -253,9 +254,11 @@ def _light_kernel():
     point's own pixel is covered; the bias of ``shadowmap.depth_bias`` with the map pixel's
     footprint pixel_tan z). mode 0: the slide's colour into out (N, 3); 1: the irradiance added
     to out; 2: lit (N,) 1.0 / 0.0."""
-    import numba
+    numba = parallel_numba()
 
-    @numba.njit(cache=True, nogil=True)
+    # Parallel over the points (each writes its own row): a frame's 300,000 points are the
+    # largest single step of a scene image.
+    @numba.njit(cache=True, nogil=True, parallel=True)
     def kernel(points, normals, frame, slide, intensity, falloff, reference, has_map, face_id, near_cover, packed,
                face_slope, geometry, own_face, mode, out, lit):
         n_pts = points.shape[0]
@@ -267,10 +270,10 @@ def _light_kernel():
         # The rounding allowance's scale: the largest coordinate of the map's faces and the points.
         scale = geometry[4]
         if has_map and mode != 0:
-            for i in range(n_pts):
-                scale = max(scale, abs(points[i, 0]), abs(points[i, 1]), abs(points[i, 2]))
+            for i in numba.prange(n_pts):
+                scale = max(scale, max(abs(points[i, 0]), abs(points[i, 1]), abs(points[i, 2])))
         rounding = PRECISION_ULPS * np.finfo(np.float64).eps * scale
-        for i in range(n_pts):
+        for i in numba.prange(n_pts):
             p0, p1, p2 = points[i, 0], points[i, 1], points[i, 2]
             x = frame[0, 0] * p0 + frame[0, 1] * p1 + frame[0, 2] * p2 + frame[3, 0]
             y = frame[1, 0] * p0 + frame[1, 1] * p1 + frame[1, 2] * p2 + frame[3, 1]
