@@ -244,13 +244,13 @@ def _spacing_kernel():
 def _project_kernel():
     """Per point: attached shadow (n . L >= -FACING_TOL, as ``faces_away``; 1.0 in hard), the
     light-space position and depth (``LightFrame.project``); returns the largest depth."""
-    import numba
+    numba = parallel_numba()
 
-    @numba.njit(cache=True, nogil=True)
+    @numba.njit(cache=True, nogil=True, parallel=True)
     def kernel(points, normals, basis, tol, uv, d, hard):
         light = basis[3]
         d_max = -np.inf
-        for i in range(points.shape[0]):
+        for i in numba.prange(points.shape[0]):
             x, y, z = points[i, 0] - basis[0, 0], points[i, 1] - basis[0, 1], points[i, 2] - basis[0, 2]
             uv[i, 0] = x * basis[1, 0] + y * basis[1, 1] + z * basis[1, 2]
             uv[i, 1] = x * basis[2, 0] + y * basis[2, 1] + z * basis[2, 2]
@@ -268,19 +268,37 @@ def _project_kernel():
 def _reach_kernel():
     """``plan._within_reach``'s test (per_m: 1.5 wedge widths per metre behind the nearest
     edge), the points within reach gathered in order; returns their count."""
-    import numba
+    numba = parallel_numba()
 
-    @numba.njit(cache=True, nogil=True)
+    @numba.njit(inline="always")
+    def within(i, uv_all, d_all, lo, hi, edge_depth, per_m, margin_m):
+        pad = per_m * max(d_all[i] - edge_depth, 0.0) + margin_m
+        return (uv_all[i, 0] >= lo[0] - pad) & (uv_all[i, 0] <= hi[0] + pad) & (uv_all[i, 1] >= lo[1] - pad) \
+            & (uv_all[i, 1] <= hi[1] + pad)
+
+    # Two passes parallel over blocks of points: each block's count, then its points at its place.
+    @numba.njit(cache=True, nogil=True, parallel=True)
     def kernel(uv_all, d_all, hard, lo, hi, edge_depth, per_m, margin_m, cand, uv, d):
-        count = 0
-        for i in range(uv_all.shape[0]):
-            pad = per_m * max(d_all[i] - edge_depth, 0.0) + margin_m
-            if (uv_all[i, 0] >= lo[0] - pad) & (uv_all[i, 0] <= hi[0] + pad) & (uv_all[i, 1] >= lo[1] - pad) \
-                    & (uv_all[i, 1] <= hi[1] + pad):
-                cand[count] = i
-                uv[count, 0], uv[count, 1], d[count] = uv_all[i, 0], uv_all[i, 1], d_all[i]
-                count += 1
-        return count
+        n = uv_all.shape[0]
+        block = 8192
+        n_blocks = (n + block - 1) // block
+        start = np.zeros(n_blocks + 1, np.int64)
+        for b in numba.prange(n_blocks):
+            count = 0
+            for i in range(b * block, min((b + 1) * block, n)):
+                if within(i, uv_all, d_all, lo, hi, edge_depth, per_m, margin_m):
+                    count += 1
+            start[b + 1] = count
+        for b in range(n_blocks):
+            start[b + 1] += start[b]
+        for b in numba.prange(n_blocks):
+            count = start[b]
+            for i in range(b * block, min((b + 1) * block, n)):
+                if within(i, uv_all, d_all, lo, hi, edge_depth, per_m, margin_m):
+                    cand[count] = i
+                    uv[count, 0], uv[count, 1], d[count] = uv_all[i, 0], uv_all[i, 1], d_all[i]
+                    count += 1
+        return start[n_blocks]
 
     return kernel
 
@@ -330,27 +348,39 @@ def _lookup_kernel():
     """``ShadowRaster.lookup`` at light-space points (the nearest pixel): hard, label and the
     distance in metres (0, -1, +inf outside the raster); the points not in attached shadow within
     ``near_m`` of the outline listed in ``near``. Returns their count."""
-    import numba
+    numba = parallel_numba()
 
-    @numba.njit(cache=True, nogil=True)
+    # Parallel over blocks of points; the near points listed per block, then moved together.
+    @numba.njit(cache=True, nogil=True, parallel=True)
     def kernel(uv, ox, oy, pixel_m, hard, edge_label, dist_px, near_m, att, in_view, label, dist, near):
         h, w = hard.shape
         pm = np.float32(pixel_m)
+        n_pts = uv.shape[0]
+        block = 8192
+        n_blocks = (n_pts + block - 1) // block
+        start = np.zeros(n_blocks + 1, np.int64)
+        for b in numba.prange(n_blocks):
+            n = b * block
+            for i in range(b * block, min((b + 1) * block, n_pts)):
+                c = np.rint((uv[i, 0] - ox) / pixel_m)
+                r = np.rint((oy - uv[i, 1]) / pixel_m)
+                if 0 <= c < w and 0 <= r < h:
+                    ci, ri = int(c), int(r)
+                    in_view[i] = hard[ri, ci]
+                    label[i] = edge_label[ri, ci]
+                    dist[i] = dist_px[ri, ci] * pm
+                else:
+                    in_view[i], label[i], dist[i] = 0, -1, np.inf
+                # The comparison in float32, as the array version's (a float32 array against a float).
+                if dist[i] <= np.float32(near_m) and not att[i]:
+                    near[n] = i  # at the block's own place first (n <= i)
+                    n += 1
+            start[b + 1] = n - b * block
         n = 0
-        for i in range(uv.shape[0]):
-            c = np.rint((uv[i, 0] - ox) / pixel_m)
-            r = np.rint((oy - uv[i, 1]) / pixel_m)
-            if 0 <= c < w and 0 <= r < h:
-                ci, ri = int(c), int(r)
-                in_view[i] = hard[ri, ci]
-                label[i] = edge_label[ri, ci]
-                dist[i] = dist_px[ri, ci] * pm
-            else:
-                in_view[i], label[i], dist[i] = 0, -1, np.inf
-            # The comparison in float32, as the array version's (a float32 array against a float).
-            if dist[i] <= np.float32(near_m) and not att[i]:
-                near[n] = i
-                n += 1
+        for b in range(n_blocks):  # in order: a block's list moves down, never over one not yet moved
+            for k in range(start[b + 1]):
+                near[n + k] = near[b * block + k]
+            n += start[b + 1]
         return n
 
     return kernel

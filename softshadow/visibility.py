@@ -208,7 +208,9 @@ def visible_surfaces(camera: PinholeCamera | GroundGrid, surfaces=(), ground_alb
     n = _visible_kernel()(f_img.reshape(-1), lookup, source, verts, np.ascontiguousarray(faces, np.int64),
                           np.ascontiguousarray(all_normals), face_surface, np.ascontiguousarray(offsets, np.int64),
                           albedos, ground, ground_albedo is not None, view, rays, directions, h, w,
-                          surface.reshape(-1), face.reshape(-1), pixel, points, normals, albedo)
+                          surface.reshape(-1), face.reshape(-1), pixel, points, normals, albedo,
+                          scratch_array(scratch, "visible.distance", h * w),
+                          scratch_array(scratch, "visible.mesh_face", h * w, np.int32))
     pixel, points, normals, albedo = pixel[:n], points[:n], normals[:n], albedo[:n] if with_albedo else None
     if smooth:
         on_mesh = surface.reshape(-1)[pixel] >= 0
@@ -230,8 +232,9 @@ def _visible_kernel():
     something get their point, normal (turned towards the camera) and albedo, in pixel order.
     Returns how many do. ``surface``/``face`` get NOTHING, GROUND or a mesh's index and face.
 
-    Two passes parallel over rows: what each pixel sees and each row's count, then (at each
-    row's place in the compact arrays, from the counts) the points, normals and albedos."""
+    Two passes parallel over rows: what each pixel sees (its face and distance kept in dist and
+    mesh_face, (H W,)) and each row's count, then (at each row's place in the compact arrays, from
+    the counts) the points, normals and albedos."""
     numba = parallel_numba()
 
     @numba.njit(inline="always")
@@ -276,7 +279,7 @@ def _visible_kernel():
 
     @numba.njit(cache=True, nogil=True, parallel=True)
     def kernel(f_img, lookup, source, verts, faces, normals, face_surface, offsets, albedos, ground, has_ground,
-               view, rays, directions, h, w, surface, face, pixel, points, out_normals, albedo):
+               view, rays, directions, h, w, surface, face, pixel, points, out_normals, albedo, dist, mesh_face):
         counts = np.zeros(h + 1, np.int64)
         for row in numba.prange(h):
             count = 0
@@ -284,6 +287,8 @@ def _visible_kernel():
                 p = row * w + col
                 ox, oy, oz, dx, dy, dz = ray(p, row, col, view, rays, directions)
                 fid, t = hit(p, ox, oy, oz, dx, dy, dz, f_img, lookup, source, verts, faces, normals, has_ground)
+                dist[p] = t
+                mesh_face[p] = fid
                 if fid >= 0:
                     s = face_surface[fid]
                     surface[p] = s
@@ -306,7 +311,7 @@ def _visible_kernel():
                 if surface[p] == NOTHING:
                     continue
                 ox, oy, oz, dx, dy, dz = ray(p, row, col, view, rays, directions)
-                fid, t = hit(p, ox, oy, oz, dx, dy, dz, f_img, lookup, source, verts, faces, normals, has_ground)
+                fid, t = mesh_face[p], dist[p]
                 if fid >= 0:
                     s = face_surface[fid]
                     nx, ny, nz = normals[fid, 0], normals[fid, 1], normals[fid, 2]
