@@ -78,8 +78,9 @@ class DensePlan:
         return PointPlan(self.edges, edge_id, hard, active, near)
 
 
-def _empty(edges: EdgeSet, hard: np.ndarray) -> DensePlan:
-    return DensePlan(edges, hard, np.zeros(0, np.int64), np.zeros((0, N_CANDIDATES), np.int32), np.zeros(0))
+def _empty(occ: Occluder, sil, hard: np.ndarray) -> DensePlan:
+    """No point in a band: the silhouette's edges without a raster, and the hard shadow."""
+    return DensePlan(_pack_edges(occ, sil), hard, np.zeros(0, np.int64), np.zeros((0, N_CANDIDATES), np.int32), np.zeros(0))
 
 
 def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k_max: float,
@@ -105,10 +106,9 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
         normals = np.ascontiguousarray(normals, np.float64).reshape(-1, 3)
         if len(normals) != n:
             raise ValueError(f"{len(normals)} normals for {n} receiver points")
-    edges = _pack_edges(occ, sil)
     if not (n and len(sil.vertex_ids)):
         attached = np.zeros(n, bool) if normals is None else faces_away(normals, light)
-        return _empty(edges, attached.astype(np.float64))
+        return _empty(occ, sil, attached.astype(np.float64))
     # Per column: (V, 3).min(0) is several times slower.
     lo_w = np.array([world[:, j].min() for j in range(3)])
     hi_w = np.array([world[:, j].max() for j in range(3)])
@@ -137,7 +137,7 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
     count = _reach_kernel()(uv_all, d_all, hard, lo_occ, hi_occ, float(edge_depth.min()),
                             1.5 * float(light_band_widths(np.float64(1.0), range_k_max)), margin_m, cand, uv_p, d_p)
     if not count:
-        return _empty(edges, hard)
+        return _empty(occ, sil, hard)
     cand, uv_p, d_p = cand[:count], uv_p[:count], d_p[:count]
     att = hard[cand] > 0
     reach = float(light_band_widths(d_p.max() - edge_depth.min(), range_k_max))
@@ -151,7 +151,7 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
     lo = np.maximum(lo_occ - pad_m, lo_pts - pad_m)
     hi = np.minimum(hi_occ + pad_m, hi_pts + pad_m)
     if np.any(hi <= lo):
-        return _empty(edges, hard)
+        return _empty(occ, sil, hard)
     grid, map_pixel_m = raster_grid(lo, hi, pixel_m, map_pixel_m)
     raster = rasterise_shadow(grid, world, light, sil, uv_v)
     m = len(cand)

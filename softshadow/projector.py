@@ -424,7 +424,8 @@ def projector_shadow_map(projector: Projector, vertices, faces, *, facing=None, 
     depth = -1.0 / np.maximum(z, NEAR_M)  # the originals behind the plane are unused
     zbuf, fid = rasterise_depth(grid.to_pixel(uv), depth, faces, (height, width), facing=facing,
                                 out=(scratch_array(scratch, f"{name}.zbuf", (height, width)),
-                                     scratch_array(scratch, f"{name}.face_id", (height, width), np.int32)))
+                                     scratch_array(scratch, f"{name}.face_id", (height, width), np.int32)),
+                                scratch=scratch, name=name)
     # Per face, in one pass: the map's triangle and depth plane (``shadow_map``'s), the bias's slope
     # term in metric terms (tan of the angle between the face's normal and the ray from the
     # projector to its centroid) and the lookup's packed data.

@@ -185,7 +185,7 @@ def visible_surfaces(camera: PinholeCamera | GroundGrid, surfaces=(), ground_alb
             directions = camera.pixel_rays(cols, rows)
     zbuf = scratch_array(scratch, "visible.zbuf", (h, w), np.float64)
     f_img = scratch_array(scratch, "visible.face_id", (h, w), np.int32)
-    rasterise_depth(xy, depth, drawn, (h, w), facing=facing, out=(zbuf, f_img))
+    rasterise_depth(xy, depth, drawn, (h, w), facing=facing, out=(zbuf, f_img), scratch=scratch, name="visible")
     all_normals = surfaces[0].face_normals if len(surfaces) == 1 else (
         np.vstack([s.face_normals for s in surfaces]) if surfaces else np.zeros((0, 3)))
     face_surface = np.repeat(np.arange(len(surfaces)), np.diff(offsets)) if surfaces else np.zeros(0, np.int64)

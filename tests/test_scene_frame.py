@@ -195,3 +195,31 @@ def test_scratch_memo_keeps_a_result_while_its_inputs_stay():
     assert scratch.memo("x", (a.astype(np.float32), key, 1.5, "s"), make) == 4  # dtype counts
     assert scratch.memo("x", (a, key, 2.5, "s"), make) == 5
     assert scratch.memo("y", (a, key, 2.5, "s"), make) == 6  # per name
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_zbuffer_on_two_threads_equals_one(dtype):
+    """Many faces are drawn in two halves on two threads and merged: the same buffer bit for bit
+    (ties on shared edges keep the lower face, as one thread does)."""
+    import numba
+    import trimesh
+
+    from softshadow.shadowmap import SPLIT_FACES, rasterise_depth
+    sphere = trimesh.creation.icosphere(subdivisions=4)
+    rng = np.random.default_rng(3)
+    # Both windings, shuffled: every face drawn twice (ties), and each half holds winners.
+    faces = rng.permutation(np.vstack([sphere.faces, sphere.faces[:, ::-1]]))
+    assert len(faces) >= SPLIT_FACES
+    xy = sphere.vertices[:, :2] * 30.0 + 40.0 + rng.normal(0, 0.01, (len(sphere.vertices), 2))
+    depth = (sphere.vertices[:, 2] + 2.0).astype(dtype)
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        one = rasterise_depth(xy, depth, faces, (80, 90))
+        numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
+        two = rasterise_depth(xy, depth, faces, (80, 90), scratch=ss.internal.Scratch())
+    finally:
+        numba.set_num_threads(before)
+    assert (one[1] >= 0).sum() > 2500 and (one[1] >= len(faces) // 2).sum() > 500, "both halves must win pixels"
+    np.testing.assert_array_equal(one[0], two[0])
+    np.testing.assert_array_equal(one[1], two[1])
