@@ -184,7 +184,7 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
         shape = (map_grid.height, map_grid.width)
         smap = shadow_map(map_grid, uv_v, d_v, lit_faces, out=(scratch_array(scratch, "sun.map_depth", shape),
                                                                scratch_array(scratch, "sun.map_face", shape, np.int32)),
-                          scratch=scratch, name="sun.map")
+                          threads=2, scratch=scratch, name="sun.map")
         # ``ShadowMap.occluder_depth`` and ``depth_bias`` per point (their rules), the receiver's
         # slope from its normal, in one pass.
         scale = max(smap.scale, float(np.abs(world).max()))

@@ -385,13 +385,14 @@ def _light_kernel():
     return kernel
 
 
-def projector_shadow_map(projector: Projector, vertices, faces, *, facing=None, scratch: Scratch | None = None,
-                         name: str = "projector") -> ProjectorShadowMap:
+def projector_shadow_map(projector: Projector, vertices, faces, *, facing=None, threads: int = 1,
+                         scratch: Scratch | None = None, name: str = "projector") -> ProjectorShadowMap:
     """The perspective shadow map of the occluding triangles (world vertices (V, 3), faces (F, 3))
     seen from ``projector``; ``shadow_px`` pixels across the slide's larger side.
 
     facing (F,) int8, optional: -1 for the faces of closed, outward-wound meshes, whose faces
-    turned away from the projector are then not drawn (``rasterise_depth``); 0 otherwise.
+    turned away from the projector are then not drawn (``rasterise_depth``); 0 otherwise. threads:
+    2 lets the map of a large mesh be drawn on two threads (``rasterise_depth``).
     scratch, name: keep the map's arrays in these buffers under this name (``softshadow.scratch``;
     the map is then overwritten by the next one made with them).
     """
@@ -425,7 +426,7 @@ def projector_shadow_map(projector: Projector, vertices, faces, *, facing=None, 
     zbuf, fid = rasterise_depth(grid.to_pixel(uv), depth, faces, (height, width), facing=facing,
                                 out=(scratch_array(scratch, f"{name}.zbuf", (height, width)),
                                      scratch_array(scratch, f"{name}.face_id", (height, width), np.int32)),
-                                scratch=scratch, name=name)
+                                threads=threads, scratch=scratch, name=name)
     # Per face, in one pass: the map's triangle and depth plane (``shadow_map``'s), the bias's slope
     # term in metric terms (tan of the angle between the face's normal and the ray from the
     # projector to its centroid) and the lookup's packed data.

@@ -108,7 +108,7 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
     light = None
     plan, alpha_band = None, np.zeros(0)
     try:
-        vis = visible_surfaces(camera, surfaces, ground_albedo, scratch=scratch, albedo=False)
+        vis = visible_surfaces(camera, surfaces, ground_albedo, scratch=scratch, albedo=False, threads=2)
         n = len(vis.pixel)
         # Each point's surface (GROUND -1, the object 0, receivers 1...), its face on the object
         # (-1 elsewhere) and among the shadow casters' faces (-1: none), in one pass.
@@ -215,7 +215,7 @@ def _projector_maps(projectors: Sequence[Projector], casters: _Casters, scratch:
     """Each projector's shadow map of the casters (``projector_light``'s), kept while neither the
     projector's geometry nor the casters change (the map does not depend on the slide's values)."""
     def make(proj, j):
-        return lambda: projector_shadow_map(proj, casters.vertices, casters.faces, facing=casters.facing,
+        return lambda: projector_shadow_map(proj, casters.vertices, casters.faces, facing=casters.facing, threads=2,
                                             scratch=scratch, name=f"projector{j}")
 
     return [_memo(scratch, f"frame.projector{j}", (casters, proj.position, proj.target, proj.up, float(proj.fov_deg),

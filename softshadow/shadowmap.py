@@ -134,8 +134,8 @@ def _facing_kernel():
 
 def rasterise_depth(xy: np.ndarray, depth: np.ndarray, faces: np.ndarray,
                     shape: tuple[int, int], *, facing: np.ndarray | None = None,
-                    out: tuple[np.ndarray, np.ndarray] | None = None, scratch: Scratch | None = None,
-                    name: str = "zbuffer") -> tuple[np.ndarray, np.ndarray]:
+                    out: tuple[np.ndarray, np.ndarray] | None = None, threads: int = 1,
+                    scratch: Scratch | None = None, name: str = "zbuffer") -> tuple[np.ndarray, np.ndarray]:
     """Nearest-face depth buffer of triangles, generic over the projection.
 
     xy (V, 2) pixel coordinates (col, row; pixel centres at integers); depth (V,) any
@@ -149,11 +149,12 @@ def rasterise_depth(xy: np.ndarray, depth: np.ndarray, faces: np.ndarray,
     (a closed mesh's faces turned away from the viewer are never the nearest: skipping them
     halves the work and changes no pixel); 0 draws the face either way. out: the (H, W) depth
     (float64, or float32 for float32 depths) and face_id (int32) arrays to fill and return;
-    scratch, name: keep the second thread's buffers (below) under this name.
+    threads: 2 lets many faces be drawn on two threads (below); scratch, name: keep the
+    second thread's buffers under this name.
 
     Scanline: each face's rows, each row's span of columns from the face's edges, then the
     depth from the face's plane at those pixel centres; O(covered pixels + face rows). With
-    numba's threads (``parallel_loops``) and many faces, the two halves of the faces are drawn
+    threads=2, two numba threads (``parallel_loops``) and many faces, the two halves of the faces are drawn
     on two threads into two buffers, then merged, the first half's face kept on a tie: the
     buffer the one thread would draw, bit for bit.
     """
@@ -173,7 +174,7 @@ def rasterise_depth(xy: np.ndarray, depth: np.ndarray, faces: np.ndarray,
         args = (np.ascontiguousarray(xy, np.float64), np.ascontiguousarray(depth, np.float64),
                 np.ascontiguousarray(faces, np.int64), cull, zbuf, fid)
         numba = parallel_numba()
-        if len(faces) >= SPLIT_FACES and numba.get_num_threads() > 1:
+        if threads > 1 and len(faces) >= SPLIT_FACES and numba.get_num_threads() > 1:
             _zbuffer_kernel()[1](*args, scratch_array(scratch, f"{name}.split_depth", h * w, dtype),
                                  scratch_array(scratch, f"{name}.split_face", h * w, np.int32), h, w,
                                  dtype == np.float32)
@@ -494,12 +495,12 @@ def _planes_kernel():
 
 def shadow_map(grid: GroundGrid, uv: np.ndarray, depth: np.ndarray, faces: np.ndarray,
                dtype=np.float64, *, facing: np.ndarray | None = None,
-               out: tuple[np.ndarray, np.ndarray] | None = None, scratch: Scratch | None = None,
+               out: tuple[np.ndarray, np.ndarray] | None = None, threads: int = 1, scratch: Scratch | None = None,
                name: str = "shadow_map") -> ShadowMap:
     """The shadow map of faces (F, 3) with light-space vertices uv (V, 2) and depths (V,) on grid.
 
     dtype: the float type of the depth buffer and the planes (float32 to measure precision);
-    facing: back-face culling per face, out: the depth and face-id arrays to fill
+    facing: back-face culling per face, out: the depth and face-id arrays to fill, threads
     (``rasterise_depth``); scratch, name: keep the per-face arrays (triangles, planes, slopes)
     in these buffers under this name (``softshadow.scratch``: the map is then overwritten by the
     next one made with them).
@@ -508,7 +509,8 @@ def shadow_map(grid: GroundGrid, uv: np.ndarray, depth: np.ndarray, faces: np.nd
     depth = np.ascontiguousarray(depth, dtype)
     faces = np.ascontiguousarray(faces, np.int64)
     zbuf, fid = rasterise_depth(grid.to_pixel(uv).astype(dtype), depth, faces,
-                                (grid.height, grid.width), facing=facing, out=out, scratch=scratch, name=name)
+                                (grid.height, grid.width), facing=facing, out=out, threads=threads,
+                                scratch=scratch, name=name)
     # Each face's light-space triangle, depth plane and slope (``_face_planes``) and the
     # coordinates' magnitude, in one compiled pass.
     f = len(faces)

@@ -128,7 +128,8 @@ class VisibleSurfaces:
 
 
 def visible_surfaces(camera: PinholeCamera | GroundGrid, surfaces=(), ground_albedo=None,
-                     smooth: bool = False, *, scratch: Scratch | None = None, albedo: bool = True) -> VisibleSurfaces:
+                     smooth: bool = False, *, scratch: Scratch | None = None, albedo: bool = True,
+                     threads: int = 1) -> VisibleSurfaces:
     """The nearest surface at every pixel of ``camera`` (see the module docstring).
 
     surfaces: a sequence of ``Surface``; ground_albedo: the ground plane z = 0's albedo (one or
@@ -136,7 +137,8 @@ def visible_surfaces(camera: PinholeCamera | GroundGrid, surfaces=(), ground_alb
     (Gouraud/Phong-like, barycentric at the point) instead of the faces' own (flat, the default);
     scratch: keep the per-pixel arrays in these buffers (``softshadow.scratch``; the result is
     then overwritten by the next call with the same scratch); albedo: False leaves the points'
-    albedos out (``albedo`` None: a caller that has the surfaces' albedos by ``surface``).
+    albedos out (``albedo`` None: a caller that has the surfaces' albedos by ``surface``); threads: 2
+    lets the z-buffer draw a large mesh on two threads (``rasterise_depth``).
     """
     h, w = camera.height, camera.width
     surfaces = list(surfaces)
@@ -185,7 +187,8 @@ def visible_surfaces(camera: PinholeCamera | GroundGrid, surfaces=(), ground_alb
             directions = camera.pixel_rays(cols, rows)
     zbuf = scratch_array(scratch, "visible.zbuf", (h, w), np.float64)
     f_img = scratch_array(scratch, "visible.face_id", (h, w), np.int32)
-    rasterise_depth(xy, depth, drawn, (h, w), facing=facing, out=(zbuf, f_img), scratch=scratch, name="visible")
+    rasterise_depth(xy, depth, drawn, (h, w), facing=facing, out=(zbuf, f_img), threads=threads, scratch=scratch,
+                    name="visible")
     all_normals = surfaces[0].face_normals if len(surfaces) == 1 else (
         np.vstack([s.face_normals for s in surfaces]) if surfaces else np.zeros((0, 3)))
     face_surface = np.repeat(np.arange(len(surfaces)), np.diff(offsets)) if surfaces else np.zeros(0, np.int64)

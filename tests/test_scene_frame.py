@@ -217,7 +217,7 @@ def test_zbuffer_on_two_threads_equals_one(dtype):
         numba.set_num_threads(1)
         one = rasterise_depth(xy, depth, faces, (80, 90))
         numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
-        two = rasterise_depth(xy, depth, faces, (80, 90), scratch=ss.internal.Scratch())
+        two = rasterise_depth(xy, depth, faces, (80, 90), threads=2, scratch=ss.internal.Scratch())
     finally:
         numba.set_num_threads(before)
     assert (one[1] >= 0).sum() > 2500 and (one[1] >= len(faces) // 2).sum() > 500, "both halves must win pixels"
