@@ -208,12 +208,15 @@ def visible_surfaces(camera: PinholeCamera | GroundGrid, surfaces=(), ground_alb
     normals = scratch_array(scratch, "visible.normals", (h * w, 3))
     with_albedo = albedo
     albedo = scratch_array(scratch, "visible.albedo", (h * w if with_albedo else 0, 3))
-    n = _visible_kernel()(f_img.reshape(-1), lookup, source, verts, np.ascontiguousarray(faces, np.int64),
-                          np.ascontiguousarray(all_normals), face_surface, np.ascontiguousarray(offsets, np.int64),
-                          albedos, ground, ground_albedo is not None, view, rays, directions, h, w,
-                          surface.reshape(-1), face.reshape(-1), pixel, points, normals, albedo,
-                          scratch_array(scratch, "visible.distance", h * w),
-                          scratch_array(scratch, "visible.mesh_face", h * w, np.int32))
+    args = (f_img.reshape(-1), lookup, source, verts, np.ascontiguousarray(faces, np.int64),
+            np.ascontiguousarray(all_normals), face_surface, np.ascontiguousarray(offsets, np.int64), albedos, ground,
+            ground_albedo is not None, view, rays, directions, h, w, surface.reshape(-1), face.reshape(-1), pixel,
+            points, normals, albedo)
+    if parallel_numba().get_num_threads() > 1:
+        n = _visible_kernel()[1](*args, scratch_array(scratch, "visible.distance", h * w),
+                                 scratch_array(scratch, "visible.mesh_face", h * w, np.int32))
+    else:  # one pass (the two passes' extra stores cost a fifth more on one thread)
+        n = _visible_kernel()[0](*args)
     pixel, points, normals, albedo = pixel[:n], points[:n], normals[:n], albedo[:n] if with_albedo else None
     if smooth:
         on_mesh = surface.reshape(-1)[pixel] >= 0
@@ -235,9 +238,10 @@ def _visible_kernel():
     something get their point, normal (turned towards the camera) and albedo, in pixel order.
     Returns how many do. ``surface``/``face`` get NOTHING, GROUND or a mesh's index and face.
 
-    Two passes parallel over rows: what each pixel sees (its face and distance kept in dist and
-    mesh_face, (H W,)) and each row's count, then (at each row's place in the compact arrays, from
-    the counts) the points, normals and albedos."""
+    Returns (the kernel, the kernel on numba's threads). The second runs two passes parallel over
+    rows: what each pixel sees (its face and distance kept in dist and mesh_face, (H W,)) and
+    each row's count, then (at each row's place in the compact arrays, from the counts) the
+    points, normals and albedos: the first's arrays."""
     numba = parallel_numba()
 
     @numba.njit(inline="always")
@@ -280,9 +284,53 @@ def _visible_kernel():
             return -1, t_ground
         return -2, 0.0
 
-    @numba.njit(cache=True, nogil=True, parallel=True)
+    @numba.njit(inline="always")
+    def write(n, fid, t, ox, oy, oz, dx, dy, dz, normals, face_surface, albedos, ground, pixel, p, points,
+              out_normals, albedo):
+        if fid >= 0:
+            s = face_surface[fid]
+            nx, ny, nz = normals[fid, 0], normals[fid, 1], normals[fid, 2]
+            a0, a1, a2 = albedos[s, 0], albedos[s, 1], albedos[s, 2]
+        else:
+            nx, ny, nz = 0.0, 0.0, 1.0
+            a0, a1, a2 = ground[0], ground[1], ground[2]
+        pixel[n] = p
+        points[n, 0], points[n, 1], points[n, 2] = ox + t * dx, oy + t * dy, oz + t * dz
+        if nx * dx + ny * dy + nz * dz > 0:  # towards the camera: the side it sees is lit
+            nx, ny, nz = -nx, -ny, -nz
+        out_normals[n, 0], out_normals[n, 1], out_normals[n, 2] = nx, ny, nz
+        if albedo.shape[0]:
+            albedo[n, 0], albedo[n, 1], albedo[n, 2] = a0, a1, a2
+
+    @numba.njit(cache=True, nogil=True)
     def kernel(f_img, lookup, source, verts, faces, normals, face_surface, offsets, albedos, ground, has_ground,
-               view, rays, directions, h, w, surface, face, pixel, points, out_normals, albedo, dist, mesh_face):
+               view, rays, directions, h, w, surface, face, pixel, points, out_normals, albedo):
+        n = 0
+        for row in range(h):
+            for col in range(w):
+                p = row * w + col
+                ox, oy, oz, dx, dy, dz = ray(p, row, col, view, rays, directions)
+                fid, t = hit(p, ox, oy, oz, dx, dy, dz, f_img, lookup, source, verts, faces, normals, has_ground)
+                if fid >= 0:
+                    s = face_surface[fid]
+                    surface[p] = s
+                    face[p] = fid - offsets[s]
+                elif fid == -1:
+                    surface[p] = GROUND
+                    face[p] = -1
+                else:
+                    surface[p] = NOTHING
+                    face[p] = -1
+                    continue
+                write(n, fid, t, ox, oy, oz, dx, dy, dz, normals, face_surface, albedos, ground, pixel, p, points,
+                      out_normals, albedo)
+                n += 1
+        return n
+
+    @numba.njit(cache=True, nogil=True, parallel=True)
+    def parallel_kernel(f_img, lookup, source, verts, faces, normals, face_surface, offsets, albedos, ground,
+                        has_ground, view, rays, directions, h, w, surface, face, pixel, points, out_normals, albedo,
+                        dist, mesh_face):
         counts = np.zeros(h + 1, np.int64)
         for row in numba.prange(h):
             count = 0
@@ -314,25 +362,12 @@ def _visible_kernel():
                 if surface[p] == NOTHING:
                     continue
                 ox, oy, oz, dx, dy, dz = ray(p, row, col, view, rays, directions)
-                fid, t = mesh_face[p], dist[p]
-                if fid >= 0:
-                    s = face_surface[fid]
-                    nx, ny, nz = normals[fid, 0], normals[fid, 1], normals[fid, 2]
-                    a0, a1, a2 = albedos[s, 0], albedos[s, 1], albedos[s, 2]
-                else:
-                    nx, ny, nz = 0.0, 0.0, 1.0
-                    a0, a1, a2 = ground[0], ground[1], ground[2]
-                pixel[n] = p
-                points[n, 0], points[n, 1], points[n, 2] = ox + t * dx, oy + t * dy, oz + t * dz
-                if nx * dx + ny * dy + nz * dz > 0:  # towards the camera: the side it sees is lit
-                    nx, ny, nz = -nx, -ny, -nz
-                out_normals[n, 0], out_normals[n, 1], out_normals[n, 2] = nx, ny, nz
-                if albedo.shape[0]:
-                    albedo[n, 0], albedo[n, 1], albedo[n, 2] = a0, a1, a2
+                write(n, mesh_face[p], dist[p], ox, oy, oz, dx, dy, dz, normals, face_surface, albedos, ground, pixel,
+                      p, points, out_normals, albedo)
                 n += 1
         return counts[h]
 
-    return kernel
+    return kernel, parallel_kernel
 
 
 def _interpolate(points: np.ndarray, tri: np.ndarray, corner_normals: np.ndarray) -> np.ndarray:
