@@ -11,13 +11,9 @@ model with the work a frame needs:
    band points only);
 4. the expanded-shadow-volume soft shadow in the band: the renderer's own penumbra formula
    (``evaluate.plan_alpha``, JAX, compiled per bucket of band sizes), at the band points only;
-5. the shading of every visible pixel in one compiled pass (numba), with the hard shadow while
-   JAX evaluates step 4, then the band's pixels again with its alpha::
+5. the shading of every visible pixel in one compiled pass (numba)::
 
        I = albedo * (ambient + projectors + E_sun max(0, n . s) (1 - alpha))
-
-What does not change between frames (the posed object, the projectors' shadow maps) is kept by
-``FrameRenderer`` (``Scratch.memo``), and the per-pixel loops run on two threads (numba).
 
 The image agrees with ``render_scene``'s (same lights, same ``range_k_max``) to rounding
 (tests/test_scene_frame.py). ``range_k_max`` defaults to the lights' own k: the bands are as
@@ -29,7 +25,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
@@ -52,8 +48,7 @@ __all__ = ["FRAME_STEPS", "FrameRenderer", "SceneFrame", "band_alpha", "render_f
 
 #: The steps ``SceneFrame.milliseconds`` times (wall time; with a second thread "projectors" is
 #: the wait for it after the sun's steps; without one, "sun_plan" includes posing the occluder
-#: and "projectors" both the shadow maps and the light; "sun_band" is the penumbra's dispatch
-#: and the wait for it after the shading of every pixel, "shading" that and the band's patch).
+#: and "projectors" both the shadow maps and the light).
 FRAME_STEPS = ("visibility", "projectors", "sun_plan", "sun_band", "shading")
 
 
@@ -111,7 +106,7 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
     if pool is None:
         t = _lap(ms, "projectors", t)
     light = None
-    plan, alpha_band = None, _no_band
+    plan, alpha_band = None, np.zeros(0)
     try:
         vis = visible_surfaces(camera, surfaces, ground_albedo, scratch=scratch, albedo=False, threads=2)
         n = len(vis.pixel)
@@ -131,8 +126,7 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
             plan = plan_dense_points(model.occluder, pose, sun, vis.points, range_k_max, vis.normals,
                                      rule=model.rule, posed=_result(posed), faces=on_object, scratch=scratch)
             t = _lap(ms, "sun_plan", t, add=pool is None)
-            # Dispatched: XLA evaluates it on its own threads while this one shades the pixels.
-            alpha_band = _band_alpha_start(plan, vis.points, model, pose, sun, k)
+            alpha_band = band_alpha(plan, vis.points, model, pose, sun, k)
             t = _lap(ms, "sun_band", t)
     finally:
         # The second thread's work finished before anything else uses the buffers (also on an
@@ -150,15 +144,10 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
     sun_dir = np.zeros(3) if sun is None else -np.asarray(sun.light_np, np.float64)
     hard = plan.hard if plan is not None else np.zeros(0)
     band = plan.band if plan is not None else np.zeros(0, np.int64)
-    shade, patch = _shade_kernel()
-    args = (vis.pixel, vis.normals, surface, albedos, light, float(lights.ambient),
-            float(lights.sun_irradiance) if sun is not None else 0.0, sun_dir, hard)
-    shade(*args, image)  # the band's points with their hard shadow first, then with the penumbra's alpha
-    t = _lap(ms, "shading", t)
-    alpha = alpha_band()
-    t = _lap(ms, "sun_band", t, add=True)
-    patch(*args, band, alpha, image)
-    _lap(ms, "shading", t, add=True)
+    _shade_kernel()(vis.pixel, vis.normals, surface, albedos, light, float(lights.ambient),
+                    float(lights.sun_irradiance) if sun is not None else 0.0, sun_dir, hard, band, alpha_band,
+                    image)
+    _lap(ms, "shading", t)
     return SceneFrame(image.reshape(h, w, 3), vis, plan, ms)
 
 
@@ -297,25 +286,15 @@ def band_alpha(plan: DensePlan, points: np.ndarray, model: SoftShadowModel, pose
                range_k: float) -> np.ndarray:
     """alpha (m,) at the plan's band points: the model's penumbra formula (``plan_alpha``, JAX),
     on the band padded to one of a few sizes per octave so that it compiles once per size."""
-    return _band_alpha_start(plan, points, model, pose, sun, range_k)()
-
-
-def _no_band() -> np.ndarray:
-    return np.zeros(0)
-
-
-def _band_alpha_start(plan: DensePlan, points: np.ndarray, model: SoftShadowModel, pose: Pose, sun: Sun,
-                      range_k: float) -> Callable[[], np.ndarray]:
-    """``band_alpha`` dispatched (JAX computes it asynchronously): returns the wait for it."""
     m = len(plan.band)
     if not m:
-        return _no_band
+        return np.zeros(0)
     size = grid_bucket_size(m)
     pts = np.zeros((size, 3))
     pts[:m] = points[plan.band]
     alpha = plan_alpha_jit(pts, plan.band_plan(size), pose, sun, range_k, model.rule, model.profile, None,
                            model.corners)
-    return lambda: np.asarray(alpha, np.float64)[:m]
+    return np.asarray(alpha, np.float64)[:m]
 
 
 def _lap(ms: dict, step: str, start: float, add: bool = False) -> float:
@@ -326,39 +305,37 @@ def _lap(ms: dict, step: str, start: float, add: bool = False) -> float:
 
 @functools.cache
 def _shade_kernel():
-    """The compiled shading passes (numba): per visible point, its surface's albedo (albedos' row
-    surface + 1: the ground's first) times ambient plus the projectors' light plus the sun's,
-    E max(0, n . s) (1 - alpha), into the flat image. Returns (shade, patch): shade with alpha
-    the plan's hard shadow at every point (parallel over the points), then patch the band's
-    points (band, ascending) with the penumbra formula's alpha_band."""
+    """The compiled shading pass (numba): per visible point, its surface's albedo (albedos' row
+    surface + 1: the ground's first) times ambient plus the
+    projectors' light plus the sun's, E max(0, n . s) (1 - alpha), alpha the plan's hard shadow or
+    (band points, ascending in ``band``) the penumbra formula's; into the flat image."""
     numba = parallel_numba()
 
-    @numba.njit(inline="always")
-    def point(i, alpha, pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, image):
-        sun = 0.0
-        if sun_irradiance != 0.0:
-            cos = normals[i, 0] * sun_dir[0] + normals[i, 1] * sun_dir[1] + normals[i, 2] * sun_dir[2]
-            sun = sun_irradiance * max(cos, 0.0) * (1.0 - alpha)
-        p = pixel[i]
-        s = surface[i] + 1  # the ground (-1) first
-        for c in range(3):
-            image[p, c] = albedos[s, c] * (ambient + light[i, c] + sun)
-
+    # Parallel over blocks of points, each starting at its first band point.
     @numba.njit(cache=True, nogil=True, parallel=True)
-    def shade(pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, hard, image):
+    def kernel(pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, hard, band, alpha_band,
+               image):
         has_sun = hard.shape[0] > 0
-        for i in numba.prange(pixel.shape[0]):
-            point(i, hard[i] if has_sun else 0.0, pixel, normals, surface, albedos, light, ambient,
-                  sun_irradiance if has_sun else 0.0, sun_dir, image)
+        n = pixel.shape[0]
+        block = 4096
+        for b in numba.prange((n + block - 1) // block):
+            lo, hi = b * block, min((b + 1) * block, n)
+            j = np.searchsorted(band, lo)
+            for i in range(lo, hi):
+                sun = 0.0
+                if has_sun:
+                    alpha = hard[i]
+                    if j < band.shape[0] and band[j] == i:
+                        alpha = alpha_band[j]
+                        j += 1
+                    cos = normals[i, 0] * sun_dir[0] + normals[i, 1] * sun_dir[1] + normals[i, 2] * sun_dir[2]
+                    sun = sun_irradiance * max(cos, 0.0) * (1.0 - alpha)
+                p = pixel[i]
+                s = surface[i] + 1  # the ground (-1) first
+                for c in range(3):
+                    image[p, c] = albedos[s, c] * (ambient + light[i, c] + sun)
 
-    @numba.njit(cache=True, nogil=True)
-    def patch(pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, hard, band, alpha_band,
-              image):
-        for j in range(band.shape[0]):
-            point(band[j], alpha_band[j], pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir,
-                  image)
-
-    return shade, patch
+    return kernel
 
 
 def _albedo_of(value) -> np.ndarray:
