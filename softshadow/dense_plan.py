@@ -270,12 +270,6 @@ def _reach_kernel():
     edge), the points within reach gathered in order; returns their count."""
     numba = parallel_numba()
 
-    @numba.njit(inline="always")
-    def within(i, uv_all, d_all, lo, hi, edge_depth, per_m, margin_m):
-        pad = per_m * max(d_all[i] - edge_depth, 0.0) + margin_m
-        return (uv_all[i, 0] >= lo[0] - pad) & (uv_all[i, 0] <= hi[0] + pad) & (uv_all[i, 1] >= lo[1] - pad) \
-            & (uv_all[i, 1] <= hi[1] + pad)
-
     # Two passes parallel over blocks of points: each block's count, then its points at its place.
     @numba.njit(cache=True, nogil=True, parallel=True)
     def kernel(uv_all, d_all, hard, lo, hi, edge_depth, per_m, margin_m, cand, uv, d):
@@ -286,7 +280,9 @@ def _reach_kernel():
         for b in numba.prange(n_blocks):
             count = 0
             for i in range(b * block, min((b + 1) * block, n)):
-                if within(i, uv_all, d_all, lo, hi, edge_depth, per_m, margin_m):
+                pad = per_m * max(d_all[i] - edge_depth, 0.0) + margin_m
+                if (uv_all[i, 0] >= lo[0] - pad) & (uv_all[i, 0] <= hi[0] + pad) & (uv_all[i, 1] >= lo[1] - pad) \
+                        & (uv_all[i, 1] <= hi[1] + pad):
                     count += 1
             start[b + 1] = count
         for b in range(n_blocks):
@@ -294,7 +290,9 @@ def _reach_kernel():
         for b in numba.prange(n_blocks):
             count = start[b]
             for i in range(b * block, min((b + 1) * block, n)):
-                if within(i, uv_all, d_all, lo, hi, edge_depth, per_m, margin_m):
+                pad = per_m * max(d_all[i] - edge_depth, 0.0) + margin_m
+                if (uv_all[i, 0] >= lo[0] - pad) & (uv_all[i, 0] <= hi[0] + pad) & (uv_all[i, 1] >= lo[1] - pad) \
+                        & (uv_all[i, 1] <= hi[1] + pad):
                     cand[count] = i
                     uv[count, 0], uv[count, 1], d[count] = uv_all[i, 0], uv_all[i, 1], d_all[i]
                     count += 1

@@ -244,110 +244,127 @@ def _visible_kernel():
     points, normals and albedos: the first's arrays."""
     numba = parallel_numba()
 
-    @numba.njit(inline="always")
-    def ray(p, row, col, view, rays, directions):
-        # The pixel's ray: a top-down map's (origin, pixel size, height in view[1:5]) or a
-        # pinhole camera's (centre in view[1:4]; K^-1's first two rows and R in rays;
-        # precomputed directions for a camera with lens distortion).
-        if view[0] == 0.0:
-            return view[1] + col * view[3], view[2] - row * view[3], view[4], 0.0, 0.0, -1.0
-        if directions.shape[0]:
-            return view[1], view[2], view[3], directions[p, 0], directions[p, 1], directions[p, 2]
-        nx = rays[0, 0] * col + rays[0, 1] * row + rays[0, 2]
-        ny = rays[1, 0] * col + rays[1, 1] * row + rays[1, 2]
-        return (view[1], view[2], view[3], nx * rays[3, 0] + ny * rays[4, 0] + rays[5, 0],
-                nx * rays[3, 1] + ny * rays[4, 1] + rays[5, 1], nx * rays[3, 2] + ny * rays[4, 2] + rays[5, 2])
-
-    @numba.njit(inline="always")
-    def hit(p, ox, oy, oz, dx, dy, dz, f_img, lookup, source, verts, faces, normals, has_ground):
-        # (face or -1 for the ground or -2 for nothing, distance along the ray).
-        t_mesh = np.inf
-        fid = -1
-        q = p if lookup.shape[0] == 0 else lookup[p]
-        if q >= 0 and f_img[q] >= 0:
-            fid = f_img[q] if source.shape[0] == 0 else source[f_img[q]]
-            nx, ny, nz = normals[fid, 0], normals[fid, 1], normals[fid, 2]
-            v0 = faces[fid, 0]
-            denom = nx * dx + ny * dy + nz * dz
-            if abs(denom) > 1e-12:
-                t = (nx * (verts[v0, 0] - ox) + ny * (verts[v0, 1] - oy) + nz * (verts[v0, 2] - oz)) / denom
-                if t > 0:
-                    t_mesh = t
-        t_ground = np.inf
-        if has_ground and abs(dz) > 1e-12:
-            t = -oz / dz
-            if t > 0:
-                t_ground = t
-        if t_mesh <= t_ground and t_mesh < np.inf:
-            return fid, t_mesh
-        if t_ground < np.inf:
-            return -1, t_ground
-        return -2, 0.0
-
-    @numba.njit(inline="always")
-    def write(n, fid, t, ox, oy, oz, dx, dy, dz, normals, face_surface, albedos, ground, pixel, p, points,
-              out_normals, albedo):
-        if fid >= 0:
-            s = face_surface[fid]
-            nx, ny, nz = normals[fid, 0], normals[fid, 1], normals[fid, 2]
-            a0, a1, a2 = albedos[s, 0], albedos[s, 1], albedos[s, 2]
-        else:
-            nx, ny, nz = 0.0, 0.0, 1.0
-            a0, a1, a2 = ground[0], ground[1], ground[2]
-        pixel[n] = p
-        points[n, 0], points[n, 1], points[n, 2] = ox + t * dx, oy + t * dy, oz + t * dz
-        if nx * dx + ny * dy + nz * dz > 0:  # towards the camera: the side it sees is lit
-            nx, ny, nz = -nx, -ny, -nz
-        out_normals[n, 0], out_normals[n, 1], out_normals[n, 2] = nx, ny, nz
-        if albedo.shape[0]:
-            albedo[n, 0], albedo[n, 1], albedo[n, 2] = a0, a1, a2
-
     @numba.njit(cache=True, nogil=True)
     def kernel(f_img, lookup, source, verts, faces, normals, face_surface, offsets, albedos, ground, has_ground,
                view, rays, directions, h, w, surface, face, pixel, points, out_normals, albedo):
         n = 0
-        for row in range(h):
-            for col in range(w):
-                p = row * w + col
-                ox, oy, oz, dx, dy, dz = ray(p, row, col, view, rays, directions)
-                fid, t = hit(p, ox, oy, oz, dx, dy, dz, f_img, lookup, source, verts, faces, normals, has_ground)
-                if fid >= 0:
-                    s = face_surface[fid]
-                    surface[p] = s
-                    face[p] = fid - offsets[s]
-                elif fid == -1:
-                    surface[p] = GROUND
-                    face[p] = -1
-                else:
-                    surface[p] = NOTHING
-                    face[p] = -1
-                    continue
-                write(n, fid, t, ox, oy, oz, dx, dy, dz, normals, face_surface, albedos, ground, pixel, p, points,
-                      out_normals, albedo)
-                n += 1
+        row, col = 0, -1
+        for p in range(h * w):
+            col += 1  # row order, without a division per pixel
+            if col == w:
+                row, col = row + 1, 0
+            # The pixel's ray: a top-down map's (origin, pixel size, height in view[1:5]) or a
+            # pinhole camera's (centre in view[1:4]; K^-1's first two rows and R in rays;
+            # precomputed directions for a camera with lens distortion).
+            if view[0] == 0.0:
+                ox, oy, oz = view[1] + col * view[3], view[2] - row * view[3], view[4]
+                dx, dy, dz = 0.0, 0.0, -1.0
+            elif directions.shape[0]:
+                ox, oy, oz = view[1], view[2], view[3]
+                dx, dy, dz = directions[p, 0], directions[p, 1], directions[p, 2]
+            else:
+                ox, oy, oz = view[1], view[2], view[3]
+                nx = rays[0, 0] * col + rays[0, 1] * row + rays[0, 2]
+                ny = rays[1, 0] * col + rays[1, 1] * row + rays[1, 2]
+                dx = nx * rays[3, 0] + ny * rays[4, 0] + rays[5, 0]
+                dy = nx * rays[3, 1] + ny * rays[4, 1] + rays[5, 1]
+                dz = nx * rays[3, 2] + ny * rays[4, 2] + rays[5, 2]
+            t_mesh = np.inf
+            fid = -1
+            q = p if lookup.shape[0] == 0 else lookup[p]
+            if q >= 0 and f_img[q] >= 0:
+                fid = f_img[q] if source.shape[0] == 0 else source[f_img[q]]
+                nx, ny, nz = normals[fid, 0], normals[fid, 1], normals[fid, 2]
+                v0 = faces[fid, 0]
+                denom = nx * dx + ny * dy + nz * dz
+                if abs(denom) > 1e-12:
+                    t = (nx * (verts[v0, 0] - ox) + ny * (verts[v0, 1] - oy) + nz * (verts[v0, 2] - oz)) / denom
+                    if t > 0:
+                        t_mesh = t
+            t_ground = np.inf
+            if has_ground and abs(dz) > 1e-12:
+                t = -oz / dz
+                if t > 0:
+                    t_ground = t
+            if t_mesh <= t_ground and t_mesh < np.inf:
+                s = face_surface[fid]
+                surface[p] = s
+                face[p] = fid - offsets[s]
+                t = t_mesh
+                nx, ny, nz = normals[fid, 0], normals[fid, 1], normals[fid, 2]
+                a0, a1, a2 = albedos[s, 0], albedos[s, 1], albedos[s, 2]
+            elif t_ground < np.inf:
+                surface[p] = GROUND
+                face[p] = -1
+                t = t_ground
+                nx, ny, nz = 0.0, 0.0, 1.0
+                a0, a1, a2 = ground[0], ground[1], ground[2]
+            else:
+                surface[p] = NOTHING
+                face[p] = -1
+                continue
+            pixel[n] = p
+            points[n, 0], points[n, 1], points[n, 2] = ox + t * dx, oy + t * dy, oz + t * dz
+            if nx * dx + ny * dy + nz * dz > 0:  # towards the camera: the side it sees is lit
+                nx, ny, nz = -nx, -ny, -nz
+            out_normals[n, 0], out_normals[n, 1], out_normals[n, 2] = nx, ny, nz
+            if albedo.shape[0]:
+                albedo[n, 0], albedo[n, 1], albedo[n, 2] = a0, a1, a2
+            n += 1
         return n
+
 
     @numba.njit(cache=True, nogil=True, parallel=True)
     def parallel_kernel(f_img, lookup, source, verts, faces, normals, face_surface, offsets, albedos, ground,
                         has_ground, view, rays, directions, h, w, surface, face, pixel, points, out_normals, albedo,
                         dist, mesh_face):
+        # ``kernel``'s arithmetic, in two passes over rows (written out: as called functions the
+        # same loops ran twice as slow).
         counts = np.zeros(h + 1, np.int64)
         for row in numba.prange(h):
             count = 0
             for col in range(w):
                 p = row * w + col
-                ox, oy, oz, dx, dy, dz = ray(p, row, col, view, rays, directions)
-                fid, t = hit(p, ox, oy, oz, dx, dy, dz, f_img, lookup, source, verts, faces, normals, has_ground)
-                dist[p] = t
-                mesh_face[p] = fid
-                if fid >= 0:
+                if view[0] == 0.0:
+                    ox, oy, oz = view[1] + col * view[3], view[2] - row * view[3], view[4]
+                    dx, dy, dz = 0.0, 0.0, -1.0
+                elif directions.shape[0]:
+                    ox, oy, oz = view[1], view[2], view[3]
+                    dx, dy, dz = directions[p, 0], directions[p, 1], directions[p, 2]
+                else:
+                    ox, oy, oz = view[1], view[2], view[3]
+                    nx = rays[0, 0] * col + rays[0, 1] * row + rays[0, 2]
+                    ny = rays[1, 0] * col + rays[1, 1] * row + rays[1, 2]
+                    dx = nx * rays[3, 0] + ny * rays[4, 0] + rays[5, 0]
+                    dy = nx * rays[3, 1] + ny * rays[4, 1] + rays[5, 1]
+                    dz = nx * rays[3, 2] + ny * rays[4, 2] + rays[5, 2]
+                t_mesh = np.inf
+                fid = -1
+                q = p if lookup.shape[0] == 0 else lookup[p]
+                if q >= 0 and f_img[q] >= 0:
+                    fid = f_img[q] if source.shape[0] == 0 else source[f_img[q]]
+                    nx, ny, nz = normals[fid, 0], normals[fid, 1], normals[fid, 2]
+                    v0 = faces[fid, 0]
+                    denom = nx * dx + ny * dy + nz * dz
+                    if abs(denom) > 1e-12:
+                        t = (nx * (verts[v0, 0] - ox) + ny * (verts[v0, 1] - oy) + nz * (verts[v0, 2] - oz)) / denom
+                        if t > 0:
+                            t_mesh = t
+                t_ground = np.inf
+                if has_ground and abs(dz) > 1e-12:
+                    t = -oz / dz
+                    if t > 0:
+                        t_ground = t
+                if t_mesh <= t_ground and t_mesh < np.inf:
                     s = face_surface[fid]
                     surface[p] = s
                     face[p] = fid - offsets[s]
+                    dist[p], mesh_face[p] = t_mesh, fid
                     count += 1
-                elif fid == -1:
+                elif t_ground < np.inf:
                     surface[p] = GROUND
                     face[p] = -1
+                    dist[p], mesh_face[p] = t_ground, -1
                     count += 1
                 else:
                     surface[p] = NOTHING
@@ -361,9 +378,34 @@ def _visible_kernel():
                 p = row * w + col
                 if surface[p] == NOTHING:
                     continue
-                ox, oy, oz, dx, dy, dz = ray(p, row, col, view, rays, directions)
-                write(n, mesh_face[p], dist[p], ox, oy, oz, dx, dy, dz, normals, face_surface, albedos, ground, pixel,
-                      p, points, out_normals, albedo)
+                if view[0] == 0.0:
+                    ox, oy, oz = view[1] + col * view[3], view[2] - row * view[3], view[4]
+                    dx, dy, dz = 0.0, 0.0, -1.0
+                elif directions.shape[0]:
+                    ox, oy, oz = view[1], view[2], view[3]
+                    dx, dy, dz = directions[p, 0], directions[p, 1], directions[p, 2]
+                else:
+                    ox, oy, oz = view[1], view[2], view[3]
+                    nx = rays[0, 0] * col + rays[0, 1] * row + rays[0, 2]
+                    ny = rays[1, 0] * col + rays[1, 1] * row + rays[1, 2]
+                    dx = nx * rays[3, 0] + ny * rays[4, 0] + rays[5, 0]
+                    dy = nx * rays[3, 1] + ny * rays[4, 1] + rays[5, 1]
+                    dz = nx * rays[3, 2] + ny * rays[4, 2] + rays[5, 2]
+                fid, t = mesh_face[p], dist[p]
+                if fid >= 0:
+                    s = face_surface[fid]
+                    nx, ny, nz = normals[fid, 0], normals[fid, 1], normals[fid, 2]
+                    a0, a1, a2 = albedos[s, 0], albedos[s, 1], albedos[s, 2]
+                else:
+                    nx, ny, nz = 0.0, 0.0, 1.0
+                    a0, a1, a2 = ground[0], ground[1], ground[2]
+                pixel[n] = p
+                points[n, 0], points[n, 1], points[n, 2] = ox + t * dx, oy + t * dy, oz + t * dz
+                if nx * dx + ny * dy + nz * dz > 0:  # towards the camera: the side it sees is lit
+                    nx, ny, nz = -nx, -ny, -nz
+                out_normals[n, 0], out_normals[n, 1], out_normals[n, 2] = nx, ny, nz
+                if albedo.shape[0]:
+                    albedo[n, 0], albedo[n, 1], albedo[n, 2] = a0, a1, a2
                 n += 1
         return counts[h]
 
