@@ -20,12 +20,12 @@ import numpy as np
 
 from .camera import GroundGrid
 from .occluder import Occluder
+from .parallel_loops import parallel_numba
 from .params import Pose, Sun
 from .plan import (BAND_FRACTION, CANDIDATE_RADII_PX, CANDIDATE_REACH_PX, N_CANDIDATES, EdgeSet,
                    PointPlan, _pack_edges, bucket_size, light_band_widths, raster_grid)
 from .posed import PosedOccluder
 from .raster import candidate_labels, rasterise_shadow
-from .parallel_loops import parallel_numba
 from .scratch import Scratch, scratch_array
 from .shadowmap import (BIAS_PX, FACING_TOL, PRECISION_ULPS, SLOPE_PX, TAN_MAX, LightFrame, face_depth_at, faces_away,
                         shadow_map)
@@ -80,7 +80,8 @@ class DensePlan:
 
 def _empty(occ: Occluder, sil, hard: np.ndarray) -> DensePlan:
     """No point in a band: the silhouette's edges without a raster, and the hard shadow."""
-    return DensePlan(_pack_edges(occ, sil), hard, np.zeros(0, np.int64), np.zeros((0, N_CANDIDATES), np.int32), np.zeros(0))
+    return DensePlan(_pack_edges(occ, sil), hard, np.zeros(0, np.int64), np.zeros((0, N_CANDIDATES), np.int32),
+                     np.zeros(0))
 
 
 def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k_max: float,

@@ -15,6 +15,10 @@ model with the work a frame needs:
 
        I = albedo * (ambient + projectors + E_sun max(0, n . s) (1 - alpha))
 
+``FrameRenderer`` keeps what did not change since its last frame (the posed object, each
+projector's shadow map: ``Scratch.memo``), and the per-pixel loops and the z-buffers of large
+meshes run on two threads (numba, ``parallel_loops``).
+
 The image agrees with ``render_scene``'s (same lights, same ``range_k_max``) to rounding
 (tests/test_scene_frame.py). ``range_k_max`` defaults to the lights' own k: the bands are as
 narrow as this frame's k allows.
@@ -153,8 +157,10 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
 
 class FrameRenderer:
     """``render_frame`` for a stream of frames: the per-frame arrays are kept between frames
-    (``softshadow.scratch``: fresh memory costs a fifth of a frame in page faults) and a second
-    thread runs the projectors while the first makes the sun's plan.
+    (``softshadow.scratch``: fresh memory costs a fifth of a frame in page faults), so are the
+    posed object and the projectors' shadow maps while their inputs stay (``Scratch.memo``), and
+    a second thread runs the projectors while the first makes the sun's plan. threads: 2 (that
+    second thread, and the first's compiled loops on two threads) or 1 (all on one).
 
     ``render(...)`` takes ``render_frame``'s arguments. A frame's arrays (image, visible, plan)
     are overwritten by the next frame: copy what you keep. Not for use from two threads at once.
