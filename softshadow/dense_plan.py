@@ -271,34 +271,30 @@ def _reach_kernel():
     edge), the points within reach gathered in order; returns their count."""
     numba = parallel_numba()
 
-    # Two passes parallel over blocks of points: each block's count, then its points at its place.
+    # Parallel over blocks of points: each block's points gathered at its own place first, then
+    # moved together (one pass over the points, as one thread's loop).
     @numba.njit(cache=True, nogil=True, parallel=True)
     def kernel(uv_all, d_all, hard, lo, hi, edge_depth, per_m, margin_m, cand, uv, d):
         n = uv_all.shape[0]
         block = 8192
         n_blocks = (n + block - 1) // block
-        start = np.zeros(n_blocks + 1, np.int64)
+        counts = np.zeros(n_blocks, np.int64)
         for b in numba.prange(n_blocks):
-            count = 0
+            count = b * block
             for i in range(b * block, min((b + 1) * block, n)):
                 pad = per_m * max(d_all[i] - edge_depth, 0.0) + margin_m
                 if (uv_all[i, 0] >= lo[0] - pad) & (uv_all[i, 0] <= hi[0] + pad) & (uv_all[i, 1] >= lo[1] - pad) \
                         & (uv_all[i, 1] <= hi[1] + pad):
-                    count += 1
-            start[b + 1] = count
-        for b in range(n_blocks):
-            start[b + 1] += start[b]
-        for b in numba.prange(n_blocks):
-            count = start[b]
-            for i in range(b * block, min((b + 1) * block, n)):
-                pad = per_m * max(d_all[i] - edge_depth, 0.0) + margin_m
-                if (uv_all[i, 0] >= lo[0] - pad) & (uv_all[i, 0] <= hi[0] + pad) & (uv_all[i, 1] >= lo[1] - pad) \
-                        & (uv_all[i, 1] <= hi[1] + pad):
-                    cand[count] = i
+                    cand[count] = i  # count <= i: never over a point not yet read
                     uv[count, 0], uv[count, 1], d[count] = uv_all[i, 0], uv_all[i, 1], d_all[i]
                     count += 1
-        return start[n_blocks]
-
+            counts[b] = count - b * block
+        count = 0
+        for b in range(n_blocks):  # in order: a block's list moves down, never over one not yet moved
+            for k in range(b * block, b * block + counts[b]):
+                cand[count], uv[count, 0], uv[count, 1], d[count] = cand[k], uv[k, 0], uv[k, 1], d[k]
+                count += 1
+        return count
     return kernel
 
 
