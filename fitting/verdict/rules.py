@@ -537,8 +537,10 @@ def judge_fit(fit: FitEvidence, context: GroupContext | None = None) -> tuple[Es
     flags: list[str] = []  # warnings that make the group unreliable
     notes: list[str | None] = []  # the others
     # 4. Agreement: photos that disagree widen the statistical errors.
+    not_resolved = _identifiability(fit)  # why k is not measured from the penumbra, or None
+    unresolved = resolution_warning(fit.penumbra_px, fit.blur_px)  # the penumbra under the blur spot
     (k_ratio, k_disagree), (rho_ratio, rho_disagree) = _birge_ratio(fit, "k"), _birge_ratio(fit, "rho")
-    if _identifiability(fit) or resolution_warning(fit.penumbra_px, fit.blur_px):
+    if not_resolved or unresolved:
         # A penumbra the photos do not resolve: each photo's own k is no measurement, and the group's
         # k is a bound (widened by the disagreement), not a compromise between photos.
         k_disagree = None
@@ -554,7 +556,7 @@ def judge_fit(fit: FitEvidence, context: GroupContext | None = None) -> tuple[Es
     flags += [w for w in (misfit, None if misfit else _lod_warning(context)) if w]
 
     # 5. Identifiability of k, with its bound.
-    bound = _identifiability(fit)
+    bound = not_resolved
     if bound is None and scene_off:
         # A misplaced edge is fitted with a wider penumbra: k reads high, and bounds the truth.
         bound = "the fitted shadow does not match the photos"
@@ -568,7 +570,6 @@ def judge_fit(fit: FitEvidence, context: GroupContext | None = None) -> tuple[Es
     if bound is None and texture:
         # What hides the rho measurement hides the penumbra's width too: k is then a bound.
         bound = "the ground's texture hides the penumbra's width"
-    unresolved = resolution_warning(fit.penumbra_px, fit.blur_px)
     if unresolved and fit.receiver != "plane":
         # The receiver's own relief (risers, a bank's slope) shares the pixels of a penumbra under the
         # blur spot: the levels mix two surfaces and rho and k follow the blur model.
