@@ -119,9 +119,9 @@ def _footprint(posed: PosedOccluder):
 
 def _in_shadow(probe: _PhotoProbe, footprint, light: np.ndarray) -> np.ndarray:
     """Whether each pixel's receiver point lies in the candidate's hard shadow (h, w) bool: the
-    point slid along the light onto the ground falls in the mesh's footprint there, or its
-    receiver is below the horizon of the sun (points under the object are rare in a photo of
-    its shadow, so this is the shadow wherever the photo sees it)."""
+    point slid along the light onto the ground falls in the mesh's footprint there (exact on the
+    ground; on a wall or steps it errs only for points below the object, rare in a photo of its
+    shadow)."""
     mask, origin, cell = footprint
     pts = probe.points.reshape(-1, 3)
     ij = np.rint((project_to_ground(pts, light) - origin) / cell).astype(np.int64)
@@ -194,8 +194,8 @@ def search_sun(model: SoftShadowModel, pose: Pose, views: Sequence[PhotoView], *
     scored by the outline's median contrast and refined by pattern search from its REFINE_BEST
     best; that sun sets each photo's shadow depth; every sun tried is scored again by the
     matched count (``_matched_score``), the elevation swept at the best azimuth, and the
-    REFINE_BEST best refined again. Every
-    photo votes; a photo that cannot (no receiver in view) is left out. Raises ValueError when
+    REFINE_BEST best refined again. Every photo votes; a photo that cannot (no receiver in
+    view) is left out. Raises ValueError when
     no photo can vote, or when no candidate's shadow is in view."""
     probes = [p for p in (_probe(model, pose, v, width) for v in views) if p is not None]
     if not probes:
