@@ -20,6 +20,7 @@ import numpy as np
 
 from .camera import GroundGrid
 from .occluder import Occluder
+from .parallel_loops import parallel_numba
 from .params import Pose, Sun
 from .plan import (BAND_FRACTION, CANDIDATE_RADII_PX, CANDIDATE_REACH_PX, N_CANDIDATES, EdgeSet,
                    PointPlan, _pack_edges, bucket_size, light_band_widths, raster_grid)
@@ -77,8 +78,10 @@ class DensePlan:
         return PointPlan(self.edges, edge_id, hard, active, near)
 
 
-def _empty(edges: EdgeSet, hard: np.ndarray) -> DensePlan:
-    return DensePlan(edges, hard, np.zeros(0, np.int64), np.zeros((0, N_CANDIDATES), np.int32), np.zeros(0))
+def _empty(occ: Occluder, sil, hard: np.ndarray) -> DensePlan:
+    """No point in a band: the silhouette's edges without a raster, and the hard shadow."""
+    return DensePlan(_pack_edges(occ, sil), hard, np.zeros(0, np.int64), np.zeros((0, N_CANDIDATES), np.int32),
+                     np.zeros(0))
 
 
 def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k_max: float,
@@ -104,10 +107,9 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
         normals = np.ascontiguousarray(normals, np.float64).reshape(-1, 3)
         if len(normals) != n:
             raise ValueError(f"{len(normals)} normals for {n} receiver points")
-    edges = _pack_edges(occ, sil)
     if not (n and len(sil.vertex_ids)):
         attached = np.zeros(n, bool) if normals is None else faces_away(normals, light)
-        return _empty(edges, attached.astype(np.float64))
+        return _empty(occ, sil, attached.astype(np.float64))
     # Per column: (V, 3).min(0) is several times slower.
     lo_w = np.array([world[:, j].min() for j in range(3)])
     hi_w = np.array([world[:, j].max() for j in range(3)])
@@ -136,7 +138,7 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
     count = _reach_kernel()(uv_all, d_all, hard, lo_occ, hi_occ, float(edge_depth.min()),
                             1.5 * float(light_band_widths(np.float64(1.0), range_k_max)), margin_m, cand, uv_p, d_p)
     if not count:
-        return _empty(edges, hard)
+        return _empty(occ, sil, hard)
     cand, uv_p, d_p = cand[:count], uv_p[:count], d_p[:count]
     att = hard[cand] > 0
     reach = float(light_band_widths(d_p.max() - edge_depth.min(), range_k_max))
@@ -150,7 +152,7 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
     lo = np.maximum(lo_occ - pad_m, lo_pts - pad_m)
     hi = np.minimum(hi_occ + pad_m, hi_pts + pad_m)
     if np.any(hi <= lo):
-        return _empty(edges, hard)
+        return _empty(occ, sil, hard)
     grid, map_pixel_m = raster_grid(lo, hi, pixel_m, map_pixel_m)
     raster = rasterise_shadow(grid, world, light, sil, uv_v)
     m = len(cand)
@@ -183,7 +185,7 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
         shape = (map_grid.height, map_grid.width)
         smap = shadow_map(map_grid, uv_v, d_v, lit_faces, out=(scratch_array(scratch, "sun.map_depth", shape),
                                                                scratch_array(scratch, "sun.map_face", shape, np.int32)),
-                          scratch=scratch, name="sun.map")
+                          threads=2, scratch=scratch, name="sun.map")
         # ``ShadowMap.occluder_depth`` and ``depth_bias`` per point (their rules), the receiver's
         # slope from its normal, in one pass.
         scale = max(smap.scale, float(np.abs(world).max()))
@@ -243,13 +245,13 @@ def _spacing_kernel():
 def _project_kernel():
     """Per point: attached shadow (n . L >= -FACING_TOL, as ``faces_away``; 1.0 in hard), the
     light-space position and depth (``LightFrame.project``); returns the largest depth."""
-    import numba
+    numba = parallel_numba()
 
-    @numba.njit(cache=True, nogil=True)
+    @numba.njit(cache=True, nogil=True, parallel=True)
     def kernel(points, normals, basis, tol, uv, d, hard):
         light = basis[3]
         d_max = -np.inf
-        for i in range(points.shape[0]):
+        for i in numba.prange(points.shape[0]):
             x, y, z = points[i, 0] - basis[0, 0], points[i, 1] - basis[0, 1], points[i, 2] - basis[0, 2]
             uv[i, 0] = x * basis[1, 0] + y * basis[1, 1] + z * basis[1, 2]
             uv[i, 1] = x * basis[2, 0] + y * basis[2, 1] + z * basis[2, 2]
@@ -267,20 +269,32 @@ def _project_kernel():
 def _reach_kernel():
     """``plan._within_reach``'s test (per_m: 1.5 wedge widths per metre behind the nearest
     edge), the points within reach gathered in order; returns their count."""
-    import numba
+    numba = parallel_numba()
 
-    @numba.njit(cache=True, nogil=True)
+    # Parallel over blocks of points: each block's points gathered at its own place first, then
+    # moved together (one pass over the points, as one thread's loop).
+    @numba.njit(cache=True, nogil=True, parallel=True)
     def kernel(uv_all, d_all, hard, lo, hi, edge_depth, per_m, margin_m, cand, uv, d):
+        n = uv_all.shape[0]
+        block = 8192
+        n_blocks = (n + block - 1) // block
+        counts = np.zeros(n_blocks, np.int64)
+        for b in numba.prange(n_blocks):
+            count = b * block
+            for i in range(b * block, min((b + 1) * block, n)):
+                pad = per_m * max(d_all[i] - edge_depth, 0.0) + margin_m
+                if (uv_all[i, 0] >= lo[0] - pad) & (uv_all[i, 0] <= hi[0] + pad) & (uv_all[i, 1] >= lo[1] - pad) \
+                        & (uv_all[i, 1] <= hi[1] + pad):
+                    cand[count] = i  # count <= i: never over a point not yet read
+                    uv[count, 0], uv[count, 1], d[count] = uv_all[i, 0], uv_all[i, 1], d_all[i]
+                    count += 1
+            counts[b] = count - b * block
         count = 0
-        for i in range(uv_all.shape[0]):
-            pad = per_m * max(d_all[i] - edge_depth, 0.0) + margin_m
-            if (uv_all[i, 0] >= lo[0] - pad) & (uv_all[i, 0] <= hi[0] + pad) & (uv_all[i, 1] >= lo[1] - pad) \
-                    & (uv_all[i, 1] <= hi[1] + pad):
-                cand[count] = i
-                uv[count, 0], uv[count, 1], d[count] = uv_all[i, 0], uv_all[i, 1], d_all[i]
+        for b in range(n_blocks):  # in order: a block's list moves down, never over one not yet moved
+            for k in range(b * block, b * block + counts[b]):
+                cand[count], uv[count, 0], uv[count, 1], d[count] = cand[k], uv[k, 0], uv[k, 1], d[k]
                 count += 1
         return count
-
     return kernel
 
 
@@ -291,18 +305,18 @@ def _depth_test_kernel():
     and its 8 neighbours, else the nearest covered pixel's within 2, extrapolated) against
     the point's depth plus ``depth_bias`` (the receiver's slope from its normal), into
     behind[test]. A point on the occluder whose own face is the nearest at its pixel is lit."""
-    import numba
+    numba = parallel_numba()
     depth_at = face_depth_at()
 
-    @numba.njit(cache=True, nogil=True)
+    @numba.njit(cache=True, nogil=True, parallel=True)
     def kernel(cand, test, uv, depth, points, normals, faces, lit_ids, light, ox, oy, pixel_m, face_id, triangle,
                plane, face_slope, scale, behind):
         h, w = face_id.shape
-        for j in range(test.shape[0]):
+        for j in numba.prange(test.shape[0]):
             p = cand[test[j]]
-            scale = max(scale, abs(points[p, 0]), abs(points[p, 1]), abs(points[p, 2]))
+            scale = max(scale, max(abs(points[p, 0]), abs(points[p, 1]), abs(points[p, 2])))
         rounding = PRECISION_ULPS * np.finfo(np.float64).eps * scale
-        for j in range(test.shape[0]):
+        for j in numba.prange(test.shape[0]):
             q = test[j]
             p = cand[q]
             u, v = uv[q, 0], uv[q, 1]
@@ -329,27 +343,39 @@ def _lookup_kernel():
     """``ShadowRaster.lookup`` at light-space points (the nearest pixel): hard, label and the
     distance in metres (0, -1, +inf outside the raster); the points not in attached shadow within
     ``near_m`` of the outline listed in ``near``. Returns their count."""
-    import numba
+    numba = parallel_numba()
 
-    @numba.njit(cache=True, nogil=True)
+    # Parallel over blocks of points; the near points listed per block, then moved together.
+    @numba.njit(cache=True, nogil=True, parallel=True)
     def kernel(uv, ox, oy, pixel_m, hard, edge_label, dist_px, near_m, att, in_view, label, dist, near):
         h, w = hard.shape
         pm = np.float32(pixel_m)
+        n_pts = uv.shape[0]
+        block = 8192
+        n_blocks = (n_pts + block - 1) // block
+        start = np.zeros(n_blocks + 1, np.int64)
+        for b in numba.prange(n_blocks):
+            n = b * block
+            for i in range(b * block, min((b + 1) * block, n_pts)):
+                c = np.rint((uv[i, 0] - ox) / pixel_m)
+                r = np.rint((oy - uv[i, 1]) / pixel_m)
+                if 0 <= c < w and 0 <= r < h:
+                    ci, ri = int(c), int(r)
+                    in_view[i] = hard[ri, ci]
+                    label[i] = edge_label[ri, ci]
+                    dist[i] = dist_px[ri, ci] * pm
+                else:
+                    in_view[i], label[i], dist[i] = 0, -1, np.inf
+                # The comparison in float32, as the array version's (a float32 array against a float).
+                if dist[i] <= np.float32(near_m) and not att[i]:
+                    near[n] = i  # at the block's own place first (n <= i)
+                    n += 1
+            start[b + 1] = n - b * block
         n = 0
-        for i in range(uv.shape[0]):
-            c = np.rint((uv[i, 0] - ox) / pixel_m)
-            r = np.rint((oy - uv[i, 1]) / pixel_m)
-            if 0 <= c < w and 0 <= r < h:
-                ci, ri = int(c), int(r)
-                in_view[i] = hard[ri, ci]
-                label[i] = edge_label[ri, ci]
-                dist[i] = dist_px[ri, ci] * pm
-            else:
-                in_view[i], label[i], dist[i] = 0, -1, np.inf
-            # The comparison in float32, as the array version's (a float32 array against a float).
-            if dist[i] <= np.float32(near_m) and not att[i]:
-                near[n] = i
-                n += 1
+        for b in range(n_blocks):  # in order: a block's list moves down, never over one not yet moved
+            for k in range(start[b + 1]):
+                near[n + k] = near[b * block + k]
+            n += start[b + 1]
         return n
 
     return kernel

@@ -42,6 +42,7 @@ import numpy as np
 
 from .camera import GroundGrid, PinholeCamera, look_at_camera
 from .clip import clip_near
+from .parallel_loops import parallel_numba
 from .scratch import Scratch, scratch_array
 from .shadowmap import (_LOOKUP_OFFSETS, _NEAREST_OFFSETS, BIAS_PX, FACING_TOL, PRECISION_ULPS, SLOPE_PX, TAN_MAX,
                         ShadowMap, rasterise_depth)
@@ -253,9 +254,11 @@ def _light_kernel():
     point's own pixel is covered; the bias of ``shadowmap.depth_bias`` with the map pixel's
     footprint pixel_tan z). mode 0: the slide's colour into out (N, 3); 1: the irradiance added
     to out; 2: lit (N,) 1.0 / 0.0."""
-    import numba
+    numba = parallel_numba()
 
-    @numba.njit(cache=True, nogil=True)
+    # Parallel over the points (each writes its own row): a frame's 300,000 points are the
+    # largest single step of a scene image.
+    @numba.njit(cache=True, nogil=True, parallel=True)
     def kernel(points, normals, frame, slide, intensity, falloff, reference, has_map, face_id, near_cover, packed,
                face_slope, geometry, own_face, mode, out, lit):
         n_pts = points.shape[0]
@@ -267,10 +270,10 @@ def _light_kernel():
         # The rounding allowance's scale: the largest coordinate of the map's faces and the points.
         scale = geometry[4]
         if has_map and mode != 0:
-            for i in range(n_pts):
-                scale = max(scale, abs(points[i, 0]), abs(points[i, 1]), abs(points[i, 2]))
+            for i in numba.prange(n_pts):
+                scale = max(scale, max(abs(points[i, 0]), abs(points[i, 1]), abs(points[i, 2])))
         rounding = PRECISION_ULPS * np.finfo(np.float64).eps * scale
-        for i in range(n_pts):
+        for i in numba.prange(n_pts):
             p0, p1, p2 = points[i, 0], points[i, 1], points[i, 2]
             x = frame[0, 0] * p0 + frame[0, 1] * p1 + frame[0, 2] * p2 + frame[3, 0]
             y = frame[1, 0] * p0 + frame[1, 1] * p1 + frame[1, 2] * p2 + frame[3, 1]
@@ -382,13 +385,14 @@ def _light_kernel():
     return kernel
 
 
-def projector_shadow_map(projector: Projector, vertices, faces, *, facing=None, scratch: Scratch | None = None,
-                         name: str = "projector") -> ProjectorShadowMap:
+def projector_shadow_map(projector: Projector, vertices, faces, *, facing=None, threads: int = 1,
+                         scratch: Scratch | None = None, name: str = "projector") -> ProjectorShadowMap:
     """The perspective shadow map of the occluding triangles (world vertices (V, 3), faces (F, 3))
     seen from ``projector``; ``shadow_px`` pixels across the slide's larger side.
 
     facing (F,) int8, optional: -1 for the faces of closed, outward-wound meshes, whose faces
-    turned away from the projector are then not drawn (``rasterise_depth``); 0 otherwise.
+    turned away from the projector are then not drawn (``rasterise_depth``); 0 otherwise. threads:
+    2 lets the map of a large mesh be drawn on two threads (``rasterise_depth``).
     scratch, name: keep the map's arrays in these buffers under this name (``softshadow.scratch``;
     the map is then overwritten by the next one made with them).
     """
@@ -421,7 +425,8 @@ def projector_shadow_map(projector: Projector, vertices, faces, *, facing=None, 
     depth = -1.0 / np.maximum(z, NEAR_M)  # the originals behind the plane are unused
     zbuf, fid = rasterise_depth(grid.to_pixel(uv), depth, faces, (height, width), facing=facing,
                                 out=(scratch_array(scratch, f"{name}.zbuf", (height, width)),
-                                     scratch_array(scratch, f"{name}.face_id", (height, width), np.int32)))
+                                     scratch_array(scratch, f"{name}.face_id", (height, width), np.int32)),
+                                threads=threads, scratch=scratch, name=name)
     # Per face, in one pass: the map's triangle and depth plane (``shadow_map``'s), the bias's slope
     # term in metric terms (tan of the angle between the face's normal and the ray from the
     # projector to its centroid) and the lookup's packed data.

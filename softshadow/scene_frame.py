@@ -15,6 +15,10 @@ model with the work a frame needs:
 
        I = albedo * (ambient + projectors + E_sun max(0, n . s) (1 - alpha))
 
+``FrameRenderer`` keeps what did not change since its last frame (the posed object, each
+projector's shadow map: ``Scratch.memo``), and the per-pixel loops and the z-buffers of large
+meshes run on two threads (numba, ``parallel_loops``).
+
 The image agrees with ``render_scene``'s (same lights, same ``range_k_max``) to rounding
 (tests/test_scene_frame.py). ``range_k_max`` defaults to the lights' own k: the bands are as
 narrow as this frame's k allows.
@@ -33,13 +37,15 @@ import numpy as np
 from .camera import GroundGrid, PinholeCamera
 from .dense_plan import DensePlan, plan_dense_points
 from .evaluate import plan_alpha_jit
+from .parallel_loops import parallel_numba
 from .params import Pose, Sun
 from .plan import grid_bucket_size
-from .posed import PosedOccluder
+from .posed import PosedOccluder, posed_vertices
 from .projector import Projector, projector_shadow_map
 from .render import SoftShadowModel
-from .scratch import Scratch, scratch_array
 from .scene_render import SceneLights, _object_surface, caster_face_offsets
+from .scratch import Scratch, scratch_array
+from .sun import check_sun_above_horizon
 from .visibility import Surface, VisibleSurfaces, visible_surfaces
 
 __all__ = ["FRAME_STEPS", "FrameRenderer", "SceneFrame", "band_alpha", "render_frame"]
@@ -83,20 +89,30 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
     range_k_max = k if range_k_max is None else float(range_k_max)
     ms: dict[str, float] = {}
     t = time.perf_counter()
-    surfaces = [_object_surface(model, pose, object_albedo), *receivers]
+    # The posed object, the casters and the projectors' shadow maps are kept between frames while
+    # their inputs do not change (``Scratch.memo``): a frame where only the sun moves re-makes none.
+    pose_key = tuple(np.asarray(x, np.float64) for x in (pose.position, pose.rotation_deg, pose.scale))
+    obj, world, rotation = _memo(scratch, "frame.object", (model, *pose_key, _albedo_of(object_albedo)),
+                                 lambda: _posed_object(model, pose, object_albedo))
+    surfaces = [obj, *receivers]
     # Neither the posed occluder nor the projectors' shadow maps need what the camera sees: the
     # second thread makes them while this one finds it.
-    posed = None if sun is None else _submit(pool, PosedOccluder.make, model.occluder, pose, sun)
+    if sun is not None:
+        check_sun_above_horizon(float(sun.elevation_deg))
+    posed = None if sun is None else _submit(pool, PosedOccluder.lit_by, model.occluder, world, rotation,
+                                             sun.light_np)
     if pool is None and sun is not None:
         t = _lap(ms, "sun_plan", t)
-    casters = _Casters.of(surfaces)
+    casters = _memo(scratch, "frame.casters", (obj, *[a for r in receivers for a in (r.vertices, r.faces)],
+                                               *[r.casts_shadows for r in receivers], *[r.closed for r in receivers]),
+                    lambda: _Casters.of(surfaces))
     maps = _submit(pool, _projector_maps, projectors, casters, scratch)
     if pool is None:
         t = _lap(ms, "projectors", t)
     light = None
     plan, alpha_band = None, np.zeros(0)
     try:
-        vis = visible_surfaces(camera, surfaces, ground_albedo, scratch=scratch, albedo=False)
+        vis = visible_surfaces(camera, surfaces, ground_albedo, scratch=scratch, albedo=False, threads=2)
         n = len(vis.pixel)
         # Each point's surface (GROUND -1, the object 0, receivers 1...), its face on the object
         # (-1 elsewhere) and among the shadow casters' faces (-1: none), in one pass.
@@ -141,8 +157,10 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
 
 class FrameRenderer:
     """``render_frame`` for a stream of frames: the per-frame arrays are kept between frames
-    (``softshadow.scratch``: fresh memory costs a fifth of a frame in page faults) and a second
-    thread runs the projectors while the first makes the sun's plan.
+    (``softshadow.scratch``: fresh memory costs a fifth of a frame in page faults), so are the
+    posed object and the projectors' shadow maps while their inputs stay (``Scratch.memo``), and
+    a second thread runs the projectors while the first makes the sun's plan. threads: 2 (that
+    second thread, and the first's compiled loops on two threads) or 1 (all on one).
 
     ``render(...)`` takes ``render_frame``'s arguments. A frame's arrays (image, visible, plan)
     are overwritten by the next frame: copy what you keep. Not for use from two threads at once.
@@ -151,11 +169,20 @@ class FrameRenderer:
     def __init__(self, threads: int = 2):
         if threads not in (1, 2):
             raise ValueError(f"FrameRenderer threads must be 1 or 2, got {threads!r}")
+        self.threads = threads
         self.scratch = Scratch()
-        self.pool = ThreadPoolExecutor(1, thread_name_prefix="softshadow-frame") if threads == 2 else None
+        # The second thread's compiled loops run on it alone: the first thread's use both cores.
+        self.pool = ThreadPoolExecutor(1, thread_name_prefix="softshadow-frame",
+                                       initializer=_numba_threads, initargs=(1,)) if threads == 2 else None
 
     def render(self, *args, **kwargs) -> SceneFrame:
-        return render_frame(*args, **kwargs, scratch=self.scratch, pool=self.pool)
+        numba = parallel_numba()
+        before = numba.get_num_threads()
+        _numba_threads(self.threads)
+        try:
+            return render_frame(*args, **kwargs, scratch=self.scratch, pool=self.pool)
+        finally:
+            numba.set_num_threads(before)
 
     def close(self) -> None:
         if self.pool is not None:
@@ -191,9 +218,27 @@ class _Casters:
 
 
 def _projector_maps(projectors: Sequence[Projector], casters: _Casters, scratch: Scratch | None) -> list:
-    """Each projector's shadow map of the casters (``projector_light``'s)."""
-    return [projector_shadow_map(proj, casters.vertices, casters.faces, facing=casters.facing, scratch=scratch,
-                                 name=f"projector{j}") for j, proj in enumerate(projectors)]
+    """Each projector's shadow map of the casters (``projector_light``'s), kept while neither the
+    projector's geometry nor the casters change (the map does not depend on the slide's values)."""
+    def make(proj, j):
+        return lambda: projector_shadow_map(proj, casters.vertices, casters.faces, facing=casters.facing, threads=2,
+                                            scratch=scratch, name=f"projector{j}")
+
+    return [_memo(scratch, f"frame.projector{j}", (casters, proj.position, proj.target, proj.up, float(proj.fov_deg),
+                                                   int(proj.shadow_px), *map(int, proj.slide.shape[:2])), make(proj, j))
+            for j, proj in enumerate(projectors)]
+
+
+def _posed_object(model: SoftShadowModel, pose: Pose, albedo) -> tuple[Surface, np.ndarray, np.ndarray]:
+    """The posed object as a ``Surface`` (``render_scene``'s), its world vertices (V, 3) and rotation (3, 3)."""
+    world, rotation = posed_vertices(model.occluder, pose)
+    surface = _object_surface(model, pose, albedo, posed=(world, rotation))
+    return surface, world, rotation
+
+
+def _memo(scratch: Scratch | None, name: str, inputs: tuple, make):
+    """``scratch.memo(name, inputs, make)``, or ``make()`` without scratch buffers."""
+    return make() if scratch is None else scratch.memo(name, inputs, make)
 
 
 def _projector_light(vis: VisibleSurfaces, own: np.ndarray, projectors: Sequence[Projector], maps,
@@ -212,12 +257,12 @@ def _projector_light(vis: VisibleSurfaces, own: np.ndarray, projectors: Sequence
 def _point_faces_kernel():
     """Per visible point (numba): its surface, its face on the object (surface 0; else -1), and
     its face among the casters' (offset[surface] + face; -1 where offset is -1)."""
-    import numba
+    numba = parallel_numba()
 
-    @numba.njit(cache=True, nogil=True)
+    @numba.njit(cache=True, nogil=True, parallel=True)
     def kernel(pixel, surface_img, face_img, offset, surface, on_object, own):
         last = offset.shape[0] - 1
-        for i in range(pixel.shape[0]):
+        for i in numba.prange(pixel.shape[0]):
             s = surface_img[pixel[i]]
             f = face_img[pixel[i]]
             surface[i] = s
@@ -226,6 +271,12 @@ def _point_faces_kernel():
             own[i] = o + f if o >= 0 else -1
 
     return kernel
+
+
+def _numba_threads(n: int) -> None:
+    """The compiled loops' threads for the calling thread (numba's setting is per thread)."""
+    numba = parallel_numba()
+    numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
 
 
 def _submit(pool: ThreadPoolExecutor | None, fn, *args, **kwargs):
@@ -264,26 +315,31 @@ def _shade_kernel():
     surface + 1: the ground's first) times ambient plus the
     projectors' light plus the sun's, E max(0, n . s) (1 - alpha), alpha the plan's hard shadow or
     (band points, ascending in ``band``) the penumbra formula's; into the flat image."""
-    import numba
+    numba = parallel_numba()
 
-    @numba.njit(cache=True, nogil=True)
+    # Parallel over blocks of points, each starting at its first band point.
+    @numba.njit(cache=True, nogil=True, parallel=True)
     def kernel(pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, hard, band, alpha_band,
                image):
-        j = 0
         has_sun = hard.shape[0] > 0
-        for i in range(pixel.shape[0]):
-            sun = 0.0
-            if has_sun:
-                alpha = hard[i]
-                if j < band.shape[0] and band[j] == i:
-                    alpha = alpha_band[j]
-                    j += 1
-                cos = normals[i, 0] * sun_dir[0] + normals[i, 1] * sun_dir[1] + normals[i, 2] * sun_dir[2]
-                sun = sun_irradiance * max(cos, 0.0) * (1.0 - alpha)
-            p = pixel[i]
-            s = surface[i] + 1  # the ground (-1) first
-            for c in range(3):
-                image[p, c] = albedos[s, c] * (ambient + light[i, c] + sun)
+        n = pixel.shape[0]
+        block = 4096
+        for b in numba.prange((n + block - 1) // block):
+            lo, hi = b * block, min((b + 1) * block, n)
+            j = np.searchsorted(band, lo)
+            for i in range(lo, hi):
+                sun = 0.0
+                if has_sun:
+                    alpha = hard[i]
+                    if j < band.shape[0] and band[j] == i:
+                        alpha = alpha_band[j]
+                        j += 1
+                    cos = normals[i, 0] * sun_dir[0] + normals[i, 1] * sun_dir[1] + normals[i, 2] * sun_dir[2]
+                    sun = sun_irradiance * max(cos, 0.0) * (1.0 - alpha)
+                p = pixel[i]
+                s = surface[i] + 1  # the ground (-1) first
+                for c in range(3):
+                    image[p, c] = albedos[s, c] * (ambient + light[i, c] + sun)
 
     return kernel
 

@@ -94,11 +94,13 @@ class SceneRender:
     setup: SceneSetup
 
 
-def _object_surface(model: SoftShadowModel, pose: Pose, albedo) -> Surface:
+def _object_surface(model: SoftShadowModel, pose: Pose, albedo,
+                    posed: tuple[np.ndarray, np.ndarray] | None = None) -> Surface:
     """The posed object as a ``Surface``: closed when its mesh is (its back faces are then not
-    drawn), with the occluder's face normals turned by the pose."""
+    drawn), with the occluder's face normals turned by the pose. posed: ``posed_vertices``'
+    (world, rotation) when already made."""
     occ = model.occluder
-    world, rotation = posed_vertices(occ, pose)
+    world, rotation = posed_vertices(occ, pose) if posed is None else posed
     closed = _outward(occ) if float(pose.scale) > 0 else False
     return Surface(world, occ.faces, albedo, "object", closed=closed, normals=occ.face_normals @ rotation.T)
 

@@ -41,6 +41,7 @@ import functools
 import numpy as np
 
 from .camera import GroundGrid
+from .parallel_loops import parallel_numba
 from .scratch import Scratch, scratch_array
 
 __all__ = ["LightFrame", "ShadowMap", "rasterise_depth", "shadow_map", "depth_bias", "faces_away",
@@ -133,7 +134,8 @@ def _facing_kernel():
 
 def rasterise_depth(xy: np.ndarray, depth: np.ndarray, faces: np.ndarray,
                     shape: tuple[int, int], *, facing: np.ndarray | None = None,
-                    out: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
+                    out: tuple[np.ndarray, np.ndarray] | None = None, threads: int = 1,
+                    scratch: Scratch | None = None, name: str = "zbuffer") -> tuple[np.ndarray, np.ndarray]:
     """Nearest-face depth buffer of triangles, generic over the projection.
 
     xy (V, 2) pixel coordinates (col, row; pixel centres at integers); depth (V,) any
@@ -146,10 +148,15 @@ def rasterise_depth(xy: np.ndarray, depth: np.ndarray, faces: np.ndarray,
     where its signed area in pixel coordinates, (p1 - p0) x (p2 - p0), has the sign of s
     (a closed mesh's faces turned away from the viewer are never the nearest: skipping them
     halves the work and changes no pixel); 0 draws the face either way. out: the (H, W) depth
-    (float64, or float32 for float32 depths) and face_id (int32) arrays to fill and return.
+    (float64, or float32 for float32 depths) and face_id (int32) arrays to fill and return;
+    threads: 2 lets many faces be drawn on two threads (below); scratch, name: keep the
+    second thread's buffers under this name.
 
     Scanline: each face's rows, each row's span of columns from the face's edges, then the
-    depth from the face's plane at those pixel centres; O(covered pixels + face rows).
+    depth from the face's plane at those pixel centres; O(covered pixels + face rows). With
+    threads=2, two numba threads (``parallel_loops``) and many faces, the two halves of the faces are drawn
+    on two threads into two buffers, then merged, the first half's face kept on a tie: the
+    buffer the one thread would draw, bit for bit.
     """
     h, w = shape
     dtype = np.result_type(depth.dtype, np.float32)
@@ -164,9 +171,20 @@ def rasterise_depth(xy: np.ndarray, depth: np.ndarray, faces: np.ndarray,
     if len(faces):
         cull = (np.zeros(len(faces), np.int8) if facing is None
                 else np.ascontiguousarray(facing, np.int8).reshape(len(faces)))
-        _zbuffer_kernel()(np.ascontiguousarray(xy, np.float64), np.ascontiguousarray(depth, np.float64),
-                          np.ascontiguousarray(faces, np.int64), cull, zbuf, fid, h, w, dtype == np.float32)
+        args = (np.ascontiguousarray(xy, np.float64), np.ascontiguousarray(depth, np.float64),
+                np.ascontiguousarray(faces, np.int64), cull, zbuf, fid)
+        numba = parallel_numba()
+        if threads > 1 and len(faces) >= SPLIT_FACES and numba.get_num_threads() > 1:
+            _zbuffer_kernel()[1](*args, scratch_array(scratch, f"{name}.split_depth", h * w, dtype),
+                                 scratch_array(scratch, f"{name}.split_face", h * w, np.int32), h, w,
+                                 dtype == np.float32)
+        else:
+            _zbuffer_kernel()[0](*args, h, w, dtype == np.float32)
     return zbuf.reshape(h, w), fid.reshape(h, w)
+
+
+#: Meshes from this many faces are drawn on two threads (fewer: the merge costs more than it saves).
+SPLIT_FACES = 2048
 
 
 @functools.cache
@@ -178,12 +196,16 @@ def _zbuffer_kernel():
     A small face's bounding box's pixel centres are tested against its three edges (edge
     functions, stepped along each row); a large face's rows are spanned from where they cross
     its edges. A centre within 1e-9 pixel of an edge, or on it, is inside, so a centre on a
-    shared edge belongs to both faces."""
-    import numba
+    shared edge belongs to both faces.
+
+    Returns (the kernel, the two-thread kernel): ``draw`` of all the faces, or of each half on
+    its own thread into its own buffer (the second's extra (H W,) depth and face buffers given),
+    merged after."""
+    numba = parallel_numba()
 
     @numba.njit(cache=True, nogil=True)
-    def kernel(xy, depth, faces, facing, zbuf, fid, h, w, single):
-        for i in range(faces.shape[0]):
+    def draw(lo, hi, xy, depth, faces, facing, zbuf, fid, h, w, single):
+        for i in range(lo, hi):
             a, b, c = faces[i, 0], faces[i, 1], faces[i, 2]
             x0, y0, z0 = xy[a, 0], xy[a, 1], depth[a]
             x1, y1, z1 = xy[b, 0], xy[b, 1], depth[b]
@@ -278,7 +300,27 @@ def _zbuffer_kernel():
                     fy += ay
                     fz += az
 
-    return kernel
+    @numba.njit(cache=True, nogil=True)
+    def kernel(xy, depth, faces, facing, zbuf, fid, h, w, single):
+        draw(0, faces.shape[0], xy, depth, faces, facing, zbuf, fid, h, w, single)
+
+    @numba.njit(cache=True, nogil=True, parallel=True)
+    def split_kernel(xy, depth, faces, facing, zbuf, fid, zbuf2, fid2, h, w, single):
+        half = faces.shape[0] // 2
+        for part in numba.prange(2):
+            if part == 0:
+                draw(0, half, xy, depth, faces, facing, zbuf, fid, h, w, single)
+            else:
+                zbuf2.fill(np.inf)
+                fid2.fill(-1)
+                draw(half, faces.shape[0], xy, depth, faces, facing, zbuf2, fid2, h, w, single)
+        # Strictly nearer only: on a tie the first half's (lower) face stays, as one thread keeps it.
+        for p in numba.prange(zbuf.shape[0]):
+            if zbuf2[p] < zbuf[p]:
+                zbuf[p] = zbuf2[p]
+                fid[p] = fid2[p]
+
+    return kernel, split_kernel
 
 
 @dataclasses.dataclass(frozen=True)
@@ -453,12 +495,12 @@ def _planes_kernel():
 
 def shadow_map(grid: GroundGrid, uv: np.ndarray, depth: np.ndarray, faces: np.ndarray,
                dtype=np.float64, *, facing: np.ndarray | None = None,
-               out: tuple[np.ndarray, np.ndarray] | None = None, scratch: Scratch | None = None,
+               out: tuple[np.ndarray, np.ndarray] | None = None, threads: int = 1, scratch: Scratch | None = None,
                name: str = "shadow_map") -> ShadowMap:
     """The shadow map of faces (F, 3) with light-space vertices uv (V, 2) and depths (V,) on grid.
 
     dtype: the float type of the depth buffer and the planes (float32 to measure precision);
-    facing: back-face culling per face, out: the depth and face-id arrays to fill
+    facing: back-face culling per face, out: the depth and face-id arrays to fill, threads
     (``rasterise_depth``); scratch, name: keep the per-face arrays (triangles, planes, slopes)
     in these buffers under this name (``softshadow.scratch``: the map is then overwritten by the
     next one made with them).
@@ -467,7 +509,8 @@ def shadow_map(grid: GroundGrid, uv: np.ndarray, depth: np.ndarray, faces: np.nd
     depth = np.ascontiguousarray(depth, dtype)
     faces = np.ascontiguousarray(faces, np.int64)
     zbuf, fid = rasterise_depth(grid.to_pixel(uv).astype(dtype), depth, faces,
-                                (grid.height, grid.width), facing=facing, out=out)
+                                (grid.height, grid.width), facing=facing, out=out, threads=threads,
+                                scratch=scratch, name=name)
     # Each face's light-space triangle, depth plane and slope (``_face_planes``) and the
     # coordinates' magnitude, in one compiled pass.
     f = len(faces)

@@ -233,9 +233,9 @@ def test_fitting_discrete_steps_run_no_eager_jax(no_eager_jax):
                      sun_azimuth_deg=150.0, sun_elevation_deg=40.0)
     with no_eager_jax():
         samples = select_samples(model, pose, view, sky_occlusion=False)
-        az, el, _ = search_sun(model, pose, view, azimuth_step=30.0, elevations=(30, 40, 50))
+        guess = search_sun(model, pose, [view], azimuth_step=30.0, elevations=(30, 40, 50))
     assert len(samples.observed) > 50
-    assert abs(el - 40.0) <= 10.0
+    assert abs(guess.elevation_deg - 40.0) <= 10.0
 
 
 def test_command_and_synthesis_steps_run_no_eager_jax(no_eager_jax):

@@ -152,3 +152,74 @@ def test_back_face_culling_changes_no_pixel():
 def test_surface_normals_are_checked():
     with pytest.raises(ValueError, match="one normal per face"):
         Surface(np.eye(3), [[0, 1, 2]], normals=np.zeros((2, 3)))
+
+
+def test_frame_renderer_remakes_what_changed():
+    """The renderer keeps the posed object, the casters and the projectors' maps between frames
+    while their inputs stay; a moved pose, projector or receiver (also one changed in place) is
+    seen: every frame equals a fresh render_frame."""
+    model = model_of("pillar")
+    cam, proj = _scene()
+    moved = Projector((-2.0, -3.5, 3.2), (0.0, 0.0, 0.5), proj.slide, fov_deg=45.0, shadow_px=256)
+    for threads in (1, 2):
+        step = _step()
+        frames = [(Pose(), proj), (Pose(), proj), (Pose(position=(0.2, 0.0, 0.0)), proj),
+                  (Pose(position=(0.2, 0.0, 0.0)), moved), (Pose(position=(0.2, 0.0, 0.0)), None)]
+        renderer = ss.FrameRenderer(threads=threads)
+        try:
+            for i, (pose, projector) in enumerate(frames):
+                if projector is None:  # the step raised in place: its shadow moves in the projector's map
+                    projector = moved
+                    step.vertices[:, 2] += 0.4
+                args = (cam, model, pose, SceneLights(0.2, 0.8, 0.02), Sun(220.0, 40.0), [projector])
+                got = renderer.render(*args, receivers=[step]).image.copy()
+                np.testing.assert_array_equal(got, render_frame(*args, receivers=[step]).image, err_msg=f"frame {i}")
+        finally:
+            renderer.close()
+
+
+def test_scratch_memo_keeps_a_result_while_its_inputs_stay():
+    scratch = ss.internal.Scratch()
+    made = []
+
+    def make():
+        made.append(1)
+        return len(made)
+
+    a, key = np.arange(4.0), object()
+    assert scratch.memo("x", (a, key, 1.5, "s"), make) == 1
+    assert scratch.memo("x", (a.copy(), key, 1.5, "s"), make) == 1  # arrays by value
+    a[0] = 9.0  # changed in place: seen
+    assert scratch.memo("x", (a, key, 1.5, "s"), make) == 2
+    assert scratch.memo("x", (a, object(), 1.5, "s"), make) == 3  # other objects by identity
+    assert scratch.memo("x", (a.astype(np.float32), key, 1.5, "s"), make) == 4  # dtype counts
+    assert scratch.memo("x", (a, key, 2.5, "s"), make) == 5
+    assert scratch.memo("y", (a, key, 2.5, "s"), make) == 6  # per name
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_zbuffer_on_two_threads_equals_one(dtype):
+    """Many faces are drawn in two halves on two threads and merged: the same buffer bit for bit
+    (ties on shared edges keep the lower face, as one thread does)."""
+    import numba
+    import trimesh
+
+    from softshadow.shadowmap import SPLIT_FACES, rasterise_depth
+    sphere = trimesh.creation.icosphere(subdivisions=4)
+    rng = np.random.default_rng(3)
+    # Both windings, shuffled: every face drawn twice (ties), and each half holds winners.
+    faces = rng.permutation(np.vstack([sphere.faces, sphere.faces[:, ::-1]]))
+    assert len(faces) >= SPLIT_FACES
+    xy = sphere.vertices[:, :2] * 30.0 + 40.0 + rng.normal(0, 0.01, (len(sphere.vertices), 2))
+    depth = (sphere.vertices[:, 2] + 2.0).astype(dtype)
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        one = rasterise_depth(xy, depth, faces, (80, 90))
+        numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
+        two = rasterise_depth(xy, depth, faces, (80, 90), threads=2, scratch=ss.internal.Scratch())
+    finally:
+        numba.set_num_threads(before)
+    assert (one[1] >= 0).sum() > 2500 and (one[1] >= len(faces) // 2).sum() > 500, "both halves must win pixels"
+    np.testing.assert_array_equal(one[0], two[0])
+    np.testing.assert_array_equal(one[1], two[1])

@@ -170,7 +170,7 @@ def test_a_free_sun_that_wanders_below_the_horizon_is_a_clear_error(monkeypatch)
         raise SunBelowHorizonError("sun elevation -1.65 deg is at or below the horizon (minimum 0.5 deg)")
     import fitting.photos.sun_search as sun_search
     monkeypatch.setattr(solve, "fit_group", fit_group)
-    monkeypatch.setattr(sun_search, "search_sun", lambda *a: (333.0, 1.0, None))
+    monkeypatch.setattr(sun_search, "search_sun", lambda *a: sun_search.SunGuess(333.0, 1.0, 0.0))
     views = [types.SimpleNamespace(name="a.jpg", sun_source="fitted", sun_azimuth_deg=None,
                                    sun_elevation_deg=None, time=None)]
     result, left_out = checked.fit_checked(None, None, views, PhotoGroup("10:30", "10:30", ["a.jpg"]),

@@ -257,6 +257,14 @@ def test_photos_that_disagree_widen_the_error_and_beyond_a_limit_flag_the_group(
     far = [_photo("a.jpg", rho=0.16, rho_stderr=0.001), _photo("b.jpg", rho=0.30, rho_stderr=0.001)]
     _, verdict = rules.judge_fit(_fit(far, rho=0.2), GroupContext(2))
     assert not verdict.reliable and any(w.startswith("the photos disagree on rho") for w in verdict.warnings)
+    # Photos that disagree on k flag the group, unless no photo resolves the penumbra (calibration
+    # study group 90: 0.0025 +- 0.0002 against 0.056 +- 0.003 for a 1 px penumbra): k is then a bound.
+    on_k = [_photo("a.jpg", k=0.0025, k_stderr=0.0002), _photo("b.jpg", k=0.056, k_stderr=0.003)]
+    _, verdict = rules.judge_fit(_fit(on_k, k=0.0027, k_stderr_stat=0.0002), GroupContext(2))
+    assert not verdict.reliable and any(w.startswith("the photos disagree on k") for w in verdict.warnings)
+    estimate, verdict = rules.judge_fit(_fit(on_k, k=0.0027, k_stderr_stat=0.0002, penumbra_px=1.0), GroupContext(2))
+    assert verdict.reliable and not verdict.identifiable and estimate.range_k > 0.0027
+    assert not any("the photos disagree on k" in w for w in verdict.warnings)
     # Photos without umbra samples are not compared on rho.
     blind = [_photo("a.jpg"), _photo("b.jpg", rho=0.8, rho_stderr=0.001, n_umbra=4)]
     estimate, _ = rules.judge_fit(_fit(blind), GroupContext(2))
@@ -286,7 +294,8 @@ def test_not_identifiable_gives_an_upper_bound_and_a_warning(k, se, pen, upper):
 
 def test_identifiability_thresholds():
     k = 0.01
-    ident = lambda **kw: rules.judge_fit(_fit(k=k, k_stderr_stat=0.001, **kw), GroupContext(3))[1].identifiable
+    ident = lambda **kw: rules.judge_fit(_fit(k=k, k_stderr_stat=0.001, blur_px=0.0, **kw),
+                                         GroupContext(3))[1].identifiable
     assert ident(penumbra_px=rules.MIN_PENUMBRA_PX)
     assert not ident(penumbra_px=rules.MIN_PENUMBRA_PX * 0.99)
     assert rules.judge_fit(_fit(k=k, k_stderr_stat=rules.MAX_K_REL_STDERR * k, penumbra_px=2.0),
@@ -332,9 +341,13 @@ def test_the_other_flags():
         _, verdict = rules.judge_fit(_fit(**kw), GroupContext(3))
         assert not verdict.reliable and any(text in w for w in verdict.warnings), text
     assert rules.judge_fit(_fit(n_in_umbra=rules.MIN_UMBRA_SAMPLES), GroupContext(3))[1].reliable
-    # The resolution note does not make a group on the ground unreliable; on steps or a bank it does.
-    _, verdict = rules.judge_fit(_fit(penumbra_px=1.3, blur_px=0.7), GroupContext(3))
-    assert verdict.reliable and verdict.warnings[0].startswith("penumbra 1.3 px wide, under the photo's blur spot")
+    # A penumbra under the blur spot makes k a bound on the ground (the group stays reliable); on
+    # steps or a bank the group is unreliable.
+    estimate, verdict = rules.judge_fit(_fit(penumbra_px=1.3, blur_px=0.7), GroupContext(3))
+    assert verdict.reliable and not verdict.identifiable and estimate.range_k > 0.0057
+    assert any("the penumbra is under the photo's blur spot; range_k is an upper bound" in w
+               for w in verdict.warnings)
+    assert rules.judge_fit(_fit(penumbra_px=1.6, blur_px=0.7), GroupContext(3))[1].identifiable  # the spot: 1.51 px
     _, verdict = rules.judge_fit(_fit(penumbra_px=1.3, blur_px=0.7, receiver="mesh"), GroupContext(3))
     assert not verdict.reliable and any("on a mesh receiver, whose relief shares its pixels" in w
                                         for w in verdict.warnings)

@@ -38,9 +38,13 @@ def _fit_group_with_sun(model, pose, views, group: PhotoGroup, options: FitOptio
         return fit_group(model, pose, views, group.label, group.time, options, sky_model, samples=samples), None
     if any(v.sun_source == "fitted" for v in views):
         from ..photos.sun_search import search_sun
-        az, el, _ = search_sun(model, pose, views[0])
+        try:
+            guess = search_sun(model, pose, views)
+        except ValueError as exc:
+            return GroupResult.failed(group.label, group.time, [v.name for v in views],
+                                      f"cannot search for the sun: {exc}"), None
         for v in views:
-            v.sun_azimuth_deg, v.sun_elevation_deg = az, el
+            v.sun_azimuth_deg, v.sun_elevation_deg = guess.azimuth_deg, guess.elevation_deg
     result: GroupResult | None = None
     moved: float | None = None
     # Re-plan around the refined sun: each solve moves it by about 2 deg at the most, since the

@@ -135,9 +135,10 @@ MIN_PENUMBRA_SAMPLES, NARROW_PENUMBRA_PX = 40, 2.0
 #: sun measured rho within 0.005 from 15).
 MIN_UMBRA_SAMPLES = 5
 #: A penumbra narrower than this many standard deviations of the pixel's area plus the camera's
-#: blur (the blur spot, sqrt(1/12 + blur^2) px) is not resolved by the photo: k then rests on the
-#: blur model (physical 400x300 folders, penumbrae of 1.1-1.6 px under 0.6-0.9 px of blur: k errors
-#: of -14 % to +13 %, within the stated error).
+#: blur (the blur spot, sqrt(1/12 + blur^2) px) is not resolved by the photo: the fitted blur and k
+#: trade off, and k is an upper bound (physical 400x300 folders, penumbrae of 1.1-1.6 px under
+#: 0.6-0.9 px of blur: k -14 % to +13 %; in the calibration study the knot at 344x258, a 1.1 px
+#: penumbra under a 1.2 px spot, read k 2.6 times the truth, 3.7 stated errors).
 RESOLVED_BLUR_WIDTHS = 2.0
 # On a receiver that is not the plane (range images, a mesh) such a penumbra makes the group
 # unreliable: the steps at 416x312 (a 1.5 px penumbra under a 2.1 px spot) read rho 5.4 sigma low, a
@@ -536,7 +537,13 @@ def judge_fit(fit: FitEvidence, context: GroupContext | None = None) -> tuple[Es
     flags: list[str] = []  # warnings that make the group unreliable
     notes: list[str | None] = []  # the others
     # 4. Agreement: photos that disagree widen the statistical errors.
+    not_resolved = _identifiability(fit)  # why k is not measured from the penumbra, or None
+    unresolved = resolution_warning(fit.penumbra_px, fit.blur_px)  # the penumbra under the blur spot
     (k_ratio, k_disagree), (rho_ratio, rho_disagree) = _birge_ratio(fit, "k"), _birge_ratio(fit, "rho")
+    if not_resolved or unresolved:
+        # A penumbra the photos do not resolve: each photo's own k is no measurement, and the group's
+        # k is a bound (widened by the disagreement), not a compromise between photos.
+        k_disagree = None
     flags += [w for w in (k_disagree, rho_disagree) if w]
     k_stat, rho_stat = fit.k_stderr_stat * k_ratio, fit.rho_stderr_stat * rho_ratio
     k_err = math.hypot(k_stat, fit.k_stderr_sys) if _finite(fit.k_stderr_sys) else k_stat
@@ -549,7 +556,7 @@ def judge_fit(fit: FitEvidence, context: GroupContext | None = None) -> tuple[Es
     flags += [w for w in (misfit, None if misfit else _lod_warning(context)) if w]
 
     # 5. Identifiability of k, with its bound.
-    bound = _identifiability(fit)
+    bound = not_resolved
     if bound is None and scene_off:
         # A misplaced edge is fitted with a wider penumbra: k reads high, and bounds the truth.
         bound = "the fitted shadow does not match the photos"
@@ -563,13 +570,15 @@ def judge_fit(fit: FitEvidence, context: GroupContext | None = None) -> tuple[Es
     if bound is None and texture:
         # What hides the rho measurement hides the penumbra's width too: k is then a bound.
         bound = "the ground's texture hides the penumbra's width"
-    unresolved = resolution_warning(fit.penumbra_px, fit.blur_px)
     if unresolved and fit.receiver != "plane":
         # The receiver's own relief (risers, a bank's slope) shares the pixels of a penumbra under the
         # blur spot: the levels mix two surfaces and rho and k follow the blur model.
         flags.append(f"the penumbra ({fit.penumbra_px:.2g} px) is under the photo's blur spot on a {fit.receiver} "
                      "receiver, whose relief shares its pixels: rho and k rest on the blur model; photograph "
                      "closer or at full size")
+        unresolved = None
+    elif unresolved and bound is None:
+        bound = "the penumbra is under the photo's blur spot"  # RESOLVED_BLUR_WIDTHS
         unresolved = None
     notes.append(f"range not identifiable: {bound}; range_k is an upper bound" if bound else unresolved)
 
