@@ -10,13 +10,21 @@
   environment variable CI is set; ``dev`` (50 random examples, with shrinking)
   otherwise; ``long`` (500 examples) for a thorough local run.
   HYPOTHESIS_PROFILE overrides the choice.
+- Compiled JAX executables are dropped after any test that leaves the process holding more than
+  ``_MAPS_LIMIT`` memory maps: XLA's CPU backend maps memory for every executable it JIT-compiles
+  and keeps each one while its cache does, and the whole suite compiles thousands (one per shape,
+  static argument and transformation). Past the kernel's ``vm.max_map_count`` (65530 by default)
+  the next compile fails inside XLA with a segmentation fault. Dropping them only then keeps the
+  executables that later modules reuse (a compile costs seconds).
 """
 
 from __future__ import annotations
 
+import gc
 import os
 
 import jax
+import pytest
 
 jax.config.update("jax_enable_x64", True)
 
@@ -35,3 +43,26 @@ settings.register_profile("dev", max_examples=50, deadline=None,
 settings.register_profile("long", max_examples=500, deadline=None,
                           suppress_health_check=_SLOW_OK, print_blob=True)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE") or ("ci" if os.environ.get("CI") else "dev"))
+
+
+_MAPS_LIMIT = 20_000  # a third of the kernel's default vm.max_map_count: one test adds at most ~6,000
+
+
+def _memory_maps() -> int:
+    """The number of this process's memory maps (0 where /proc is missing)."""
+    try:
+        with open("/proc/self/maps", "rb") as maps:
+            return sum(1 for _ in maps)
+    except OSError:
+        return 0
+
+
+def _drop_compiled() -> None:
+    jax.clear_caches()
+    gc.collect()  # the executables go when the last reference does
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_runtest_teardown(item, nextitem):
+    if _memory_maps() > _MAPS_LIMIT:
+        _drop_compiled()

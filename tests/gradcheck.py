@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -21,11 +22,12 @@ from softshadow.internal import concatenate_plans
 PARAM_NAMES = ("range_k", "rho", "azimuth", "elevation", "x", "y", "z", "rot_x", "rot_y", "rot_z")
 # Central-difference steps: small against the scales (k >= 0.01, penumbra widths >= ~5 mm).
 STEPS = np.array([1e-7, 1e-6, 1e-6, 1e-6, 1e-7, 1e-7, 1e-7, 1e-6, 1e-6, 1e-6])
-# One edge count and one point count for every plan: a property test's examples (and the hard
-# cases) then share one compiled evaluation per rule and profile instead of recompiling whenever
-# a count crosses a power of two.
+# One edge count and at least one point count for every plan: a property test's examples (and the
+# hard cases) then share one compiled evaluation per rule and profile instead of recompiling
+# whenever a count crosses a power of two. Point sets of up to POINT_PAD points share one shape;
+# larger ones take the plan's own power of two (every padded point is evaluated: no larger).
 EDGE_PAD = 256
-POINT_PAD = 2048
+POINT_PAD = 512
 PAIR_PAD, CROSS_PAD = 4096, 512  # the wedge rule's pairs and crossings
 
 
@@ -40,8 +42,11 @@ def fixed_shape_plan(mdl, sun, pose, points, range_k_max, pixel_axes=None):
     pixel_axes: the pixel footprints the plan holds the pixel means for."""
     plan = mdl.plan_points(sun, pose, points, range_k_max=range_k_max, pixel_axes=pixel_axes)
     n_edges = int(np.asarray(plan.edges.outward_sign).shape[0])
-    return concatenate_plans([plan], [len(points)], pad_to=max(POINT_PAD, int(plan.edge_id.shape[0])),
+    plan = concatenate_plans([plan], [len(points)], pad_to=max(POINT_PAD, int(plan.edge_id.shape[0])),
                              edge_pad_to=max(EDGE_PAD, n_edges), pairs_to=PAIR_PAD, cross_to=CROSS_PAD)
+    # ``active`` as a JAX array: at_points evaluates every padded point (as for a traced plan) rather
+    # than the band's, whose count would set the compiled shape.
+    return eqx.tree_at(lambda q: q.active, plan, jnp.asarray(plan.active))
 
 
 def check_point_gradients(mdl, theta0: np.ndarray, points: np.ndarray, range_k_max: float,

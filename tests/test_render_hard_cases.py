@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from gradcheck import PARAM_NAMES, STEPS, check_point_gradients, unpack
+from gradcheck import PARAM_NAMES, STEPS, check_point_gradients, fixed_shape_grid_plan, fixed_shape_plan, unpack
 from softshadow import GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun
 from softshadow.internal import PosedOccluder
 from softshadow.meshes import builtin_mesh
@@ -45,6 +45,10 @@ def default_model(name: str, rule: str = "edge", profile: str = "linear") -> Sof
 
 
 SKEWED_PIXEL = np.array([[0.011, 0.002, 0.0], [-0.003, 0.013, 0.0]])  # a skewed 1 cm pixel
+
+# The profile each rule's cases use: the profiles are tested on their own elsewhere, and one pair per
+# rule means one compiled evaluation (and gradient) per rule for all its cases.
+PROFILE_OF = {"edge": "linear", "paper": "disk"}
 
 
 def model_for(kind: str, name: str, profile: str = "linear"):
@@ -94,9 +98,10 @@ def render_and_grad(mdl: SoftShadowModel, params: ShadowParams, sun: Sun, pose: 
                     grid: GroundGrid, range_k_max: float, with_grad: bool = True):
     """Ground map (H, W) and the gradient of sum(W * map) wrt (params, sun, pose), plan fixed.
 
-    with_grad=False skips the gradient (its compilation dominates the cost of a case).
+    with_grad=False skips the gradient (its compilation dominates the cost of a case). The plan
+    is padded to one shape per grid size, so the cases share their compiled evaluations.
     """
-    plan = mdl.plan_grid(sun, pose, grid, range_k_max=range_k_max)
+    plan = fixed_shape_grid_plan(mdl, sun, pose, grid, range_k_max)
     weights = jnp.asarray(np.random.default_rng(0).uniform(0.5, 1.5, (grid.height, grid.width)))
 
     def loss(p, s, q):
@@ -113,8 +118,9 @@ def render_and_grad(mdl: SoftShadowModel, params: ShadowParams, sun: Sun, pose: 
 
 
 def points_and_grad(mdl, params, sun, pose, points, range_k_max):
-    """Shading at points and its gradient (sum) wrt (params, sun, pose), plan fixed."""
-    plan = mdl.plan_points(sun, pose, points, range_k_max=range_k_max)
+    """Shading at points and its gradient (sum) wrt (params, sun, pose), plan fixed (one padded
+    shape for every case: one compiled evaluation per rule and profile)."""
+    plan = fixed_shape_plan(mdl, sun, pose, points, range_k_max)
 
     def loss(p, s, q):
         return jnp.sum(mdl.at_points(p, s, q, points, plan=plan))
@@ -200,7 +206,7 @@ def test_k_zero_and_tiny_give_the_hard_shadow_with_finite_gradients(profile):
 def test_occluder_standing_on_the_ground(rule):
     """A pillar and a box stand on z = 0: the base edges are at zero distance (zero penumbra)."""
     sun, params = Sun(150.0, 40.0), ShadowParams(0.03, 0.2)
-    cases = [(builtin_model("pillar", rule), Pose(rotation_deg=(0, 0, 25.0)))]
+    cases = [(builtin_model("pillar", rule, PROFILE_OF[rule]), Pose(rotation_deg=(0, 0, 25.0)))]
     if rule == "edge":
         cases.append((point_model(standing_box(), rule=rule), Pose(rotation_deg=(0, 0, 5.0))))
     for mdl, pose in cases:
@@ -237,14 +243,12 @@ def test_open_box_casts_the_closed_box_shadow(rule):
     """A box without its top is not watertight, yet seen from the sun it has the same outline."""
     sun, pose, params = Sun(100.0, 30.0), Pose(rotation_deg=(0, 0, 12.0)), ShadowParams(0.02, 0.3)
     grid = GroundGrid.around((-1.0, 0.3), 3.0, 64)
-    closed, _ = render_and_grad(point_model(standing_box(), rule=rule), params, sun, pose,
-                                grid, 0.02, with_grad=False)
-    opened, grads = render_and_grad(point_model(open_box(), rule=rule), params, sun, pose,
-                                    grid, 0.02)
-    hard_closed, _ = render_and_grad(point_model(standing_box(), rule=rule),
-                                     ShadowParams(0.0, 0.3), sun, pose, grid, 0.0, with_grad=False)
-    hard_open, _ = render_and_grad(point_model(open_box(), rule=rule),
-                                   ShadowParams(0.0, 0.3), sun, pose, grid, 0.0, with_grad=False)
+    closed_model = point_model(standing_box(), rule=rule, profile=PROFILE_OF[rule])
+    open_model = point_model(open_box(), rule=rule, profile=PROFILE_OF[rule])
+    closed, _ = render_and_grad(closed_model, params, sun, pose, grid, 0.02, with_grad=False)
+    opened, grads = render_and_grad(open_model, params, sun, pose, grid, 0.02)
+    hard_closed, _ = render_and_grad(closed_model, ShadowParams(0.0, 0.3), sun, pose, grid, 0.0, with_grad=False)
+    hard_open, _ = render_and_grad(open_model, ShadowParams(0.0, 0.3), sun, pose, grid, 0.0, with_grad=False)
     np.testing.assert_array_equal(hard_open, hard_closed)
     if rule == "edge":  # the edge rule depends only on the outline's edges and the light
         diff = np.abs(opened - closed)
@@ -259,7 +263,7 @@ def test_single_quad_matches_its_projected_parallelogram():
     """Every edge of a lone quad is a boundary edge; with k = 0 the shadow is the projected quad."""
     mdl = point_model(single_quad())
     sun, pose = Sun(210.0, 50.0), Pose()
-    grid = GroundGrid.around((0.6, 1.0), 3.0, 96)
+    grid = GroundGrid.around((0.6, 1.0), 3.0, 64)
     img, _ = render_and_grad(mdl, ShadowParams(0.0, 0.0), sun, pose, grid, 0.0, with_grad=False)
     light = np.asarray(sun.light)
     v = np.asarray(single_quad().vertices)
@@ -288,7 +292,7 @@ def _segment_distance(p, a, b):
 @pytest.mark.parametrize("rule", ["edge", "paper"])
 def test_box_lit_side_on_has_finite_gradients(rule):
     """Sun due east (azimuth 90) on an axis-aligned box: the +-y faces have n . L = 0 exactly."""
-    mdl = point_model(standing_box(), rule=rule)
+    mdl = point_model(standing_box(), rule=rule, profile=PROFILE_OF[rule])
     sun, pose, params = Sun(90.0, 35.0), Pose(), ShadowParams(0.02, 0.3)
     grid = GroundGrid.around((-1.0, 0.0), 3.0, 64)
     img, grads = render_and_grad(mdl, params, sun, pose, grid, 0.02)
@@ -306,20 +310,21 @@ def test_box_lit_side_on_has_finite_gradients(rule):
 def test_shadow_partly_out_of_frame_agrees_with_a_larger_frame():
     mdl = builtin_model("pillar")
     sun, pose, params = Sun(160.0, 30.0), Pose(), ShadowParams(0.03, 0.3)
-    big = GroundGrid.around((-0.9, 2.4), 6.0, 96)  # the whole shadow
-    # A 48 x 48 window of the same pixels cut through the middle of the shadow.
-    part = GroundGrid(big.pixel_m, (big.origin_m[0] + 30 * big.pixel_m, big.origin_m[1] - 20 * big.pixel_m),
-                      48, 48)
+    big = GroundGrid.around((-0.9, 2.4), 6.0, 64)  # the whole shadow
+    # A window of the same pixels shifted by (22, 26) pixels: it cuts through the middle of the
+    # shadow and reaches out of the larger frame (the same grid size: one compiled evaluation).
+    part = GroundGrid(big.pixel_m, (big.origin_m[0] + 22 * big.pixel_m, big.origin_m[1] - 26 * big.pixel_m),
+                      64, 64)
     whole, _ = render_and_grad(mdl, params, sun, pose, big, 0.03, with_grad=False)
     window, grads = render_and_grad(mdl, params, sun, pose, part, 0.03)
-    assert 0.02 < shadow_fraction(window, 0.3) < 0.9
-    np.testing.assert_allclose(window, whole[20:68, 30:78], atol=1e-9)
+    assert 0.02 < shadow_fraction(window[:38, :42], 0.3) < 0.9
+    np.testing.assert_allclose(window[:38, :42], whole[26:, 22:], atol=1e-9)
 
 
 def test_shadow_wholly_out_of_frame_is_all_lit_with_zero_gradients():
     mdl = builtin_model("ball")
     sun, pose, params = Sun(160.0, 30.0), Pose(), ShadowParams(0.03, 0.3)
-    grid = GroundGrid.around((20.0, -20.0), 2.0, 32)
+    grid = GroundGrid.around((20.0, -20.0), 2.0, 64)
     img, grads = render_and_grad(mdl, params, sun, pose, grid, 0.03)
     np.testing.assert_array_equal(img, np.ones_like(img))
     assert all(float(jnp.max(jnp.abs(g))) == 0.0 for g in jax.tree_util.tree_leaves(grads))
@@ -551,13 +556,17 @@ def test_default_model_at_k_zero_is_the_limit_of_k_to_zero_with_finite_gradients
     mdl = default_model("pillar", "edge", profile)
     sun, pose = Sun(200.0, 35.0), Pose(rotation_deg=(0.0, 0.0, 15.0))
     grid = GroundGrid.around((0.6, 1.6), 1.6, 48)
-    at_zero = np.asarray(mdl.ground_map(ShadowParams(0.0, 0.3), sun, pose, grid))
-    near_zero = np.asarray(mdl.ground_map(ShadowParams(1e-7, 0.3), sun, pose, grid))
+    # Plans of one shape (the whole grid): the maps share one compiled evaluation.
+    at_zero = np.asarray(mdl.ground_map(ShadowParams(0.0, 0.3), sun, pose, grid,
+                                        plan=fixed_shape_grid_plan(mdl, sun, pose, grid, 0.0)))
+    near_zero = np.asarray(mdl.ground_map(ShadowParams(1e-7, 0.3), sun, pose, grid,
+                                          plan=fixed_shape_grid_plan(mdl, sun, pose, grid, 1e-7)))
     assert np.abs(at_zero - near_zero).max() < 1e-4
     bare = mdl.with_options(hidden_sky=False)
-    partial = np.asarray(bare.ground_map(ShadowParams(0.0, 0.3), sun, pose, grid))
+    partial = np.asarray(bare.ground_map(ShadowParams(0.0, 0.3), sun, pose, grid,
+                                         plan=fixed_shape_grid_plan(bare, sun, pose, grid, 0.0)))
     assert np.sum((partial > 0.31) & (partial < 0.99)) > 40, "the pixels on the outline should be partly shaded"
-    plan = mdl.plan_grid(sun, pose, grid, range_k_max=1e-6)
+    plan = fixed_shape_grid_plan(mdl, sun, pose, grid, 1e-6)
     grad = jax.grad(lambda t: jnp.sum(mdl.ground_map(*unpack(t), grid, plan=plan)))(
         jnp.asarray(theta_for(0.0, 0.3, sun, pose)))
     assert np.all(np.isfinite(np.asarray(grad)))

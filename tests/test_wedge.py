@@ -50,11 +50,12 @@ def boxes_with_gap(gap=0.01) -> trimesh.Trimesh:
     return trimesh.util.concatenate([left, right])
 
 
-def truth_alpha(mesh: trimesh.Trimesh, points: np.ndarray, az: float, el: float, radius_deg: float):
-    """1 - the visible fraction of a uniform sun disk, 64 x 64 strata (data_synth)."""
+def truth_alpha(mesh: trimesh.Trimesh, points: np.ndarray, az: float, el: float, radius_deg: float,
+                n_samples: int = 4096):
+    """1 - the visible fraction of a uniform sun disk, 64 x 64 strata by default (data_synth)."""
     sky = SunSky(az, el, radius_deg)
     normals = np.tile([0.0, 0.0, 1.0], (len(points), 1))
-    return 1.0 - sun_visibility(mesh, points, normals, sky, n_samples=4096)
+    return 1.0 - sun_visibility(mesh, points, normals, sky, n_samples=n_samples)
 
 
 def ground_band(mesh, az, el, radius_deg, n=400, seed=0, extent=None):
@@ -67,6 +68,9 @@ def ground_band(mesh, az, el, radius_deg, n=400, seed=0, extent=None):
     lo = np.minimum(shadow.min(0), v[:, :2].min(0)) - 0.2
     hi = np.maximum(shadow.max(0), v[:, :2].max(0)) + 0.2
     pts = np.c_[rng.uniform(lo, hi, (20 * n, 2)), np.zeros(20 * n)]
+    # A coarse pass (16 x 16 strata) finds the candidates in the penumbra; only they get the fine one.
+    coarse = truth_alpha(mesh, pts, az, el, radius_deg, n_samples=256)
+    pts = pts[(coarse > 0.0) & (coarse < 1.0)][:2 * n]
     alpha = truth_alpha(mesh, pts, az, el, radius_deg)
     keep = np.flatnonzero((alpha > 0.02) & (alpha < 0.98))[:n]
     return pts[keep], alpha[keep]
