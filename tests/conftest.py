@@ -45,7 +45,8 @@ settings.register_profile("long", max_examples=500, deadline=None,
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE") or ("ci" if os.environ.get("CI") else "dev"))
 
 
-_MAPS_LIMIT = 20_000  # a third of the kernel's default vm.max_map_count: one test adds at most ~6,000
+# A third of the kernel's default vm.max_map_count; the most any one test adds is ~3,600 maps.
+_MAPS_LIMIT = 20_000
 
 
 def _memory_maps() -> int:
