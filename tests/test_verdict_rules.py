@@ -341,6 +341,11 @@ def test_the_other_flags():
         _, verdict = rules.judge_fit(_fit(**kw), GroupContext(3))
         assert not verdict.reliable and any(text in w for w in verdict.warnings), text
     assert rules.judge_fit(_fit(n_in_umbra=rules.MIN_UMBRA_SAMPLES), GroupContext(3))[1].reliable
+    # A solver stopped on its step limit whose next step would move k and rho by little has settled.
+    assert rules.judge_fit(_fit(converged=False, remaining_step_se=0.05), GroupContext(3))[1].reliable
+    _, verdict = rules.judge_fit(_fit(converged=False, remaining_step_se=0.5), GroupContext(3))
+    assert not verdict.reliable and verdict.warnings == (
+        "the solver stopped before converging (one more step would move k or rho by 0.5 of their errors)",)
     # A penumbra under the blur spot makes k a bound on the ground (the group stays reliable); on
     # steps or a bank the group is unreliable.
     estimate, verdict = rules.judge_fit(_fit(penumbra_px=1.3, blur_px=0.7), GroupContext(3))

@@ -42,7 +42,7 @@ __all__ = [
     "UMBRA_RESIDUAL_RATIO", "UMBRA_RESIDUAL_MIN", "DEPTH_MISMATCH_MAX", "RELIEF_UMBRA_BIAS_RATIO", "TEXTURE_DEPTH_RATIO", "TEXTURE_PENUMBRA_PX", "MIN_PHOTO_UMBRA_SAMPLES",
     "MIN_PHOTO_PENUMBRA_SAMPLES", "PHOTO_SYS_SHARE", "DISAGREE_MAX_RATIO", "MIN_PENUMBRA_PX", "MAX_K_REL_STDERR",
     "MIN_PENUMBRA_SAMPLES", "NARROW_PENUMBRA_PX", "MIN_UMBRA_SAMPLES", "RESOLVED_BLUR_WIDTHS",
-    "MIN_PROFILES", "SUN_SETTLED_DEG", "SUN_FREE_MAX_DEG", "SUN_FREE_SHIFT", "SUN_CHECK_GAIN", "CLOCK_ALONG_PATH", "ELEVATION_ONLY", "LOD_SHIFT_MAX",
+    "MIN_PROFILES", "SOLVER_SETTLED_SE", "SUN_SETTLED_DEG", "SUN_FREE_MAX_DEG", "SUN_FREE_SHIFT", "SUN_CHECK_GAIN", "CLOCK_ALONG_PATH", "ELEVATION_ONLY", "LOD_SHIFT_MAX",
     "failed", "no_shadow", "photo_to_leave_out", "wants_sun_check", "sun_moves", "judge_fit", "range_upper_bound",
     "resolution_warning", "few_profiles_warning", "misfit_of",
 ]
@@ -158,6 +158,12 @@ RESOLVED_BLUR_WIDTHS = 2.0
 #: steps at 416x312 (rho 3.0 stated errors low) 1.74, the knot on steps whose pose was 3 cm off (rho
 #: 2.1 low) 1.37, the knot on a wall described 11 % too large (rho 10 high) 2.5.
 RELIEF_UMBRA_BIAS_RATIO = 1.3
+#: A solver stopped on its step limit has still settled k and rho when one more Gauss-Newton step
+#: would move neither by more than this many of its statistical errors
+#: (``FitEvidence.remaining_step_se``): such a step changes nothing that is reported. A k creeping
+#: towards 0 under a penumbra narrower than a pixel (the pillar on a wall, 0.12 px) stops the solver
+#: so, with the values final.
+SOLVER_SETTLED_SE = 0.1
 #: Fewer shadow-edge profiles than this: one stretch of edge decides k and rho (the same rule as
 #: without geometry, ``fitting.verdict.edge_rules``).
 MIN_PROFILES = 10
@@ -555,6 +561,15 @@ def _band_warning(fit: FitEvidence, context: GroupContext) -> str:
     return head + "the samples may not cover the whole penumbra (raise --range-k-max)"
 
 
+def _solver_warning(fit: FitEvidence) -> str | None:
+    """The warning for a solve that stopped before k and rho settled (``SOLVER_SETTLED_SE``), or None."""
+    if fit.converged or fit.remaining_step_se <= SOLVER_SETTLED_SE:
+        return None
+    moves = "" if math.isnan(fit.remaining_step_se) else (
+        f" (one more step would move k or rho by {fit.remaining_step_se:.2g} of their errors)")
+    return "the solver stopped before converging" + moves
+
+
 def _photos_warning(fit: FitEvidence, context: GroupContext) -> str | None:
     """The warning for a group whose photos that measured the shadow are fewer than half of those given."""
     given = max(context.photos_given, len(fit.photos) + len(context.left_out) + len(fit.photos_without_shadow))
@@ -628,7 +643,7 @@ def judge_fit(fit: FitEvidence, context: GroupContext | None = None) -> tuple[Es
         flags += [f"{p.photo}: {why}; rho is a compromise" for p in fit.photos if (why := _umbra_levels(p))]
         flags += [w for w in (_depth_mismatch_warning(fit),) if w]
     flags += [w for w in (texture, _band_warning(fit, context) if fit.k > fit.range_k_max and not misfit else None,
-                          None if fit.converged else "the solver stopped before converging",
+                          _solver_warning(fit),
                           # Too little of the outline in view: one stretch of edge decides k and rho.
                           few_profiles_warning(fit.n_profiles), _photos_warning(fit, context)) if w]
     if context.left_out:
