@@ -173,7 +173,7 @@ def write_coverage_report(result: dict, md_path: Path, json_name: str | None = N
          f"- Load average (1 min) while groups finished: median {sorted(loads)[len(loads) // 2] if loads else 'n/a'}, "
          f"range {min(loads) if loads else 'n/a'}-{max(loads) if loads else 'n/a'}; at the start "
          f"{_load(m.get('load_average_1_5_15_min'))}",
-         f"- Code: commit {result.get('commit') or 'n/a'}; seed {result.get('seed')}; {len(records)} groups; "
+         f"- Code: {result.get('commit') or 'n/a'}; seed {result.get('seed')}; {len(records)} groups; "
          f"render and fit took {sum(seconds) / 3600:.1f} hours of wall time in all, median "
          f"{sorted(seconds)[len(seconds) // 2] if seconds else 0:.0f} s a group",
          ""]
@@ -326,7 +326,7 @@ def summary_section(result: dict, study_page: str = "uncertainty_study.md") -> s
          "`softshadow bench --what coverage --json docs/uncertainty_study.json --report docs/uncertainty_study.md` "
          "(hours of CPU; resumable).", "", *_HEAD, _row("all", total), _row("well described", well),
          _row("misdescribed", wrong), "",
-         f"Code at commit {result.get('commit') or 'n/a'} (seed {result.get('seed')}); machine: {m.get('cpu', 'n/a')}, "
+         f"Code: {result.get('commit') or 'n/a'} (seed {result.get('seed')}); machine: {m.get('cpu', 'n/a')}, "
          f"{m.get('cores', '?')} cores, shared with other work (load average over 1 minute while the groups "
          f"finished: median {loads[len(loads) // 2] if loads else 'n/a'}).", "",
          _size_line(total, crit),

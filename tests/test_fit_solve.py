@@ -136,3 +136,30 @@ def test_robust_scale_is_three_normal_sigmas_and_ignores_padding():
     assert robust_delta(r, True) == pytest.approx(3 * 0.02, rel=0.05)
     assert robust_delta(r, False) == 0.0
     assert robust_delta(np.zeros(10), True) == pytest.approx(3e-3)
+
+
+def test_remaining_step_is_zero_at_a_least_squares_solution_and_counts_errors_away_from_it():
+    """A linear model in (raw_k, raw_rho, one more parameter): at its least-squares solution one more
+    Gauss-Newton step moves nothing; from a point 0.3 away in raw_rho it moves rho by 0.3 sigmoid'
+    over rho's error."""
+    from fitting.solve.evidence import remaining_step_se
+    rng = np.random.default_rng(3)
+    n_photos = 1
+    p = 4 + 5 * n_photos  # FitParams.layout
+    jac = np.zeros((200, p))
+    jac[:, :3] = rng.normal(size=(200, 3))
+    truth = np.zeros(p)
+    truth[:3] = (-1.0, 0.4, 0.2)
+    y = jac @ truth + 0.01 * rng.normal(size=200)
+    best = np.zeros(p)
+    best[:3] = np.linalg.lstsq(jac[:, :3], y, rcond=None)[0]
+    at = lambda x: FitParams.from_vector(x, n_photos)
+    k_se, rho_se = 1e-4, 1e-3
+    assert remaining_step_se(at(best), jac @ best - y, jac, k_se, rho_se) < 1e-6
+    off = best.copy()
+    off[1] += 0.3
+    rho = lambda raw: 1.0 / (1.0 + np.exp(-raw))
+    expected = abs(rho(best[1]) - rho(off[1])) / rho_se
+    assert remaining_step_se(at(off), jac @ off - y, jac, k_se, rho_se) == pytest.approx(expected, rel=1e-6)
+    assert np.isnan(remaining_step_se(at(off), np.full(200, np.nan), jac, k_se, rho_se))
+    assert np.isnan(remaining_step_se(at(off), jac @ off - y, jac, 0.0, rho_se))

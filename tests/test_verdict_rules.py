@@ -231,7 +231,7 @@ def test_a_refit_that_leaves_k_beyond_the_band_does_not_explain_it():
 
 def test_the_texture_rule_is_averaged_across_a_wide_penumbra():
     """A faint shadow (rho 0.67) over asphalt: the lit residual 34 % of the depth, a 25 px penumbra."""
-    rough = [_photo(f"{i}.jpg", rms_lit=0.112, predicted_depth=0.33, k=0.018, rho=0.67) for i in range(3)]
+    rough = [_photo(f"{i}.jpg", rms_lit=0.112, shadow_depth=0.33, predicted_depth=0.33, k=0.018, rho=0.67) for i in range(3)]
     assert rules.judge_fit(_fit(rough, k=0.018, rho=0.67, penumbra_px=25.5), GroupContext(3))[1].reliable
     _, verdict = rules.judge_fit(_fit(rough, k=0.018, rho=0.67, penumbra_px=2.6), GroupContext(3))
     assert not verdict.reliable and any("texture rivals the shadow" in w for w in verdict.warnings)
@@ -341,6 +341,11 @@ def test_the_other_flags():
         _, verdict = rules.judge_fit(_fit(**kw), GroupContext(3))
         assert not verdict.reliable and any(text in w for w in verdict.warnings), text
     assert rules.judge_fit(_fit(n_in_umbra=rules.MIN_UMBRA_SAMPLES), GroupContext(3))[1].reliable
+    # A solver stopped on its step limit whose next step would move k and rho by little has settled.
+    assert rules.judge_fit(_fit(converged=False, remaining_step_se=0.05), GroupContext(3))[1].reliable
+    _, verdict = rules.judge_fit(_fit(converged=False, remaining_step_se=0.5), GroupContext(3))
+    assert not verdict.reliable and verdict.warnings == (
+        "the solver stopped before converging (one more step would move k or rho by 0.5 of their errors)",)
     # A penumbra under the blur spot makes k a bound on the ground (the group stays reliable); on
     # steps or a bank the group is unreliable.
     estimate, verdict = rules.judge_fit(_fit(penumbra_px=1.3, blur_px=0.7), GroupContext(3))
@@ -348,10 +353,37 @@ def test_the_other_flags():
     assert any("the penumbra is under the photo's blur spot; range_k is an upper bound" in w
                for w in verdict.warnings)
     assert rules.judge_fit(_fit(penumbra_px=1.6, blur_px=0.7), GroupContext(3))[1].identifiable  # the spot: 1.51 px
-    _, verdict = rules.judge_fit(_fit(penumbra_px=1.3, blur_px=0.7, receiver="mesh"), GroupContext(3))
-    assert not verdict.reliable and any("on a mesh receiver, whose relief shares its pixels" in w
-                                        for w in verdict.warnings)
     assert rules.judge_fit(_fit(penumbra_px=3.0, blur_px=0.7, receiver="depth"), GroupContext(3))[1].reliable
+
+
+@pytest.mark.parametrize("rms_umbra, n_umbra, reliable", [(0.004, 300, True), (0.008, 300, False), (0.004, 3, False)])
+def test_a_penumbra_under_the_blur_spot_on_relief_flags_the_group_when_its_umbra_is_not_one_level(
+        rms_umbra, n_umbra, reliable):
+    """On steps or a bank, a penumbra under the blur spot leaves k a bound; rho is trusted only when the
+    umbra is fitted as one level at its noise (RMS over robust spread <= RELIEF_UMBRA_BIAS_RATIO)."""
+    photos = [_photo(f"{i}.jpg", rms_umbra=rms_umbra, noise_umbra=0.004, n_umbra=n_umbra) for i in range(3)]
+    estimate, verdict = rules.judge_fit(_fit(photos, penumbra_px=1.3, blur_px=0.7, receiver="mesh"), GroupContext(3))
+    assert verdict.reliable is reliable and not verdict.identifiable and estimate.range_k > 0.0057
+    relief = [w for w in verdict.warnings if "on a mesh receiver, whose relief shares its pixels" in w]
+    assert bool(relief) is not reliable
+    if rms_umbra > 0.004:
+        assert "(the umbra's residual 2.00 times its noise)" in relief[0]
+    # On the plane the same group is reliable, with k a bound.
+    assert rules.judge_fit(_fit(photos, penumbra_px=1.3, blur_px=0.7), GroupContext(3))[1].reliable
+
+
+@pytest.mark.parametrize("gap, reliable", [(0.06, False), (-0.06, True), (0.03, True), (-0.03, True)])
+def test_a_photos_shadow_deeper_than_the_fitted_one_flags_the_group(gap, reliable):
+    """Deeper: the fitted umbra holds partly lit pixels. Shallower (light the relief sends into the
+    umbra) is no flag."""
+    photos = [_photo(f"{i}.jpg", shadow_depth=0.84 + gap, predicted_depth=0.84) for i in range(3)]
+    _, verdict = rules.judge_fit(_fit(photos), GroupContext(3))
+    assert verdict.reliable is reliable and verdict.identifiable
+    assert any("the photos' shadow is 6 % of the lit level deeper than the fitted one" in w
+               for w in verdict.warnings) is (not reliable)
+    # The photos' median decides: one photo's gap alone does not.
+    one = [photos[0], *[_photo(f"{i}.jpg") for i in (1, 2)]]
+    assert rules.judge_fit(_fit(one), GroupContext(3))[1].reliable
 
 
 # ----------------------------------------------------------------------------- without geometry

@@ -28,7 +28,8 @@ from ..samples.receiver_light import shadow_factor
 from ..verdict.evidence import NAN, PhotoEvidence
 from .model import K_SCALE, FitParams, Prediction
 
-__all__ = ["REGION_MARGIN_PX", "photo_evidence", "photo_estimates", "photos_evidence", "no_ramp_k"]
+__all__ = ["REGION_MARGIN_PX", "photo_evidence", "photo_estimates", "photos_evidence", "no_ramp_k",
+           "remaining_step_se"]
 
 #: A sample counts for the lit ground's or the umbra's noise when it lies this many pixels beyond
 #: the fitted penumbra: the camera's blur (0.5-0.9 px on the synthetic cameras) and a penumbra a
@@ -122,22 +123,48 @@ def photo_estimates(params: FitParams, residuals: np.ndarray, jacobian: np.ndarr
         if len(r) <= len(cols):
             out.append((NAN, NAN, NAN, NAN))
             continue
-        left, sv, vt = np.linalg.svd(j, full_matrices=False)
-        keep = sv > _COV_RCOND * (sv[0] if len(sv) else 0.0)
-        inv = np.where(keep, 1.0 / np.where(keep, sv, 1.0), 0.0)
-        step = -(vt.T * inv) @ (left.T @ r)
-        dof = max(len(r) - int(keep.sum()), 1)
-        r_after = r + j @ step
-        s2 = float(r_after @ r_after) / dof
-        cov = (vt.T * inv ** 2) @ vt * s2
-        rk, rr = raw_k + step[0], raw_rho + step[1]
-        k = K_SCALE * float(np.logaddexp(0.0, rk))
-        rho = float(np.exp(-np.logaddexp(0.0, -rr)))  # sigmoid, without overflow
-        dk = K_SCALE * float(np.exp(-np.logaddexp(0.0, -rk)))
+        step, cov = _gauss_newton_step(j, r)
+        k, rho, dk = _k_rho_after(raw_k + step[0], raw_rho + step[1])
         se_k = float(np.sqrt(max(cov[0, 0], 0.0)) * dk * stat_scale[0])
         se_rho = float(np.sqrt(max(cov[1, 1], 0.0)) * rho * (1 - rho) * stat_scale[1])
         out.append((k, se_k, rho, se_rho))
     return out
+
+
+def _gauss_newton_step(j: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The Gauss-Newton step (p,) that the residuals r (n,) and their Jacobian j (n, p) ask for,
+    and its classic covariance (p, p) (directions with singular values below _COV_RCOND of the
+    largest, such as switched-off terms' zero columns, are left alone)."""
+    left, sv, vt = np.linalg.svd(j, full_matrices=False)
+    keep = sv > _COV_RCOND * (sv[0] if len(sv) else 0.0)
+    inv = np.where(keep, 1.0 / np.where(keep, sv, 1.0), 0.0)
+    step = -(vt.T * inv) @ (left.T @ r)
+    dof = max(len(r) - int(keep.sum()), 1)
+    r_after = r + j @ step
+    return step, (vt.T * inv ** 2) @ vt * (float(r_after @ r_after) / dof)
+
+
+def _k_rho_after(raw_k: float, raw_rho: float) -> tuple[float, float, float]:
+    """k, rho and dk/draw_k at these raw parameters (``fitting.solve.model``), in NumPy."""
+    k = K_SCALE * float(np.logaddexp(0.0, raw_k))
+    rho = float(np.exp(-np.logaddexp(0.0, -raw_rho)))  # sigmoid, without overflow
+    return k, rho, K_SCALE * float(np.exp(-np.logaddexp(0.0, -raw_k)))
+
+
+def remaining_step_se(params: FitParams, residuals: np.ndarray, jacobian: np.ndarray, k_stderr: float,
+                      rho_stderr: float) -> float:
+    """How far one more Gauss-Newton step from the solution ``params`` would still move k or rho, in
+    units of their errors ``k_stderr`` and ``rho_stderr`` (the larger of the two; NaN when the
+    residuals (n,) or their Jacobian (n, p) are not finite, or an error is not positive)."""
+    r, j = np.asarray(residuals, dtype=np.float64), np.asarray(jacobian, dtype=np.float64)
+    if not (np.isfinite(r).all() and np.isfinite(j).all() and k_stderr > 0 and rho_stderr > 0):
+        return NAN
+    lay = FitParams.layout(params.n_photos)
+    step, _ = _gauss_newton_step(j, r)
+    raw_k, raw_rho = float(params.raw_k), float(params.raw_rho)
+    k0, rho0, _ = _k_rho_after(raw_k, raw_rho)
+    k1, rho1, _ = _k_rho_after(raw_k + step[lay["raw_k"].start], raw_rho + step[lay["raw_rho"].start])
+    return max(abs(k1 - k0) / k_stderr, abs(rho1 - rho0) / rho_stderr)
 
 
 def photos_evidence(samples, rows: list[slice], solution, est, errors, sun_cos: np.ndarray, sky_hidden: np.ndarray,

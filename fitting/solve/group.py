@@ -35,7 +35,7 @@ from ..report.results import FitDiagnostics, GroupResult, OverlayPlotData, PlotD
 from .saved_programs import call_saved
 from ..samples.ground import select_samples
 from ..samples.photo_samples import NoShadowInView, PhotoSamples
-from .evidence import no_ramp_k, photos_evidence
+from .evidence import no_ramp_k, photos_evidence, remaining_step_se
 from .uncertainty import cluster_covariance, combine_errors, edge_clusters
 from ..verdict.evidence import FitEvidence, GroupContext, SunFree
 from ..verdict.rules import judge_fit
@@ -477,7 +477,9 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
                                      fit_sun=fit_sun, fit_blur=bool(float(cfg.fit_blur)))),
         no_ramp_k=no_ramp_k(sol.prediction.u[:n_eff], est.range_k), sun_fitted=fit_sun, sun_free=sun_free,
         photos_without_shadow=tuple(_split_reason(w) for w in no_shadow),
-        receiver=getattr(used[0].receiver, "kind", "plane") if used[0].receiver is not None else "plane")
+        receiver=getattr(used[0].receiver, "kind", "plane") if used[0].receiver is not None else "plane",
+        remaining_step_se=remaining_step_se(sol.params, sol.residuals, sol.jacobian, errors.range_stderr_stat,
+                                            errors.rho_stderr_stat))
     estimate, verdict = judge_fit(evidence, GroupContext(photos_given=len(views)))
     plots = PlotData()
     if options.plots:

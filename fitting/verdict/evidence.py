@@ -105,6 +105,10 @@ class FitEvidence:
     photos_without_shadow: (photo, reason) for photos that were not sampled (no shadow in view).
     sun_free: the solve with the sun free (None: the sun was fitted anyway).
     receiver: the surface the shadow falls on: "plane" (the ground), "depth" (range images) or "mesh".
+    remaining_step_se: how far one more Gauss-Newton step from the solution would still move k or
+    rho, in units of their statistical errors (the larger of the two; NaN: not known). A solver
+    that stopped on its step limit with this small has settled k and rho (a k that creeps towards
+    0 under a penumbra narrower than a pixel, for example).
     """
 
     k: float
@@ -126,6 +130,7 @@ class FitEvidence:
     photos_without_shadow: tuple[tuple[str, str], ...] = ()
     sun_free: SunFree | None = None
     receiver: str = "plane"
+    remaining_step_se: float = NAN
 
 
 @dataclasses.dataclass(frozen=True)
