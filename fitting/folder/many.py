@@ -168,11 +168,19 @@ def _check_scheduler(scheduler: str) -> None:
         raise ValueError(f"scheduler must be 'local' or an address such as tcp://HOST:8786, got {scheduler!r}")
 
 
+_QUIET_TRACKER = "ignore::UserWarning:multiprocessing.resource_tracker"
+
+
 def _client(scheduler: str, workers: int | None, log: Callable[[str], None]):
     """A dask.distributed Client on a new LocalCluster ("local") or an existing scheduler."""
     from dask.distributed import Client, LocalCluster
     if scheduler == "local":
         n = workers or max(1, os.cpu_count() or 1)
+        # A Ctrl-C ends this process at once (the command line's exit), and Python's resource
+        # tracker then unlinks the semaphores the cluster's start had made: it starts with this
+        # process's warning options, so that it does so without its "leaked semaphore" warning.
+        if _QUIET_TRACKER not in sys.warnoptions:
+            sys.warnoptions.append(_QUIET_TRACKER)
         # Processes, one thread each: XLA threads inside each fit, and the GIL is not shared.
         with _workers_ignore_ctrl_c(), _ctrl_c_held() as held:
             # A cluster interrupted while it starts cannot be closed (its exit handler then
