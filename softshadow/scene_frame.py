@@ -15,6 +15,9 @@ model with the work a frame needs:
 
        I = albedo * (ambient + projectors + E_sun max(0, n . s) (1 - alpha))
 
+   With a second thread, that thread shades every pixel with its hard shadow while the first
+   evaluates step 4, and the band's pixels are shaded again after (the same image).
+
 ``FrameRenderer`` keeps what did not change since its last frame (the posed object, each
 projector's shadow map: ``Scratch.memo``), and the per-pixel loops and the z-buffers of large
 meshes run on two threads (numba, ``parallel_loops``).
@@ -50,9 +53,10 @@ from .visibility import Surface, VisibleSurfaces, visible_surfaces
 
 __all__ = ["FRAME_STEPS", "FrameRenderer", "SceneFrame", "band_alpha", "render_frame"]
 
-#: The steps ``SceneFrame.milliseconds`` times (wall time; with a second thread "projectors" is
-#: the wait for it after the sun's steps; without one, "sun_plan" includes posing the occluder
-#: and "projectors" both the shadow maps and the light).
+#: The steps ``SceneFrame.milliseconds`` times (wall time; with a second thread, "shading" is the
+#: wait for its light and shading (made while this one evaluates the penumbra, "sun_band") and the
+#: band's pixels shaded again, and "projectors" is not timed; without one, "sun_plan" includes
+#: posing the occluder and "projectors" both the shadow maps and the light).
 FRAME_STEPS = ("visibility", "projectors", "sun_plan", "sun_band", "shading")
 
 
@@ -81,7 +85,8 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
     arrays in these buffers (the frame's arrays are then overwritten by the next frame made
     with them; ``FrameRenderer`` does this); pool: a thread that poses the occluder and makes the
     projectors' shadow maps while this one finds what each pixel sees, then the projectors'
-    light while this one makes the sun's plan.
+    light while this one makes the sun's plan, then the shading while this one evaluates the
+    penumbra.
     """
     pose = Pose() if pose is None else pose
     lights = SceneLights() if lights is None else lights
@@ -109,7 +114,7 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
     maps = _submit(pool, _projector_maps, projectors, casters, scratch)
     if pool is None:
         t = _lap(ms, "projectors", t)
-    light = None
+    light = shaded = None
     plan, alpha_band = None, np.zeros(0)
     try:
         vis = visible_surfaces(camera, surfaces, ground_albedo, scratch=scratch, albedo=False, threads=2)
@@ -130,27 +135,34 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
             plan = plan_dense_points(model.occluder, pose, sun, vis.points, range_k_max, vis.normals,
                                      rule=model.rule, posed=_result(posed), faces=on_object, scratch=scratch)
             t = _lap(ms, "sun_plan", t, add=pool is None)
+        h, w = vis.shape
+        image = scratch_array(scratch, "frame.image", (h * w, 3))
+        sun_dir = np.zeros(3) if sun is None else -np.asarray(sun.light_np, np.float64)
+        shading = (vis.pixel, vis.normals, surface, albedos, float(lights.ambient),
+                   float(lights.sun_irradiance) if sun is not None else 0.0, sun_dir,
+                   plan.hard if plan is not None else np.zeros(0))
+        band = plan.band if plan is not None else np.zeros(0, np.int64)
+        if pool is not None and plan is not None:
+            # The second thread shades every pixel with its hard shadow while this one evaluates
+            # the penumbra (JAX); the band's pixels are shaded again with it after.
+            shaded = pool.submit(_shade, shading, light, background, image, band[:0], np.zeros(0))
             alpha_band = band_alpha(plan, vis.points, model, pose, sun, k)
             t = _lap(ms, "sun_band", t)
+            shaded.result()
+            pixel, normals, surface, albedos, ambient, sun_irradiance, sun_dir, _ = shading
+            _shade_kernel()[1](pixel, normals, surface, albedos, _result(light), ambient, sun_irradiance, sun_dir, band,
+                               alpha_band, image)
+        else:
+            if plan is not None:
+                alpha_band = band_alpha(plan, vis.points, model, pose, sun, k)
+                t = _lap(ms, "sun_band", t)
+            _shade(shading, light, background, image, band, alpha_band)
     finally:
         # The second thread's work finished before anything else uses the buffers (also on an
         # error: the next frame would share them).
-        for pending in (posed, maps, light):
+        for pending in (posed, maps, light, shaded):
             if isinstance(pending, Future):
                 pending.exception()
-    if pool is not None:
-        light = _result(light)
-        t = _lap(ms, "projectors", t)
-    h, w = vis.shape
-    image = scratch_array(scratch, "frame.image", (h * w, 3))
-    if n < h * w:  # the shading writes every pixel that sees something; the rest is background
-        image[:] = np.broadcast_to(np.asarray(background, np.float64), (3,))
-    sun_dir = np.zeros(3) if sun is None else -np.asarray(sun.light_np, np.float64)
-    hard = plan.hard if plan is not None else np.zeros(0)
-    band = plan.band if plan is not None else np.zeros(0, np.int64)
-    _shade_kernel()(vis.pixel, vis.normals, surface, albedos, light, float(lights.ambient),
-                    float(lights.sun_irradiance) if sun is not None else 0.0, sun_dir, hard, band, alpha_band,
-                    image)
     _lap(ms, "shading", t)
     return SceneFrame(image.reshape(h, w, 3), vis, plan, ms)
 
@@ -303,6 +315,16 @@ def band_alpha(plan: DensePlan, points: np.ndarray, model: SoftShadowModel, pose
     return np.asarray(alpha, np.float64)[:m]
 
 
+def _shade(shading: tuple, light, background, image: np.ndarray, band: np.ndarray, alpha_band: np.ndarray) -> None:
+    """The shading pass (``_shade_kernel``) into the flat image (H W, 3), the background first
+    where no point is seen; light: the projectors' (N, 3) or the Future of it."""
+    pixel, normals, surface, albedos, ambient, sun_irradiance, sun_dir, hard = shading
+    if len(pixel) < len(image):  # the shading writes every pixel that sees something; the rest is background
+        image[:] = np.broadcast_to(np.asarray(background, np.float64), (3,))
+    _shade_kernel()[0](pixel, normals, surface, albedos, _result(light), ambient, sun_irradiance, sun_dir, hard, band,
+                       alpha_band, image)
+
+
 def _lap(ms: dict, step: str, start: float, add: bool = False) -> float:
     now = time.perf_counter()
     ms[step] = 1e3 * (now - start) + (ms.get(step, 0.0) if add else 0.0)
@@ -311,16 +333,27 @@ def _lap(ms: dict, step: str, start: float, add: bool = False) -> float:
 
 @functools.cache
 def _shade_kernel():
-    """The compiled shading pass (numba): per visible point, its surface's albedo (albedos' row
-    surface + 1: the ground's first) times ambient plus the
-    projectors' light plus the sun's, E max(0, n . s) (1 - alpha), alpha the plan's hard shadow or
-    (band points, ascending in ``band``) the penumbra formula's; into the flat image."""
+    """The compiled shading passes (numba): per visible point, its surface's albedo (albedos' row
+    surface + 1: the ground's first) times ambient plus the projectors' light plus the sun's,
+    E max(0, n . s) (1 - alpha), into the flat image. Returns (shade, patch): shade every point,
+    alpha the plan's hard shadow or (band points, ascending in ``band``) the penumbra formula's;
+    patch only the band's points, with the penumbra formula's alpha (after a shading with an
+    empty band: the same image as one shading with it)."""
     numba = parallel_numba()
+
+    @numba.njit(inline="always")
+    def point(i, alpha, pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, image):
+        cos = normals[i, 0] * sun_dir[0] + normals[i, 1] * sun_dir[1] + normals[i, 2] * sun_dir[2]
+        sun = sun_irradiance * max(cos, 0.0) * (1.0 - alpha)
+        p = pixel[i]
+        s = surface[i] + 1  # the ground (-1) first
+        for c in range(3):
+            image[p, c] = albedos[s, c] * (ambient + light[i, c] + sun)
 
     # Parallel over blocks of points, each starting at its first band point.
     @numba.njit(cache=True, nogil=True, parallel=True)
-    def kernel(pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, hard, band, alpha_band,
-               image):
+    def shade(pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, hard, band, alpha_band,
+              image):
         has_sun = hard.shape[0] > 0
         n = pixel.shape[0]
         block = 4096
@@ -328,20 +361,21 @@ def _shade_kernel():
             lo, hi = b * block, min((b + 1) * block, n)
             j = np.searchsorted(band, lo)
             for i in range(lo, hi):
-                sun = 0.0
+                alpha = 1.0  # no sun: E is 0
                 if has_sun:
                     alpha = hard[i]
                     if j < band.shape[0] and band[j] == i:
                         alpha = alpha_band[j]
                         j += 1
-                    cos = normals[i, 0] * sun_dir[0] + normals[i, 1] * sun_dir[1] + normals[i, 2] * sun_dir[2]
-                    sun = sun_irradiance * max(cos, 0.0) * (1.0 - alpha)
-                p = pixel[i]
-                s = surface[i] + 1  # the ground (-1) first
-                for c in range(3):
-                    image[p, c] = albedos[s, c] * (ambient + light[i, c] + sun)
+                point(i, alpha, pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, image)
 
-    return kernel
+    @numba.njit(cache=True, nogil=True, parallel=True)
+    def patch(pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, band, alpha_band, image):
+        for j in numba.prange(band.shape[0]):
+            point(band[j], alpha_band[j], pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir,
+                  image)
+
+    return shade, patch
 
 
 def _albedo_of(value) -> np.ndarray:
