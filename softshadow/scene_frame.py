@@ -171,8 +171,9 @@ class FrameRenderer:
     """``render_frame`` for a stream of frames: the per-frame arrays are kept between frames
     (``softshadow.scratch``: fresh memory costs a fifth of a frame in page faults), so are the
     posed object and the projectors' shadow maps while their inputs stay (``Scratch.memo``), and
-    a second thread runs the projectors while the first makes the sun's plan. threads: 2 (that
-    second thread, and the first's compiled loops on two threads) or 1 (all on one).
+    a second thread runs the projectors while the first makes the sun's plan and shades the
+    pixels while the first evaluates the penumbra. threads: 2 (that second thread, and the
+    first's compiled loops on two threads) or 1 (all on one).
 
     ``render(...)`` takes ``render_frame``'s arguments. A frame's arrays (image, visible, plan)
     are overwritten by the next frame: copy what you keep. Not for use from two threads at once.
