@@ -18,9 +18,10 @@ model with the work a frame needs:
    With a second thread, that thread shades every pixel with its hard shadow while the first
    evaluates step 4, and the band's pixels are shaded again after (the same image).
 
-``FrameRenderer`` keeps what did not change since its last frame (the posed object, each
-projector's shadow map: ``Scratch.memo``), and the per-pixel loops and the z-buffers of large
-meshes run on two threads (numba, ``parallel_loops``).
+``FrameRenderer`` keeps what did not change since its last frame (``Scratch.memo``): the posed
+object, each projector's shadow map, what each pixel sees while the camera, the surfaces and the
+ground stay, and the projectors' light while, besides, the projectors stay; the per-pixel loops
+and the z-buffers of large meshes run on two threads (numba, ``parallel_loops``).
 
 The image agrees with ``render_scene``'s (same lights, same ``range_k_max``) to rounding
 (tests/test_scene_frame.py). ``range_k_max`` defaults to the lights' own k: the bands are as
@@ -117,15 +118,13 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
     light = shaded = None
     plan, alpha_band = None, np.zeros(0)
     try:
-        vis = visible_surfaces(camera, surfaces, ground_albedo, scratch=scratch, albedo=False, threads=2)
+        # What each pixel sees (and each point's surface and faces) is kept while the camera, the
+        # surfaces and the ground stay: a frame where only the sun or a projector changes keeps it.
+        seen_key = (*_camera_key(camera), obj, casters, *[a for r in receivers for a in (r.vertices, r.faces, r.normals)],
+                    *[r.closed for r in receivers], ground_albedo is None)
+        vis, surface, on_object, own = _memo(scratch, "frame.visible", seen_key,
+                                             lambda: _seen(camera, surfaces, ground_albedo, casters, scratch))
         n = len(vis.pixel)
-        # Each point's surface (GROUND -1, the object 0, receivers 1...), its face on the object
-        # (-1 elsewhere) and among the shadow casters' faces (-1: none), in one pass.
-        surface = scratch_array(scratch, "frame.surface", n, np.int64)
-        on_object = scratch_array(scratch, "frame.object_face", n, np.int64)
-        own = scratch_array(scratch, "frame.caster_face", n, np.int64)
-        _point_faces_kernel()(vis.pixel, vis.surface.reshape(-1), vis.face.reshape(-1), casters.offset, surface,
-                              on_object, own)
         albedos = np.vstack([_albedo_of(ground_albedo), *[s.albedo for s in surfaces]])
         t = _lap(ms, "visibility", t)
         light = _submit(pool, _projector_light, vis, own, projectors, maps, scratch)
@@ -170,7 +169,9 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
 class FrameRenderer:
     """``render_frame`` for a stream of frames: the per-frame arrays are kept between frames
     (``softshadow.scratch``: fresh memory costs a fifth of a frame in page faults), so are the
-    posed object and the projectors' shadow maps while their inputs stay (``Scratch.memo``), and
+    posed object, the projectors' shadow maps, what each pixel sees and the projectors' light
+    while their inputs stay (``Scratch.memo``: arrays by value, other objects such as a
+    ``Projector`` by identity; a frame's arrays are read-only, as the next frame may reuse them), and
     a second thread runs the projectors while the first makes the sun's plan and shades the
     pixels while the first evaluates the penumbra. threads: 2 (that second thread, and the
     first's compiled loops on two threads) or 1 (all on one).
@@ -254,14 +255,44 @@ def _memo(scratch: Scratch | None, name: str, inputs: tuple, make):
     return make() if scratch is None else scratch.memo(name, inputs, make)
 
 
+def _seen(camera: PinholeCamera | GroundGrid, surfaces: Sequence[Surface], ground_albedo, casters: _Casters,
+          scratch: Scratch | None) -> tuple[VisibleSurfaces, np.ndarray, np.ndarray, np.ndarray]:
+    """What each pixel sees (``visible_surfaces``), and each visible point's surface (GROUND -1,
+    the object 0, receivers 1...), its face on the object (-1 elsewhere) and among the shadow
+    casters' faces (-1: none), each (N,), in one pass."""
+    vis = visible_surfaces(camera, surfaces, ground_albedo, scratch=scratch, albedo=False, threads=2)
+    n = len(vis.pixel)
+    surface = scratch_array(scratch, "frame.surface", n, np.int64)
+    on_object = scratch_array(scratch, "frame.object_face", n, np.int64)
+    own = scratch_array(scratch, "frame.caster_face", n, np.int64)
+    _point_faces_kernel()(vis.pixel, vis.surface.reshape(-1), vis.face.reshape(-1), casters.offset, surface,
+                          on_object, own)
+    return vis, surface, on_object, own
+
+
+def _camera_key(camera: PinholeCamera | GroundGrid) -> tuple:
+    """What of a camera or top-down map decides what its pixels see (``Scratch.memo``'s inputs)."""
+    if isinstance(camera, GroundGrid):
+        return ("grid", float(camera.pixel_m), *map(float, camera.origin_m), int(camera.width), int(camera.height))
+    return ("pinhole", camera.K, camera.R, camera.t, int(camera.width), int(camera.height), camera.dist)
+
+
 def _projector_light(vis: VisibleSurfaces, own: np.ndarray, projectors: Sequence[Projector], maps,
                      scratch: Scratch | None) -> np.ndarray:
     """``projector_light``: the projectors' irradiance (N, 3) at the visible points through their
-    maps (own: each point's face among the casters', -1 none)."""
+    maps (own: each point's face among the casters', -1 none); kept while the visible points, the
+    projectors (by identity) and their maps stay."""
+    maps = _result(maps)
+    return _memo(scratch, "frame.light", (vis, own, *projectors, *maps), lambda: _light(vis, own, projectors, maps,
+                                                                                       scratch))
+
+
+def _light(vis: VisibleSurfaces, own: np.ndarray, projectors: Sequence[Projector], maps: Sequence,
+           scratch: Scratch | None) -> np.ndarray:
     light = scratch_array(scratch, "projectors.light", (len(vis.pixel), 3))
     light.fill(0.0)
     points = np.ascontiguousarray(vis.points, np.float64)
-    for proj, smap in zip(projectors, _result(maps)):
+    for proj, smap in zip(projectors, maps):
         proj.add_irradiance(points, vis.normals, smap, light, faces=own)
     return light
 

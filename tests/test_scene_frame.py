@@ -273,6 +273,41 @@ def test_frame_renderer_remakes_what_changed():
             renderer.close()
 
 
+def test_frame_renderer_keeps_what_each_pixel_sees_while_the_camera_stays():
+    """While the camera, the surfaces and the ground stay, the renderer keeps what each pixel sees
+    and the projector's light (only the sun or the projector moving); a moved camera, a receiver
+    moved in place or the ground taken away is seen: every frame equals a fresh render_frame."""
+    model = model_of("pillar")
+    cam, proj = _scene()
+    moved_cam = ss.PinholeCamera(cam.K, cam.R, cam.t + (0.05, 0.0, 0.0), cam.width, cam.height)  # moved sideways
+    # Another slide from the same place (the same shadow map, another light), then another place.
+    other_slide = Projector(proj.position, proj.target, sine_slide(3, 0.5, 64), fov_deg=45.0, shadow_px=256)
+    moved_proj = Projector((-2.0, -3.5, 3.2), (0.0, 0.0, 0.5), proj.slide, fov_deg=45.0, shadow_px=256)
+    step = _step()
+    frames = [(cam, 220.0, proj, 0.8), (cam, 225.0, proj, 0.8), (cam, 225.0, other_slide, 0.8),
+              (cam, 225.0, moved_proj, 0.8), (moved_cam, 225.0, moved_proj, 0.8), (cam, 230.0, moved_proj, 0.8),
+              (cam, 230.0, moved_proj, None), (cam, 230.0, moved_proj, None)]
+    for threads in (1, 2):
+        renderer = ss.FrameRenderer(threads=threads)
+        seen, lit = [], []
+        try:
+            for i, (camera, azimuth, projector, ground) in enumerate(frames):
+                if i == 7:  # the step raised in place: what the camera sees changes
+                    step.vertices[:, 2] += 0.3
+                args = (camera, model, Pose(), SceneLights(0.2, 0.8, 0.02), Sun(azimuth, 40.0), [projector])
+                frame = renderer.render(*args, receivers=[step], ground_albedo=ground)
+                seen.append(frame.visible)
+                lit.append(renderer.scratch._memo["frame.light"][1])
+                np.testing.assert_array_equal(frame.image.copy(), render_frame(*args, receivers=[step],
+                                                                               ground_albedo=ground).image,
+                                              err_msg=f"frame {i}, {threads} thread(s)")
+        finally:
+            renderer.close()
+        kept = [a is b for a, b in zip(seen[1:], seen[:-1])]
+        assert kept == [True, True, True, False, False, False, False], kept
+        assert [a is b for a, b in zip(lit[1:], lit[:-1])] == [True, False, False, False, False, False, False]
+
+
 def test_scratch_memo_keeps_a_result_while_its_inputs_stay():
     scratch = ss.internal.Scratch()
     made = []
