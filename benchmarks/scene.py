@@ -6,20 +6,22 @@ per pixel, lit by the sun (its soft shadow: the renderer's expanded shadow volum
 one slide projector (the paper's lattice slide, 15 cycles, amplitude 1, its own shadow map)
 and an ambient term (``softshadow.MaskingScene``). Each level is drawn by ``FrameRenderer``
 (``render_frame``: forward only, the image ``render_scene`` draws) for ``frames`` frames after
-``warmup`` frames, the sun moving by 0.05 degrees of azimuth every frame: every frame finds what
-each pixel sees, the projector's light at every pixel, and the sun's shadow map, plan and
-penumbra anew. The camera, the object and the projector stay, so the renderer keeps the
-projector's shadow map (it keeps a map while neither its projector nor the casters move); the
-same frames with the projector moving by 1 mm every frame (its map made anew each time) are
-timed beside them. ``frame_ms`` is the median wall time per frame, with the steps' medians
-beside it, with two threads (the renderer's default) and with one. The differentiable
-``render_scene`` of the full dragon is timed once warm beside it.
+``warmup`` frames, the sun moving by 0.05 degrees of azimuth every frame: every frame makes the
+sun's shadow map, plan and penumbra anew. The camera, the object and the projector stay, so the
+renderer keeps the projector's shadow map, what each pixel sees and the projector's light at
+every pixel (it keeps each while its inputs stay); the same frames with the projector moving by
+1 mm every frame (its map and light made anew each time) and with the camera moving by 1 mm
+every frame (what each pixel sees and the projector's light made anew each time) are timed
+beside them. ``frame_ms`` is the median wall time per frame, with the steps' medians beside it,
+with two threads (the renderer's default) and with one. The differentiable ``render_scene`` of
+the full dragon is timed once warm beside it.
 
 Rows (key ``scene``): faces (the full mesh's), level (the face count drawn), width, height,
 frame_ms (median wall time per frame, two threads), frame_min_ms, frame_cpu_ms (median CPU time of
-the process per frame, all threads), the same with one thread (``..._one_thread``) and with the
-projector moving (``..._projector_moves``, two threads), steps_ms (the steps' median wall times,
-``softshadow.internal.FRAME_STEPS``), and the load average before and after the level.
+the process per frame, all threads), the same with one thread (``..._one_thread``), with the
+projector moving (``..._projector_moves``, two threads) and with the camera moving
+(``..._camera_moves``, two threads), steps_ms and steps_ms_camera_moves (the steps' median wall
+times, ``softshadow.internal.FRAME_STEPS``), and the load average before and after the level.
 """
 
 from __future__ import annotations
@@ -54,19 +56,21 @@ def bench_scene(quick: bool = False, progress=None) -> dict:
             model = SoftShadowModel.from_mesh(level.mesh)
             row = {"faces": int(len(mesh.faces)), "level": int(level.faces), "width": camera.width,
                    "height": camera.height, "load_before": load_average()}
-            for threads, moving in ((2, False), (1, False), (2, True)):
+            for threads, moving in ((2, None), (1, None), (2, "projector"), (2, "camera")):
                 if progress:
                     progress(f"bench scene: {level.faces:,} faces, {threads} thread(s)"
-                             + (", the projector moving" if moving else ""))
+                             + (f", the {moving} moving" if moving else ""))
                 renderer = FrameRenderer(threads=threads)
                 times, cpu, steps = [], [], []
                 try:
                     for i in range(warmup + frames):
                         sun = scene.sun_at(azimuth_offset_deg=0.05 * i)
                         projector = (dataclasses.replace(proj, position=proj.position + (0.001 * i, 0.0, 0.0))
-                                     if moving else proj)
+                                     if moving == "projector" else proj)
+                        view = (dataclasses.replace(camera, t=camera.t + (0.001 * i, 0.0, 0.0))
+                                if moving == "camera" else camera)
                         t, c = time.perf_counter(), time.process_time()
-                        frame = renderer.render(camera, model, Pose(), lights, sun, [projector],
+                        frame = renderer.render(view, model, Pose(), lights, sun, [projector],
                                                 object_albedo=scene.albedo, ground_albedo=scene.albedo)
                         if i >= warmup:
                             times.append(1e3 * (time.perf_counter() - t))
@@ -74,15 +78,16 @@ def bench_scene(quick: bool = False, progress=None) -> dict:
                             steps.append(frame.milliseconds)
                 finally:
                     renderer.close()
-                key = "frame_ms_projector_moves" if moving else "frame_ms" if threads == 2 else "frame_ms_one_thread"
+                key = (f"frame_ms_{moving}_moves" if moving else "frame_ms" if threads == 2
+                       else "frame_ms_one_thread")
                 row[key] = round(float(np.median(times)), 2)
                 row[key.replace("frame_ms", "frame_min_ms")] = round(float(np.min(times)), 2)
                 # The process's CPU time per frame (all its threads, XLA's included): what the frame
                 # costs the machine, less moved by the neighbours than the wall time.
                 row[key.replace("frame_ms", "frame_cpu_ms")] = round(float(np.median(cpu)), 2)
-                if threads == 2 and not moving:
-                    row["steps_ms"] = {k: round(float(np.median([s.get(k, 0.0) for s in steps])), 2)
-                                      for k in steps[0]}
+                if threads == 2 and moving in (None, "camera"):
+                    row["steps_ms" if moving is None else "steps_ms_camera_moves"] = {
+                        k: round(float(np.median([s.get(k, 0.0) for s in steps])), 2) for k in steps[0]}
             row["load_after"] = load_average()
             rows.append(row)
         # The differentiable path, warm, for comparison.
@@ -103,21 +108,32 @@ def bench_scene(quick: bool = False, progress=None) -> dict:
             "summary": {"full_frame_ms": full["frame_ms"], "coarsest_level": coarse["level"],
                         "coarsest_frame_ms": coarse["frame_ms"],
                         "coarsest_over_full": round(coarse["frame_ms"] / full["frame_ms"], 3),
-                        "coarsest_over_full_cpu": round(coarse["frame_cpu_ms"] / full["frame_cpu_ms"], 3)}}
+                        "coarsest_over_full_cpu": round(coarse["frame_cpu_ms"] / full["frame_cpu_ms"], 3),
+                        "full_frame_ms_camera_moves": full["frame_ms_camera_moves"],
+                        "coarsest_frame_ms_camera_moves": coarse["frame_ms_camera_moves"],
+                        "coarsest_over_full_camera_moves": round(coarse["frame_ms_camera_moves"]
+                                                                 / full["frame_ms_camera_moves"], 3)}}
 
 
 def scene_table(result: dict) -> str:
     """The Markdown table of ``bench_scene``'s rows (docs/level_of_detail.md)."""
     lines = ["| faces drawn | frame ms, 2 threads (min) | CPU ms per frame | frame ms, 1 thread (min) | "
              "CPU ms per frame | projector moving: frame ms, 2 threads (CPU ms) | "
-             "steps ms, 2 threads: visibility / sun plan / sun band / shading | load before |",
-             "|---:|---:|---:|---:|---:|---:|---|---|"]
+             "camera moving: frame ms, 2 threads (CPU ms) | "
+             "steps ms, 2 threads: visibility / sun plan / sun band / shading | the same, camera moving | "
+             "load before |",
+             "|---:|---:|---:|---:|---:|---:|---:|---|---|---|"]
     for r in result["scene"]:
         s = r["steps_ms"]
         load = ", ".join(f"{x:.1f}" for x in r["load_before"]) if r.get("load_before") else "?"
         lines.append(f"| {r['level']:,} | {r['frame_ms']:.1f} ({r['frame_min_ms']:.1f}) | {r['frame_cpu_ms']:.1f} | "
                      f"{r['frame_ms_one_thread']:.1f} ({r['frame_min_ms_one_thread']:.1f}) | "
                      f"{r['frame_cpu_ms_one_thread']:.1f} | {r['frame_ms_projector_moves']:.1f} "
-                     f"({r['frame_cpu_ms_projector_moves']:.1f}) | {s['visibility']:.1f} / {s['sun_plan']:.1f} / "
-                     f"{s['sun_band']:.1f} / {s['shading']:.1f} | {load} |")
+                     f"({r['frame_cpu_ms_projector_moves']:.1f}) | {r['frame_ms_camera_moves']:.1f} "
+                     f"({r['frame_cpu_ms_camera_moves']:.1f}) | {_steps(s)} | {_steps(r['steps_ms_camera_moves'])} | "
+                     f"{load} |")
     return "\n".join(lines)
+
+
+def _steps(s: dict) -> str:
+    return " / ".join(f"{s.get(k, 0.0):.1f}" for k in ("visibility", "sun_plan", "sun_band", "shading"))

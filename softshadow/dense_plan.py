@@ -25,7 +25,7 @@ from .params import Pose, Sun
 from .plan import (BAND_FRACTION, CANDIDATE_RADII_PX, CANDIDATE_REACH_PX, N_CANDIDATES, EdgeSet,
                    PointPlan, _pack_edges, bucket_size, light_band_widths, raster_grid)
 from .posed import PosedOccluder
-from .raster import candidate_labels, rasterise_shadow
+from .raster import rasterise_shadow
 from .scratch import Scratch, scratch_array
 from .shadowmap import (BIAS_PX, FACING_TOL, PRECISION_ULPS, SLOPE_PX, TAN_MAX, LightFrame, face_depth_at, faces_away,
                         shadow_map)
@@ -131,21 +131,23 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
     hi_occ = np.array([uv_v[:, 0].max(), uv_v[:, 1].max()])
     extent = float((hi_occ - lo_occ).max()) + 3.0 * reach
     margin_m = (margin_px + CANDIDATE_REACH_PX + 2) * extent / 256
-    # Each point within its own reach (``plan._within_reach``), gathered.
+    # Each point within its own reach (``plan._within_reach``), gathered in order with its
+    # light-space position, depth and attached shadow; the gathered points' bounds beside.
     cand = scratch_array(scratch, "sun.cand", n, np.int64)
     uv_p = scratch_array(scratch, "sun.cand_uv", (n, 2))
     d_p = scratch_array(scratch, "sun.cand_depth", n)
+    att = scratch_array(scratch, "sun.cand_attached", n, np.bool_)
+    bounds = np.empty(5)
     count = _reach_kernel()(uv_all, d_all, hard, lo_occ, hi_occ, float(edge_depth.min()),
-                            1.5 * float(light_band_widths(np.float64(1.0), range_k_max)), margin_m, cand, uv_p, d_p)
+                            1.5 * float(light_band_widths(np.float64(1.0), range_k_max)), margin_m, cand, uv_p, d_p,
+                            att, bounds)
     if not count:
         return _empty(occ, sil, hard)
-    cand, uv_p, d_p = cand[:count], uv_p[:count], d_p[:count]
-    att = hard[cand] > 0
-    reach = float(light_band_widths(d_p.max() - edge_depth.min(), range_k_max))
+    cand, uv_p, d_p, att = cand[:count], uv_p[:count], d_p[:count], att[:count]
+    reach = float(light_band_widths(bounds[4] - edge_depth.min(), range_k_max))
     extent = float((hi_occ - lo_occ).max()) + 3.0 * reach
-    lo_pts = np.array([uv_p[:, 0].min(), uv_p[:, 1].min()])
-    hi_pts = np.array([uv_p[:, 0].max(), uv_p[:, 1].max()])
-    spacing = _spacing(uv_p, extent / 128)
+    lo_pts, hi_pts = bounds[:2].copy(), bounds[2:4].copy()
+    spacing = _spacing(uv_p, extent / 128, lo_pts, hi_pts)
     pixel_m = max(float(np.clip(spacing, extent / 2048, extent / 256)), 1e-5)
     map_pixel_m = float(np.clip(spacing, extent / 2048, extent / 512))
     pad_m = 1.5 * reach + (margin_px + CANDIDATE_REACH_PX + 2) * pixel_m
@@ -206,39 +208,48 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
     band = cand[sel]
     edge_id = np.zeros((len(sel), N_CANDIDATES), np.int32)
     if len(sel):
-        cr = np.clip(np.rint(grid.to_pixel(uv_p[sel])).astype(np.int64), 0, [grid.width - 1, grid.height - 1])
-        edge_id[:] = np.maximum(candidate_labels(raster.edge_label, cr[:, 1], cr[:, 0], radii=CANDIDATE_RADII_PX,
-                                                 max_candidates=N_CANDIDATES, neighbours=raster.edge_neighbours), 0)
+        neighbours = raster.edge_neighbours
+        neighbours = np.full((0, 2), -1, np.int64) if neighbours is None else np.asarray(neighbours, np.int64)
+        _candidates_kernel()(uv_p, sel, grid.origin_m[0], grid.origin_m[1], pixel_m, raster.edge_label, neighbours,
+                             _CANDIDATE_OFFSETS, edge_id)
     near_b = near_b[:n_band]
     return DensePlan(_pack_edges(occ, sil, raster=raster), hard, band, edge_id, near_b.astype(np.float64))
 
 
-def _spacing(uv: np.ndarray, cell_m: float) -> float:
+def _spacing(uv: np.ndarray, cell_m: float, lo: np.ndarray, hi: np.ndarray) -> float:
     """``plan._spacing`` (the points' typical spacing: the area of the cells of side ``cell_m``
-    they occupy, per point, square-rooted) in one compiled pass."""
-    lo_u, lo_v = float(uv[:, 0].min()), float(uv[:, 1].min())
-    width = int((uv[:, 0].max() - lo_u) / cell_m) + 1
-    height = int((uv[:, 1].max() - lo_v) / cell_m) + 1
-    taken = _spacing_kernel()(uv, lo_u, lo_v, cell_m, width, height)
+    they occupy, per point, square-rooted) in one compiled pass; lo, hi (2,): the points' bounds."""
+    width = int((hi[0] - lo[0]) / cell_m) + 1
+    height = int((hi[1] - lo[1]) / cell_m) + 1
+    taken = _spacing_kernel()(uv, float(lo[0]), float(lo[1]), cell_m, width, height)
     return cell_m * float(np.sqrt(taken / len(uv)))
 
 
 @functools.cache
 def _spacing_kernel():
-    import numba
+    numba = parallel_numba()
 
-    @numba.njit(cache=True, nogil=True)
+    # The cells marked on two threads (two threads may mark one cell: both write True), then counted.
+    @numba.njit(cache=True, nogil=True, parallel=True)
     def kernel(uv, lo_u, lo_v, cell_m, width, height):
         taken = np.zeros(width * height, np.bool_)
+        for i in numba.prange(uv.shape[0]):
+            taken[int((uv[i, 1] - lo_v) / cell_m) * width + int((uv[i, 0] - lo_u) / cell_m)] = True
         count = 0
-        for i in range(uv.shape[0]):
-            k = int((uv[i, 1] - lo_v) / cell_m) * width + int((uv[i, 0] - lo_u) / cell_m)
-            if not taken[k]:
-                taken[k] = True
-                count += 1
+        for k in range(taken.shape[0]):
+            count += taken[k]
         return count
 
     return kernel
+
+
+#: ``candidate_labels``' samples around a pixel (row, col steps), in its order: per radius, the 8
+#: directions.
+_CANDIDATE_OFFSETS = np.array([(dr * r, dc * r) for r in CANDIDATE_RADII_PX for dr in (-1, 0, 1) for dc in (-1, 0, 1)
+                               if (dr, dc) != (0, 0)], np.int64)
+
+#: Points per block of the parallel gathering passes (each block's count, then each block at its place).
+_BLOCK = 8192
 
 
 @functools.cache
@@ -268,33 +279,41 @@ def _project_kernel():
 @functools.cache
 def _reach_kernel():
     """``plan._within_reach``'s test (per_m: 1.5 wedge widths per metre behind the nearest
-    edge), the points within reach gathered in order; returns their count."""
+    edge), the points within reach gathered in order: their index, position, depth and attached
+    shadow (hard > 0), and their bounds (lo u, lo v, hi u, hi v, hi depth). Returns their count."""
     numba = parallel_numba()
 
     # Parallel over blocks of points: each block's points gathered at its own place first, then
     # moved together (one pass over the points, as one thread's loop).
     @numba.njit(cache=True, nogil=True, parallel=True)
-    def kernel(uv_all, d_all, hard, lo, hi, edge_depth, per_m, margin_m, cand, uv, d):
+    def kernel(uv_all, d_all, hard, lo, hi, edge_depth, per_m, margin_m, cand, uv, d, att, bounds):
         n = uv_all.shape[0]
-        block = 8192
-        n_blocks = (n + block - 1) // block
+        n_blocks = (n + _BLOCK - 1) // _BLOCK
         counts = np.zeros(n_blocks, np.int64)
+        box = np.empty((n_blocks, 5))
         for b in numba.prange(n_blocks):
-            count = b * block
-            for i in range(b * block, min((b + 1) * block, n)):
-                pad = per_m * max(d_all[i] - edge_depth, 0.0) + margin_m
-                if (uv_all[i, 0] >= lo[0] - pad) & (uv_all[i, 0] <= hi[0] + pad) & (uv_all[i, 1] >= lo[1] - pad) \
-                        & (uv_all[i, 1] <= hi[1] + pad):
-                    cand[count] = i  # count <= i: never over a point not yet read
-                    uv[count, 0], uv[count, 1], d[count] = uv_all[i, 0], uv_all[i, 1], d_all[i]
+            count = b * _BLOCK
+            lo_u, lo_v, hi_u, hi_v, hi_d = np.inf, np.inf, -np.inf, -np.inf, -np.inf
+            for i in range(b * _BLOCK, min((b + 1) * _BLOCK, n)):
+                u, v, di = uv_all[i, 0], uv_all[i, 1], d_all[i]
+                pad = per_m * max(di - edge_depth, 0.0) + margin_m
+                if (u >= lo[0] - pad) & (u <= hi[0] + pad) & (v >= lo[1] - pad) & (v <= hi[1] + pad):
+                    # count <= i: never over a point not yet read
+                    cand[count], uv[count, 0], uv[count, 1], d[count], att[count] = i, u, v, di, hard[i] > 0
+                    lo_u, lo_v, hi_u, hi_v, hi_d = min(lo_u, u), min(lo_v, v), max(hi_u, u), max(hi_v, v), max(hi_d, di)
                     count += 1
-            counts[b] = count - b * block
+            counts[b] = count - b * _BLOCK
+            box[b, 0], box[b, 1], box[b, 2], box[b, 3], box[b, 4] = lo_u, lo_v, hi_u, hi_v, hi_d
         count = 0
+        bounds[0], bounds[1], bounds[2], bounds[3], bounds[4] = np.inf, np.inf, -np.inf, -np.inf, -np.inf
         for b in range(n_blocks):  # in order: a block's list moves down, never over one not yet moved
-            for k in range(b * block, b * block + counts[b]):
-                cand[count], uv[count, 0], uv[count, 1], d[count] = cand[k], uv[k, 0], uv[k, 1], d[k]
+            for k in range(b * _BLOCK, b * _BLOCK + counts[b]):
+                cand[count], uv[count, 0], uv[count, 1], d[count], att[count] = cand[k], uv[k, 0], uv[k, 1], d[k], att[k]
                 count += 1
+            bounds[0], bounds[1] = min(bounds[0], box[b, 0]), min(bounds[1], box[b, 1])
+            bounds[2], bounds[3], bounds[4] = max(bounds[2], box[b, 2]), max(bounds[3], box[b, 3]), max(bounds[4], box[b, 4])
         return count
+
     return kernel
 
 
@@ -386,23 +405,38 @@ def _test_kernel():
     """The points in the occluder's view (and not in attached shadow): those deeper than
     ``d_far`` are behind it; the others listed in ``test``, their light-space bounding box in
     box (lo u, lo v, hi u, hi v). Returns their count."""
-    import numba
+    numba = parallel_numba()
 
-    @numba.njit(cache=True, nogil=True)
+    # Parallel over blocks of points; each block's list at its own place first, then moved together.
+    @numba.njit(cache=True, nogil=True, parallel=True)
     def kernel(in_view, att, d, uv, d_far, behind, test, box):
+        n_pts = in_view.shape[0]
+        n_blocks = (n_pts + _BLOCK - 1) // _BLOCK
+        counts = np.zeros(n_blocks, np.int64)
+        boxes = np.empty((n_blocks, 4))
+        for b in numba.prange(n_blocks):
+            n = b * _BLOCK
+            lo_u, lo_v, hi_u, hi_v = np.inf, np.inf, -np.inf, -np.inf
+            for i in range(b * _BLOCK, min((b + 1) * _BLOCK, n_pts)):
+                behind[i] = False
+                if in_view[i] == 0 or att[i]:
+                    continue
+                if d[i] > d_far:
+                    behind[i] = True
+                    continue
+                test[n] = i  # n <= i
+                n += 1
+                lo_u, lo_v, hi_u, hi_v = min(lo_u, uv[i, 0]), min(lo_v, uv[i, 1]), max(hi_u, uv[i, 0]), max(hi_v, uv[i, 1])
+            counts[b] = n - b * _BLOCK
+            boxes[b, 0], boxes[b, 1], boxes[b, 2], boxes[b, 3] = lo_u, lo_v, hi_u, hi_v
         n = 0
         box[0], box[1], box[2], box[3] = np.inf, np.inf, -np.inf, -np.inf
-        for i in range(in_view.shape[0]):
-            behind[i] = False
-            if in_view[i] == 0 or att[i]:
-                continue
-            if d[i] > d_far:
-                behind[i] = True
-                continue
-            test[n] = i
-            n += 1
-            box[0], box[1] = min(box[0], uv[i, 0]), min(box[1], uv[i, 1])
-            box[2], box[3] = max(box[2], uv[i, 0]), max(box[3], uv[i, 1])
+        for b in range(n_blocks):  # in order: a block's list moves down, never over one not yet moved
+            for k in range(b * _BLOCK, b * _BLOCK + counts[b]):
+                test[n] = test[k]
+                n += 1
+            box[0], box[1] = min(box[0], boxes[b, 0]), min(box[1], boxes[b, 1])
+            box[2], box[3] = max(box[2], boxes[b, 2]), max(box[3], boxes[b, 3])
         return n
 
     return kernel
@@ -415,22 +449,76 @@ def _band_kernel():
     times its depth behind its edge): the band BAND_FRACTION of it plus the margin, near the
     boundary within a quarter of it plus 1.5 pixels on a clean outline edge (all of its length
     on the outline). The band's points listed in ``band``; returns their count."""
-    import numba
+    numba = parallel_numba()
 
-    @numba.njit(cache=True, nogil=True)
+    # Parallel over blocks of points; each block's list at its own place first, then moved together.
+    @numba.njit(cache=True, nogil=True, parallel=True)
     def kernel(cand, d, label, dist, att, behind, edge_depth, per_m, frac, has_frac, fraction, margin_m, near_m,
                hard, band, near_b):
+        n_pts = d.shape[0]
+        n_blocks = (n_pts + _BLOCK - 1) // _BLOCK
+        counts = np.zeros(n_blocks, np.int64)
+        for b in numba.prange(n_blocks):
+            n = b * _BLOCK
+            for i in range(b * _BLOCK, min((b + 1) * _BLOCK, n_pts)):
+                hard[cand[i]] = 1.0 if (behind[i] or att[i]) else 0.0
+                lab = label[i]
+                width = per_m * max(d[i] - edge_depth[max(lab, 0)], 0.0)
+                if lab >= 0 and dist[i] <= fraction * width + margin_m and not att[i]:
+                    near_b[n] = dist[i] <= 0.25 * width + near_m and has_frac and frac[lab] >= 0.99
+                    band[n] = i  # n <= i
+                    n += 1
+            counts[b] = n - b * _BLOCK
         n = 0
-        for i in range(d.shape[0]):
-            hard[cand[i]] = 1.0 if (behind[i] or att[i]) else 0.0
-            lab = label[i]
-            width = per_m * max(d[i] - edge_depth[max(lab, 0)], 0.0)
-            a = lab >= 0 and dist[i] <= fraction * width + margin_m and not att[i]
-            clean = has_frac and lab >= 0 and frac[lab] >= 0.99
-            near_b[n] = a and dist[i] <= 0.25 * width + near_m and clean
-            if a:
-                band[n] = i
+        for b in range(n_blocks):  # in order: a block's list moves down, never over one not yet moved
+            for k in range(b * _BLOCK, b * _BLOCK + counts[b]):
+                band[n], near_b[n] = band[k], near_b[k]
                 n += 1
         return n
+
+    return kernel
+
+
+@functools.cache
+def _candidates_kernel():
+    """``raster.candidate_labels`` (up to K distinct labels: the pixel's own, its outline
+    neighbours, then the labels at the offsets, greedily), with -1 made 0, at the raster's nearest
+    pixel (clipped to the raster) of the points uv[sel], into edge_id (len(sel), K)."""
+    numba = parallel_numba()
+
+    @numba.njit(cache=True, nogil=True, parallel=True)
+    def kernel(uv, sel, ox, oy, pixel_m, edge_label, neighbours, offsets, edge_id):
+        h, w = edge_label.shape
+        k_max = edge_id.shape[1]
+        has_neighbours = neighbours.shape[0] > 0
+        n_columns = offsets.shape[0] + (2 if has_neighbours else 0)
+        for j in numba.prange(sel.shape[0]):
+            q = sel[j]
+            col = min(max(np.int64(np.rint((uv[q, 0] - ox) / pixel_m)), 0), w - 1)
+            row = min(max(np.int64(np.rint((oy - uv[q, 1]) / pixel_m)), 0), h - 1)
+            # The labels as found in edge_id[j] (-1 kept until the end).
+            first = edge_label[row, col]
+            edge_id[j, 0] = first
+            count = 1
+            for c in range(n_columns):
+                if count >= k_max:
+                    break
+                if has_neighbours and c < 2:
+                    v = neighbours[first, c] if first >= 0 else -1
+                else:
+                    o = c - 2 if has_neighbours else c
+                    v = edge_label[min(max(row + offsets[o, 0], 0), h - 1), min(max(col + offsets[o, 1], 0), w - 1)]
+                if v < 0:
+                    continue
+                fresh = True
+                for s in range(count):
+                    if edge_id[j, s] == v:
+                        fresh = False
+                        break
+                if fresh:
+                    edge_id[j, count] = v
+                    count += 1
+            for s in range(k_max):
+                edge_id[j, s] = max(edge_id[j, s] if s < count else first, 0)
 
     return kernel

@@ -15,9 +15,13 @@ model with the work a frame needs:
 
        I = albedo * (ambient + projectors + E_sun max(0, n . s) (1 - alpha))
 
-``FrameRenderer`` keeps what did not change since its last frame (the posed object, each
-projector's shadow map: ``Scratch.memo``), and the per-pixel loops and the z-buffers of large
-meshes run on two threads (numba, ``parallel_loops``).
+   With a second thread, that thread shades every pixel with its hard shadow while the first
+   evaluates step 4, and the band's pixels are shaded again after (the same image).
+
+``FrameRenderer`` keeps what did not change since its last frame (``Scratch.memo``): the posed
+object, each projector's shadow map, what each pixel sees while the camera, the surfaces and the
+ground stay, and the projectors' light while, besides, the projectors stay; the per-pixel loops
+and the z-buffers of large meshes run on two threads (numba, ``parallel_loops``).
 
 The image agrees with ``render_scene``'s (same lights, same ``range_k_max``) to rounding
 (tests/test_scene_frame.py). ``range_k_max`` defaults to the lights' own k: the bands are as
@@ -50,9 +54,10 @@ from .visibility import Surface, VisibleSurfaces, visible_surfaces
 
 __all__ = ["FRAME_STEPS", "FrameRenderer", "SceneFrame", "band_alpha", "render_frame"]
 
-#: The steps ``SceneFrame.milliseconds`` times (wall time; with a second thread "projectors" is
-#: the wait for it after the sun's steps; without one, "sun_plan" includes posing the occluder
-#: and "projectors" both the shadow maps and the light).
+#: The steps ``SceneFrame.milliseconds`` times (wall time; with a second thread, "shading" is the
+#: wait for its light and shading (made while this one evaluates the penumbra, "sun_band") and the
+#: band's pixels shaded again, and "projectors" is not timed; without one, "sun_plan" includes
+#: posing the occluder and "projectors" both the shadow maps and the light).
 FRAME_STEPS = ("visibility", "projectors", "sun_plan", "sun_band", "shading")
 
 
@@ -81,7 +86,8 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
     arrays in these buffers (the frame's arrays are then overwritten by the next frame made
     with them; ``FrameRenderer`` does this); pool: a thread that poses the occluder and makes the
     projectors' shadow maps while this one finds what each pixel sees, then the projectors'
-    light while this one makes the sun's plan.
+    light while this one makes the sun's plan, then the shading while this one evaluates the
+    penumbra.
     """
     pose = Pose() if pose is None else pose
     lights = SceneLights() if lights is None else lights
@@ -109,18 +115,16 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
     maps = _submit(pool, _projector_maps, projectors, casters, scratch)
     if pool is None:
         t = _lap(ms, "projectors", t)
-    light = None
+    light = shaded = None
     plan, alpha_band = None, np.zeros(0)
     try:
-        vis = visible_surfaces(camera, surfaces, ground_albedo, scratch=scratch, albedo=False, threads=2)
+        # What each pixel sees (and each point's surface and faces) is kept while the camera, the
+        # surfaces and the ground stay: a frame where only the sun or a projector changes keeps it.
+        seen_key = (*_camera_key(camera), obj, casters, *[a for r in receivers for a in (r.vertices, r.faces, r.normals)],
+                    *[r.closed for r in receivers], ground_albedo is None)
+        vis, surface, on_object, own = _memo(scratch, "frame.visible", seen_key,
+                                             lambda: _seen(camera, surfaces, ground_albedo, casters, scratch))
         n = len(vis.pixel)
-        # Each point's surface (GROUND -1, the object 0, receivers 1...), its face on the object
-        # (-1 elsewhere) and among the shadow casters' faces (-1: none), in one pass.
-        surface = scratch_array(scratch, "frame.surface", n, np.int64)
-        on_object = scratch_array(scratch, "frame.object_face", n, np.int64)
-        own = scratch_array(scratch, "frame.caster_face", n, np.int64)
-        _point_faces_kernel()(vis.pixel, vis.surface.reshape(-1), vis.face.reshape(-1), casters.offset, surface,
-                              on_object, own)
         albedos = np.vstack([_albedo_of(ground_albedo), *[s.albedo for s in surfaces]])
         t = _lap(ms, "visibility", t)
         light = _submit(pool, _projector_light, vis, own, projectors, maps, scratch)
@@ -130,27 +134,34 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
             plan = plan_dense_points(model.occluder, pose, sun, vis.points, range_k_max, vis.normals,
                                      rule=model.rule, posed=_result(posed), faces=on_object, scratch=scratch)
             t = _lap(ms, "sun_plan", t, add=pool is None)
+        h, w = vis.shape
+        image = scratch_array(scratch, "frame.image", (h * w, 3))
+        sun_dir = np.zeros(3) if sun is None else -np.asarray(sun.light_np, np.float64)
+        shading = (vis.pixel, vis.normals, surface, albedos, float(lights.ambient),
+                   float(lights.sun_irradiance) if sun is not None else 0.0, sun_dir,
+                   plan.hard if plan is not None else np.zeros(0))
+        band = plan.band if plan is not None else np.zeros(0, np.int64)
+        if pool is not None and plan is not None:
+            # The second thread shades every pixel with its hard shadow while this one evaluates
+            # the penumbra (JAX); the band's pixels are shaded again with it after.
+            shaded = pool.submit(_shade, shading, light, background, image, band[:0], np.zeros(0))
             alpha_band = band_alpha(plan, vis.points, model, pose, sun, k)
             t = _lap(ms, "sun_band", t)
+            shaded.result()
+            pixel, normals, surface, albedos, ambient, sun_irradiance, sun_dir, _ = shading
+            _shade_kernel()[1](pixel, normals, surface, albedos, _result(light), ambient, sun_irradiance, sun_dir, band,
+                               alpha_band, image)
+        else:
+            if plan is not None:
+                alpha_band = band_alpha(plan, vis.points, model, pose, sun, k)
+                t = _lap(ms, "sun_band", t)
+            _shade(shading, light, background, image, band, alpha_band)
     finally:
         # The second thread's work finished before anything else uses the buffers (also on an
         # error: the next frame would share them).
-        for pending in (posed, maps, light):
+        for pending in (posed, maps, light, shaded):
             if isinstance(pending, Future):
                 pending.exception()
-    if pool is not None:
-        light = _result(light)
-        t = _lap(ms, "projectors", t)
-    h, w = vis.shape
-    image = scratch_array(scratch, "frame.image", (h * w, 3))
-    if n < h * w:  # the shading writes every pixel that sees something; the rest is background
-        image[:] = np.broadcast_to(np.asarray(background, np.float64), (3,))
-    sun_dir = np.zeros(3) if sun is None else -np.asarray(sun.light_np, np.float64)
-    hard = plan.hard if plan is not None else np.zeros(0)
-    band = plan.band if plan is not None else np.zeros(0, np.int64)
-    _shade_kernel()(vis.pixel, vis.normals, surface, albedos, light, float(lights.ambient),
-                    float(lights.sun_irradiance) if sun is not None else 0.0, sun_dir, hard, band, alpha_band,
-                    image)
     _lap(ms, "shading", t)
     return SceneFrame(image.reshape(h, w, 3), vis, plan, ms)
 
@@ -158,9 +169,12 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
 class FrameRenderer:
     """``render_frame`` for a stream of frames: the per-frame arrays are kept between frames
     (``softshadow.scratch``: fresh memory costs a fifth of a frame in page faults), so are the
-    posed object and the projectors' shadow maps while their inputs stay (``Scratch.memo``), and
-    a second thread runs the projectors while the first makes the sun's plan. threads: 2 (that
-    second thread, and the first's compiled loops on two threads) or 1 (all on one).
+    posed object, the projectors' shadow maps, what each pixel sees and the projectors' light
+    while their inputs stay (``Scratch.memo``: arrays by value, other objects such as a
+    ``Projector`` by identity; a frame's arrays are read-only, as the next frame may reuse them), and
+    a second thread runs the projectors while the first makes the sun's plan and shades the
+    pixels while the first evaluates the penumbra. threads: 2 (that second thread, and the
+    first's compiled loops on two threads) or 1 (all on one).
 
     ``render(...)`` takes ``render_frame``'s arguments. A frame's arrays (image, visible, plan)
     are overwritten by the next frame: copy what you keep. Not for use from two threads at once.
@@ -241,14 +255,44 @@ def _memo(scratch: Scratch | None, name: str, inputs: tuple, make):
     return make() if scratch is None else scratch.memo(name, inputs, make)
 
 
+def _seen(camera: PinholeCamera | GroundGrid, surfaces: Sequence[Surface], ground_albedo, casters: _Casters,
+          scratch: Scratch | None) -> tuple[VisibleSurfaces, np.ndarray, np.ndarray, np.ndarray]:
+    """What each pixel sees (``visible_surfaces``), and each visible point's surface (GROUND -1,
+    the object 0, receivers 1...), its face on the object (-1 elsewhere) and among the shadow
+    casters' faces (-1: none), each (N,), in one pass."""
+    vis = visible_surfaces(camera, surfaces, ground_albedo, scratch=scratch, albedo=False, threads=2)
+    n = len(vis.pixel)
+    surface = scratch_array(scratch, "frame.surface", n, np.int64)
+    on_object = scratch_array(scratch, "frame.object_face", n, np.int64)
+    own = scratch_array(scratch, "frame.caster_face", n, np.int64)
+    _point_faces_kernel()(vis.pixel, vis.surface.reshape(-1), vis.face.reshape(-1), casters.offset, surface,
+                          on_object, own)
+    return vis, surface, on_object, own
+
+
+def _camera_key(camera: PinholeCamera | GroundGrid) -> tuple:
+    """What of a camera or top-down map decides what its pixels see (``Scratch.memo``'s inputs)."""
+    if isinstance(camera, GroundGrid):
+        return ("grid", float(camera.pixel_m), *map(float, camera.origin_m), int(camera.width), int(camera.height))
+    return ("pinhole", camera.K, camera.R, camera.t, int(camera.width), int(camera.height), camera.dist)
+
+
 def _projector_light(vis: VisibleSurfaces, own: np.ndarray, projectors: Sequence[Projector], maps,
                      scratch: Scratch | None) -> np.ndarray:
     """``projector_light``: the projectors' irradiance (N, 3) at the visible points through their
-    maps (own: each point's face among the casters', -1 none)."""
+    maps (own: each point's face among the casters', -1 none); kept while the visible points, the
+    projectors (by identity) and their maps stay."""
+    maps = _result(maps)
+    return _memo(scratch, "frame.light", (vis, own, *projectors, *maps), lambda: _light(vis, own, projectors, maps,
+                                                                                       scratch))
+
+
+def _light(vis: VisibleSurfaces, own: np.ndarray, projectors: Sequence[Projector], maps: Sequence,
+           scratch: Scratch | None) -> np.ndarray:
     light = scratch_array(scratch, "projectors.light", (len(vis.pixel), 3))
     light.fill(0.0)
     points = np.ascontiguousarray(vis.points, np.float64)
-    for proj, smap in zip(projectors, _result(maps)):
+    for proj, smap in zip(projectors, maps):
         proj.add_irradiance(points, vis.normals, smap, light, faces=own)
     return light
 
@@ -303,6 +347,16 @@ def band_alpha(plan: DensePlan, points: np.ndarray, model: SoftShadowModel, pose
     return np.asarray(alpha, np.float64)[:m]
 
 
+def _shade(shading: tuple, light, background, image: np.ndarray, band: np.ndarray, alpha_band: np.ndarray) -> None:
+    """The shading pass (``_shade_kernel``) into the flat image (H W, 3), the background first
+    where no point is seen; light: the projectors' (N, 3) or the Future of it."""
+    pixel, normals, surface, albedos, ambient, sun_irradiance, sun_dir, hard = shading
+    if len(pixel) < len(image):  # the shading writes every pixel that sees something; the rest is background
+        image[:] = np.broadcast_to(np.asarray(background, np.float64), (3,))
+    _shade_kernel()[0](pixel, normals, surface, albedos, _result(light), ambient, sun_irradiance, sun_dir, hard, band,
+                       alpha_band, image)
+
+
 def _lap(ms: dict, step: str, start: float, add: bool = False) -> float:
     now = time.perf_counter()
     ms[step] = 1e3 * (now - start) + (ms.get(step, 0.0) if add else 0.0)
@@ -311,16 +365,27 @@ def _lap(ms: dict, step: str, start: float, add: bool = False) -> float:
 
 @functools.cache
 def _shade_kernel():
-    """The compiled shading pass (numba): per visible point, its surface's albedo (albedos' row
-    surface + 1: the ground's first) times ambient plus the
-    projectors' light plus the sun's, E max(0, n . s) (1 - alpha), alpha the plan's hard shadow or
-    (band points, ascending in ``band``) the penumbra formula's; into the flat image."""
+    """The compiled shading passes (numba): per visible point, its surface's albedo (albedos' row
+    surface + 1: the ground's first) times ambient plus the projectors' light plus the sun's,
+    E max(0, n . s) (1 - alpha), into the flat image. Returns (shade, patch): shade every point,
+    alpha the plan's hard shadow or (band points, ascending in ``band``) the penumbra formula's;
+    patch only the band's points, with the penumbra formula's alpha (after a shading with an
+    empty band: the same image as one shading with it)."""
     numba = parallel_numba()
+
+    @numba.njit(inline="always")
+    def point(i, alpha, pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, image):
+        cos = normals[i, 0] * sun_dir[0] + normals[i, 1] * sun_dir[1] + normals[i, 2] * sun_dir[2]
+        sun = sun_irradiance * max(cos, 0.0) * (1.0 - alpha)
+        p = pixel[i]
+        s = surface[i] + 1  # the ground (-1) first
+        for c in range(3):
+            image[p, c] = albedos[s, c] * (ambient + light[i, c] + sun)
 
     # Parallel over blocks of points, each starting at its first band point.
     @numba.njit(cache=True, nogil=True, parallel=True)
-    def kernel(pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, hard, band, alpha_band,
-               image):
+    def shade(pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, hard, band, alpha_band,
+              image):
         has_sun = hard.shape[0] > 0
         n = pixel.shape[0]
         block = 4096
@@ -328,20 +393,21 @@ def _shade_kernel():
             lo, hi = b * block, min((b + 1) * block, n)
             j = np.searchsorted(band, lo)
             for i in range(lo, hi):
-                sun = 0.0
+                alpha = 1.0  # no sun: E is 0
                 if has_sun:
                     alpha = hard[i]
                     if j < band.shape[0] and band[j] == i:
                         alpha = alpha_band[j]
                         j += 1
-                    cos = normals[i, 0] * sun_dir[0] + normals[i, 1] * sun_dir[1] + normals[i, 2] * sun_dir[2]
-                    sun = sun_irradiance * max(cos, 0.0) * (1.0 - alpha)
-                p = pixel[i]
-                s = surface[i] + 1  # the ground (-1) first
-                for c in range(3):
-                    image[p, c] = albedos[s, c] * (ambient + light[i, c] + sun)
+                point(i, alpha, pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, image)
 
-    return kernel
+    @numba.njit(cache=True, nogil=True, parallel=True)
+    def patch(pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, band, alpha_band, image):
+        for j in numba.prange(band.shape[0]):
+            point(band[j], alpha_band[j], pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir,
+                  image)
+
+    return shade, patch
 
 
 def _albedo_of(value) -> np.ndarray:

@@ -1,7 +1,10 @@
 """The forward-only scene image (softshadow.scene_frame, docs/projector.md).
 
 - ``plan_dense_points`` makes the same plan as ``plan_points``' light-space back end (every
-  leaf equal), with and without normals, with the object's own faces given, on a receiver mesh.
+  leaf equal), with and without normals, with the object's own faces given, on a receiver mesh,
+  on one thread and on two over several blocks of points; its compiled candidate edges equal
+  ``raster.candidate_labels``' (labels missing, at the raster's border, with and without
+  outline neighbours).
 - ``render_frame`` draws ``render_scene``'s image (same lights and band k) to rounding: the sun,
   a projector, a receiver mesh, the ground; no sun; a top-down map.
 - ``FrameRenderer`` keeps its buffers between frames without mixing frames up (images equal to
@@ -62,6 +65,98 @@ def test_dense_plan_equals_plan_points(mesh, sun, with_normals):
     on_object = np.where(vis.surface.ravel()[vis.pixel] == 0, vis.face.ravel()[vis.pixel], -1)
     _plans_equal(ref, plan_dense_points(model.occluder, pose, sun, vis.points, 0.02, normals,
                                         faces=on_object).point_plan())
+
+
+def test_dense_plan_on_one_and_two_threads_over_several_blocks():
+    """The compiled passes gather points block by block (in parallel, then in order): with points in
+    several blocks, on one thread and on two, the plan is ``plan_points``'."""
+    import numba
+
+    from softshadow.dense_plan import _BLOCK
+    model = model_of("ball")
+    cam = look_at_camera((3.0, -3.5, 2.5), (0.3, 0.0, 0.4), 200, 150, 55.0)
+    vis = visible_surfaces(cam, [_object_surface(model, Pose(), 0.8), _step()], 0.8)
+    sun = Sun(215.0, 38.0)
+    ref = model.plan_points(sun, Pose(), vis.points, 0.02, normals=vis.normals, backend="light")
+    before = numba.get_num_threads()
+    try:
+        for threads in (1, min(2, numba.config.NUMBA_NUM_THREADS)):
+            numba.set_num_threads(threads)
+            dense = plan_dense_points(model.occluder, Pose(), sun, vis.points, 0.02, vis.normals,
+                                      scratch=ss.internal.Scratch())
+            blocks = np.unique(dense.band // _BLOCK)
+            assert len(blocks) >= 2 and len(vis.points) > 2 * _BLOCK, "the band must span several blocks"
+            _plans_equal(ref, dense.point_plan())
+    finally:
+        numba.set_num_threads(before)
+
+
+def test_dense_plan_block_passes_equal_their_one_pass_rules():
+    """The test and band passes, parallel over blocks of points, against their rules in NumPy on
+    random points over several blocks (the lists in order, the box over all of them)."""
+    import numba
+
+    from softshadow.dense_plan import _BLOCK, _band_kernel, _test_kernel
+    rng = np.random.default_rng(11)
+    m = 3 * _BLOCK + 123
+    in_view = (rng.random(m) < 0.4).astype(np.uint8)
+    att = rng.random(m) < 0.2
+    d = rng.uniform(0.0, 2.0, m)
+    uv = rng.normal(0.0, 1.0, (m, 2))
+    want_test = np.flatnonzero((in_view > 0) & ~att & (d <= 1.5))
+    label = rng.integers(-1, 20, m).astype(np.int32)
+    dist = rng.uniform(0.0, 0.05, m).astype(np.float32)
+    edge_depth, frac = rng.uniform(0.0, 1.0, 20), rng.choice([0.5, 1.0], 20)
+    cand = rng.permutation(m + 50)[:m]
+    per_m, fraction, margin, near_m = 0.04, 0.75, 0.005, 0.002
+    width = per_m * np.maximum(d - edge_depth[np.maximum(label, 0)], 0.0)
+    in_band = (label >= 0) & (dist <= fraction * width + margin) & ~att
+    want_near = (dist <= 0.25 * width + near_m) & (frac[label] >= 0.99)
+    before = numba.get_num_threads()
+    try:
+        for threads in (1, min(2, numba.config.NUMBA_NUM_THREADS)):
+            numba.set_num_threads(threads)
+            behind, test, box = np.ones(m, bool), np.empty(m, np.int64), np.empty(4)
+            n = _test_kernel()(in_view, att, d, uv, 1.5, behind, test, box)
+            np.testing.assert_array_equal(test[:n], want_test)
+            np.testing.assert_array_equal(behind, (in_view > 0) & ~att & (d > 1.5))
+            np.testing.assert_array_equal(box, [*uv[want_test].min(0), *uv[want_test].max(0)])
+            hard, band, near_b = np.full(m + 50, 7.0), np.empty(m, np.int64), np.empty(m, bool)
+            n = _band_kernel()(cand, d, label, dist, att, behind, edge_depth, per_m, frac, True, fraction, margin,
+                               near_m, hard, band, near_b)
+            np.testing.assert_array_equal(band[:n], np.flatnonzero(in_band))
+            np.testing.assert_array_equal(near_b[:n], want_near[in_band])
+            np.testing.assert_array_equal(hard[cand], (behind | att).astype(float))
+    finally:
+        numba.set_num_threads(before)
+    assert len(np.unique(want_test // _BLOCK)) == 4 and 0 < want_near[in_band].sum() < in_band.sum()
+
+
+@pytest.mark.parametrize("with_neighbours", [True, False])
+def test_dense_plan_candidate_edges_equal_candidate_labels(with_neighbours):
+    from softshadow.dense_plan import _CANDIDATE_OFFSETS, _candidates_kernel
+    from softshadow.plan import CANDIDATE_RADII_PX, N_CANDIDATES
+    from softshadow.raster import candidate_labels
+    rng = np.random.default_rng(7)
+    h, w, pixel_m, ox, oy = 40, 50, 0.1, -1.0, 2.0
+    # Voronoi-like cells of labels (-1: none) so that neighbouring samples share and differ.
+    cells = rng.integers(-1, 30, (h // 4 + 1, w // 4 + 1)).astype(np.int32)
+    edge_label = np.ascontiguousarray(np.repeat(np.repeat(cells, 4, 0), 4, 1)[:h, :w])
+    neighbours = rng.integers(-1, 30, (30, 2)) if with_neighbours else None
+    # Points over the raster and beyond its border (clipped to it).
+    uv = np.column_stack([rng.uniform(ox - 0.5, ox + w * pixel_m + 0.5, 400),
+                          rng.uniform(oy - h * pixel_m - 0.5, oy + 0.5, 400)])
+    sel = np.sort(rng.choice(400, 300, replace=False))
+    cols = np.clip(np.rint((uv[sel, 0] - ox) / pixel_m).astype(np.int64), 0, w - 1)
+    rows = np.clip(np.rint((oy - uv[sel, 1]) / pixel_m).astype(np.int64), 0, h - 1)
+    want = np.maximum(candidate_labels(edge_label, rows, cols, radii=CANDIDATE_RADII_PX, max_candidates=N_CANDIDATES,
+                                       neighbours=neighbours), 0)
+    got = np.full((len(sel), N_CANDIDATES), -7, np.int32)
+    _candidates_kernel()(uv, sel, ox, oy, pixel_m, edge_label,
+                         np.full((0, 2), -1, np.int64) if neighbours is None else neighbours, _CANDIDATE_OFFSETS, got)
+    assert (rows == 0).any() and (cols == w - 1).any() and (edge_label[rows, cols] < 0).any()
+    assert len({tuple(r) for r in want}) > 50 and (want[:, 2] != want[:, 0]).any()
+    np.testing.assert_array_equal(got, want)
 
 
 def _scene(size=(120, 90)):
@@ -176,6 +271,41 @@ def test_frame_renderer_remakes_what_changed():
                 np.testing.assert_array_equal(got, render_frame(*args, receivers=[step]).image, err_msg=f"frame {i}")
         finally:
             renderer.close()
+
+
+def test_frame_renderer_keeps_what_each_pixel_sees_while_the_camera_stays():
+    """While the camera, the surfaces and the ground stay, the renderer keeps what each pixel sees
+    and the projector's light (only the sun or the projector moving); a moved camera, a receiver
+    moved in place or the ground taken away is seen: every frame equals a fresh render_frame."""
+    model = model_of("pillar")
+    cam, proj = _scene()
+    moved_cam = ss.PinholeCamera(cam.K, cam.R, cam.t + (0.05, 0.0, 0.0), cam.width, cam.height)  # moved sideways
+    # Another slide from the same place (the same shadow map, another light), then another place.
+    other_slide = Projector(proj.position, proj.target, sine_slide(3, 0.5, 64), fov_deg=45.0, shadow_px=256)
+    moved_proj = Projector((-2.0, -3.5, 3.2), (0.0, 0.0, 0.5), proj.slide, fov_deg=45.0, shadow_px=256)
+    step = _step()
+    frames = [(cam, 220.0, proj, 0.8), (cam, 225.0, proj, 0.8), (cam, 225.0, other_slide, 0.8),
+              (cam, 225.0, moved_proj, 0.8), (moved_cam, 225.0, moved_proj, 0.8), (cam, 230.0, moved_proj, 0.8),
+              (cam, 230.0, moved_proj, None), (cam, 230.0, moved_proj, None)]
+    for threads in (1, 2):
+        renderer = ss.FrameRenderer(threads=threads)
+        seen, lit = [], []
+        try:
+            for i, (camera, azimuth, projector, ground) in enumerate(frames):
+                if i == 7:  # the step raised in place: what the camera sees changes
+                    step.vertices[:, 2] += 0.3
+                args = (camera, model, Pose(), SceneLights(0.2, 0.8, 0.02), Sun(azimuth, 40.0), [projector])
+                frame = renderer.render(*args, receivers=[step], ground_albedo=ground)
+                seen.append(frame.visible)
+                lit.append(renderer.scratch._memo["frame.light"][1])
+                np.testing.assert_array_equal(frame.image.copy(), render_frame(*args, receivers=[step],
+                                                                               ground_albedo=ground).image,
+                                              err_msg=f"frame {i}, {threads} thread(s)")
+        finally:
+            renderer.close()
+        kept = [a is b for a, b in zip(seen[1:], seen[:-1])]
+        assert kept == [True, True, True, False, False, False, False], kept
+        assert [a is b for a, b in zip(lit[1:], lit[:-1])] == [True, False, False, False, False, False, False]
 
 
 def test_scratch_memo_keeps_a_result_while_its_inputs_stay():
