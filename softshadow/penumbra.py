@@ -382,6 +382,13 @@ def footprint_profile_alpha(u, du_a, du_b, profile: Profile = "linear"):
     ``pixel_profile.blurred_profile_alpha`` (the fitter's model of a photographed pixel, which
     adds the camera's blur) takes for the same footprint has the same variance.
     """
+    nodes, half, w = _footprint_nodes(u, du_a, du_b)
+    return _box_profile_alpha(nodes, half, profile) @ w
+
+
+def _footprint_nodes(u, du_a, du_b):
+    """The footprint's Gauss-Legendre nodes in u across the narrower side (..., n), the box's
+    half-width along the wider side (..., 1) and the nodes' weights (n,) (``footprint_profile_alpha``)."""
     u, du_a, du_b = jnp.asarray(u), jnp.abs(jnp.asarray(du_a)), jnp.abs(jnp.asarray(du_b))
     wide = 0.5 * jnp.maximum(du_a, du_b)
     narrow = 0.5 * jnp.minimum(du_a, du_b)
@@ -392,8 +399,7 @@ def footprint_profile_alpha(u, du_a, du_b, profile: Profile = "linear"):
     z, w = np.polynomial.legendre.leggauss(_FOOTPRINT_NODES)
     dtype = jnp.result_type(v)
     z, w = jnp.asarray(z, dtype), jnp.asarray(0.5 * w, dtype)
-    values = _box_profile_alpha(v[..., None] + narrow[..., None] * z, wide[..., None], profile)
-    return values @ w
+    return v[..., None] + narrow[..., None] * z, wide[..., None], w
 
 
 def _box_step(v, half):
@@ -409,16 +415,7 @@ def footprint_bump(u, du_a, du_b, profile: Profile = "linear"):
     the pixel does not reach the ramp, and tends to 0 as the ramp narrows within the pixel (the
     ramp's departure is odd about its middle), so a footprint mean of alpha is the hard
     shadow's area in the pixel plus this (``wedge.wedge_alpha``)."""
-    u, du_a, du_b = jnp.asarray(u), jnp.abs(jnp.asarray(du_a)), jnp.abs(jnp.asarray(du_b))
-    wide = 0.5 * jnp.maximum(du_a, du_b)
-    narrow = 0.5 * jnp.minimum(du_a, du_b)
-    reach = 2.0 + wide + narrow
-    v = jnp.clip(u, -reach, reach)
-    z, w = np.polynomial.legendre.leggauss(_FOOTPRINT_NODES)
-    dtype = jnp.result_type(v)
-    z, w = jnp.asarray(z, dtype), jnp.asarray(0.5 * w, dtype)
-    nodes = v[..., None] + narrow[..., None] * z
-    half = wide[..., None]
+    nodes, half, w = _footprint_nodes(u, du_a, du_b)
     return (_box_profile_alpha(nodes, half, profile) - _box_step(nodes, half)) @ w
 
 

@@ -109,3 +109,11 @@ def fixed_shape_grid_plan(mdl, sun, pose, grid, range_k_max):
     points = concatenate_plans([plan.plan], [plan.n_band], pad_to=size, edge_pad_to=max(EDGE_PAD, n_edges),
                                pairs_to=PAIR_PAD, cross_to=CROSS_PAD)
     return dataclasses.replace(plan, band_index=index, plan=points)
+
+
+def k_zero_and_near_maps(mdl, sun, pose, grid):
+    """The ground maps (H, W) at k = 0 and k = 1e-7 (rho 0.3), each on a plan of the whole grid
+    (``fixed_shape_grid_plan``: one compiled evaluation for both)."""
+    from softshadow import ShadowParams
+    return tuple(np.asarray(mdl.ground_map(ShadowParams(k, 0.3), sun, pose, grid,
+                                           plan=fixed_shape_grid_plan(mdl, sun, pose, grid, k))) for k in (0.0, 1e-7))

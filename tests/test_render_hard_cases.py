@@ -22,7 +22,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from gradcheck import PARAM_NAMES, STEPS, check_point_gradients, fixed_shape_grid_plan, fixed_shape_plan, unpack
+from gradcheck import (PARAM_NAMES, STEPS, check_point_gradients, fixed_shape_grid_plan, fixed_shape_plan,
+                       k_zero_and_near_maps, unpack)
 from softshadow import GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun
 from softshadow.internal import PosedOccluder
 from softshadow.meshes import builtin_mesh
@@ -556,11 +557,7 @@ def test_default_model_at_k_zero_is_the_limit_of_k_to_zero_with_finite_gradients
     mdl = default_model("pillar", "edge", profile)
     sun, pose = Sun(200.0, 35.0), Pose(rotation_deg=(0.0, 0.0, 15.0))
     grid = GroundGrid.around((0.6, 1.6), 1.6, 48)
-    # Plans of one shape (the whole grid): the maps share one compiled evaluation.
-    at_zero = np.asarray(mdl.ground_map(ShadowParams(0.0, 0.3), sun, pose, grid,
-                                        plan=fixed_shape_grid_plan(mdl, sun, pose, grid, 0.0)))
-    near_zero = np.asarray(mdl.ground_map(ShadowParams(1e-7, 0.3), sun, pose, grid,
-                                          plan=fixed_shape_grid_plan(mdl, sun, pose, grid, 1e-7)))
+    at_zero, near_zero = k_zero_and_near_maps(mdl, sun, pose, grid)  # one compiled evaluation
     assert np.abs(at_zero - near_zero).max() < 1e-4
     bare = mdl.with_options(hidden_sky=False)
     partial = np.asarray(bare.ground_map(ShadowParams(0.0, 0.3), sun, pose, grid,

@@ -19,7 +19,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from data_synth import SunSky, sun_visibility
-from gradcheck import PARAM_NAMES, STEPS, check_point_gradients, fixed_shape_grid_plan, unpack
+from gradcheck import (PARAM_NAMES, STEPS, check_point_gradients, fixed_shape_grid_plan,
+                       k_zero_and_near_maps, unpack)
 from softshadow import GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun
 from softshadow.internal import concatenate_plans
 from softshadow.meshes import builtin_mesh
@@ -289,11 +290,7 @@ def test_k_zero_is_the_limit_of_k_to_zero_with_finite_gradients():
     mdl = wedge_pillar("disk").with_options(hidden_sky=False)
     sun, pose = Sun(200.0, 35.0), Pose(rotation_deg=(0.0, 0.0, 15.0))
     grid = GroundGrid.around((0.6, 1.6), 1.6, 48)
-    # Plans of one shape (the whole grid, as in the float32 test): one compiled map and gradient.
-    at_zero = np.asarray(mdl.ground_map(ShadowParams(0.0, 0.3), sun, pose, grid,
-                                        plan=fixed_shape_grid_plan(mdl, sun, pose, grid, 0.0)))
-    near_zero = np.asarray(mdl.ground_map(ShadowParams(1e-7, 0.3), sun, pose, grid,
-                                          plan=fixed_shape_grid_plan(mdl, sun, pose, grid, 1e-7)))
+    at_zero, near_zero = k_zero_and_near_maps(mdl, sun, pose, grid)  # one compiled evaluation
     partial = (at_zero > 0.31) & (at_zero < 0.99)
     assert partial.sum() > 40, "the pixels on the outline should be partly shaded"
     assert np.abs(at_zero - near_zero).max() < 1e-4
