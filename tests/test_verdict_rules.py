@@ -285,11 +285,35 @@ def test_identifiable_when_the_penumbra_is_resolved_and_k_is_measured():
     (0.002, 0.0005, None, 0.002 + 2 * 0.0005),  # no sample inside the penumbra
 ])
 def test_not_identifiable_gives_an_upper_bound_and_a_warning(k, se, pen, upper):
-    estimate, verdict = rules.judge_fit(_fit(k=k, k_stderr_stat=se, k_stderr_sys=0.0, penumbra_px=pen),
+    # No camera blur: the blur spot (0.58 px) bounds k below these bounds.
+    estimate, verdict = rules.judge_fit(_fit(k=k, k_stderr_stat=se, k_stderr_sys=0.0, penumbra_px=pen, blur_px=0.0),
                                         GroupContext(3))
     assert not verdict.identifiable
     assert estimate.range_k == pytest.approx(upper) and estimate.range_k >= k
     assert any("upper bound" in w for w in verdict.warnings)
+
+
+@pytest.mark.parametrize("pen, per_k", [(0.3, None), (None, 380.0), (0.114, 380.0)])
+def test_a_penumbra_under_the_blur_spot_bounds_k_by_the_spots_width(pen, per_k):
+    """A fit that traded k for blur (k near 0, a penumbra far under the spot, or none sampled at all)
+    bounds k by the k whose penumbra would fill the blur spot, from the width per unit k at the outline
+    (given, or the fitted width over the fitted k): a knot at 752x564 read k 1e-7 for a truth of
+    0.0036 (a 1.37 px penumbra under a 1.39 px spot), and the bound of 0.0000 was a confident miss."""
+    k, blur = 3e-4, 0.63
+    estimate, verdict = rules.judge_fit(_fit(k=k, k_stderr_stat=1e-5, k_stderr_sys=0.0, penumbra_px=pen,
+                                             blur_px=blur, n_in_penumbra=0 if pen is None else 40,
+                                             no_ramp_k=1e-5 if pen is None else None, penumbra_px_per_k=per_k),
+                                        GroupContext(3))
+    spot = rules.RESOLVED_BLUR_WIDTHS * math.sqrt(1 / 12 + blur ** 2)
+    width_per_k = per_k if per_k is not None else pen / k
+    assert not verdict.identifiable
+    assert estimate.range_k == pytest.approx(spot / width_per_k)
+    assert rules.unresolved_k(_fit(k=k, penumbra_px=pen, blur_px=blur, penumbra_px_per_k=per_k)) == pytest.approx(
+        spot / width_per_k)
+    assert math.isnan(rules.unresolved_k(_fit(k=k, penumbra_px=None, blur_px=blur)))
+    # A resolved penumbra keeps its measured k: the spot bounds only what the photos do not resolve.
+    estimate, verdict = rules.judge_fit(_fit(penumbra_px_per_k=per_k or 400.0), GroupContext(3))
+    assert verdict.identifiable and estimate.range_k == 0.0057
 
 
 def test_identifiability_thresholds():

@@ -99,6 +99,8 @@ class FitEvidence:
     fitted). n_in_penumbra, n_in_umbra: the group's samples inside the fitted penumbra (|u| < 1)
     and in the fitted umbra (alpha, blur included, at least 0.99). no_ramp_k: when no sample lies
     inside the fitted penumbra, the largest k the samples allow (None: not known).
+    penumbra_px_per_k: the penumbra's width in image pixels per unit k at the shadow's outline (the
+    width any k would have; None: not known).
     n_profiles: stretches of shadow edge sampled; converged: the solver's outcome.
     range_k_max: the largest k the samples' band was planned for. sun_fitted: the sun was fitted
     with k and rho (not known from a time and site, or given). photos: each photo's evidence.
@@ -131,6 +133,7 @@ class FitEvidence:
     sun_free: SunFree | None = None
     receiver: str = "plane"
     remaining_step_se: float = NAN
+    penumbra_px_per_k: float | None = None
 
 
 @dataclasses.dataclass(frozen=True)

@@ -43,7 +43,7 @@ __all__ = [
     "MIN_PHOTO_PENUMBRA_SAMPLES", "PHOTO_SYS_SHARE", "DISAGREE_MAX_RATIO", "MIN_PENUMBRA_PX", "MAX_K_REL_STDERR",
     "MIN_PENUMBRA_SAMPLES", "NARROW_PENUMBRA_PX", "MIN_UMBRA_SAMPLES", "RESOLVED_BLUR_WIDTHS",
     "MIN_PROFILES", "SOLVER_SETTLED_SE", "SUN_SETTLED_DEG", "SUN_FREE_MAX_DEG", "SUN_FREE_SHIFT", "SUN_CHECK_GAIN", "CLOCK_ALONG_PATH", "ELEVATION_ONLY", "LOD_SHIFT_MAX",
-    "failed", "no_shadow", "photo_to_leave_out", "wants_sun_check", "sun_moves", "judge_fit", "range_upper_bound",
+    "failed", "no_shadow", "photo_to_leave_out", "wants_sun_check", "sun_moves", "judge_fit", "range_upper_bound", "unresolved_k",
     "resolution_warning", "few_profiles_warning", "misfit_of",
 ]
 
@@ -243,11 +243,30 @@ def range_upper_bound(k: float, k_stderr: float, penumbra_px: float | None,
     return float(upper)
 
 
+def _blur_spot_px(blur_px: float | None) -> float:
+    """The narrowest penumbra (image pixels) the photos resolve: ``RESOLVED_BLUR_WIDTHS`` standard
+    deviations of the pixel's area plus the camera's blur (``blur_px``; None: not fitted, 0)."""
+    return RESOLVED_BLUR_WIDTHS * math.sqrt(1.0 / 12.0 + float(blur_px or 0.0) ** 2)
+
+
+def unresolved_k(fit: FitEvidence) -> float:
+    """The k whose penumbra would be as wide as the photos' blur spot: any smaller k leaves the photos
+    as they are, so a penumbra the photos do not resolve bounds k by this. From the penumbra's width
+    per unit k at the outline (``penumbra_px_per_k``, or the fitted width over the fitted k); NaN when
+    neither is known."""
+    per_k = fit.penumbra_px_per_k
+    if not (_finite(per_k) and per_k > 0) and _finite(fit.penumbra_px) and fit.k > 0:
+        per_k = fit.penumbra_px / fit.k
+    if not (_finite(per_k) and per_k > 0):
+        return math.nan
+    return _blur_spot_px(fit.blur_px) / per_k
+
+
 def resolution_warning(penumbra_px: float | None, blur_px: float | None) -> str | None:
     """The warning for a penumbra (median width, image pixels) under the photo's blur spot, or None."""
     if not _finite(penumbra_px):
         return None
-    spot = RESOLVED_BLUR_WIDTHS * math.sqrt(1.0 / 12.0 + float(blur_px or 0.0) ** 2)
+    spot = _blur_spot_px(blur_px)
     if penumbra_px >= spot:
         return None
     return (f"penumbra {penumbra_px:.2g} px wide, under the photo's blur spot ({spot:.2g} px): k rests on "
@@ -608,6 +627,7 @@ def judge_fit(fit: FitEvidence, context: GroupContext | None = None) -> tuple[Es
 
     # 5. Identifiability of k, with its bound.
     bound = not_resolved
+    resolution_bound = bool(not_resolved or unresolved)
     if bound is None and scene_off:
         # A misplaced edge is fitted with a wider penumbra: k reads high, and bounds the truth.
         bound = "the fitted shadow does not match the photos"
@@ -657,6 +677,10 @@ def judge_fit(fit: FitEvidence, context: GroupContext | None = None) -> tuple[Es
             # No sample inside the penumbra: k did not move from its start; the bound is the k whose
             # penumbra would reach the nearest sample, which shows no ramp.
             range_k = max(range_k, fit.no_ramp_k)
+        if resolution_bound and _finite(spot_k := unresolved_k(fit)):
+            # Under the blur spot the fit trades k for blur and may settle on any k whose penumbra the
+            # photos do not resolve, down to 0: every k up to the spot's width fits as well.
+            range_k = max(range_k, spot_k)
     estimate = Estimate(range_k=range_k, rho=fit.rho, range_stderr=k_err, rho_stderr=rho_err,
                         range_stderr_stat=k_stat, rho_stderr_stat=rho_stat,
                         range_stderr_sys=fit.k_stderr_sys if _finite(fit.k_stderr_sys) else None,
