@@ -318,26 +318,29 @@ def test_a_penumbra_under_the_blur_spot_bounds_k_by_the_spots_width(pen, per_k):
 
 def test_identifiability_thresholds():
     k = 0.01
-    ident = lambda **kw: rules.judge_fit(_fit(k=k, k_stderr_stat=0.001, blur_px=0.0, **kw),
+    ident = lambda **kw: rules.judge_fit(_fit(**{"k": k, "k_stderr_stat": 0.001, "blur_px": 0.0, **kw}),
                                          GroupContext(3))[1].identifiable
-    assert ident(penumbra_px=rules.MIN_PENUMBRA_PX)
-    assert not ident(penumbra_px=rules.MIN_PENUMBRA_PX * 0.99)
-    assert rules.judge_fit(_fit(k=k, k_stderr_stat=rules.MAX_K_REL_STDERR * k, penumbra_px=2.0),
-                           GroupContext(3))[1].identifiable
-    assert not rules.judge_fit(_fit(k=k, k_stderr_stat=rules.MAX_K_REL_STDERR * k * 1.01, penumbra_px=2.0),
-                               GroupContext(3))[1].identifiable
+    # The blur spot without blur: the pixel's area, 3 sqrt(1/12) = 0.87 px.
+    spot = rules.RESOLVED_BLUR_WIDTHS * math.sqrt(1 / 12)
+    assert ident(penumbra_px=spot * 1.001)
+    assert not ident(penumbra_px=spot * 0.999)
+    assert not rules.judge_fit(_fit(k=k, k_stderr_stat=0.001, blur_px=0.5, penumbra_px=spot * 1.001),
+                               GroupContext(3))[1].identifiable  # a blurred photo's spot is wider
+    assert ident(k_stderr_stat=rules.MAX_K_REL_STDERR * k, penumbra_px=2.0)
+    assert not ident(k_stderr_stat=rules.MAX_K_REL_STDERR * k * 1.01, penumbra_px=2.0)
 
 
 def test_too_few_samples_inside_a_narrow_penumbra_make_k_an_upper_bound():
     narrow = 0.99 * rules.NARROW_PENUMBRA_PX
-    judge = lambda n, px=narrow: rules.judge_fit(_fit(k=0.01, k_stderr_stat=0.001, k_stderr_sys=0.002,
+    # A sharp camera (0.3 px of blur, a 1.25 px spot) resolves a penumbra under NARROW_PENUMBRA_PX.
+    judge = lambda n, px=narrow: rules.judge_fit(_fit(k=0.01, k_stderr_stat=0.001, k_stderr_sys=0.002, blur_px=0.3,
                                                       penumbra_px=px, n_in_penumbra=n), GroupContext(3))
     assert judge(rules.MIN_PENUMBRA_SAMPLES)[1].identifiable
     estimate, verdict = judge(rules.MIN_PENUMBRA_SAMPLES - 1)
     assert not verdict.identifiable and estimate.range_k == pytest.approx(0.01 + 2 * math.hypot(0.001, 0.002))
     assert any(f"only {rules.MIN_PENUMBRA_SAMPLES - 1} samples" in w and "upper bound" in w for w in verdict.warnings)
     assert judge(3, rules.NARROW_PENUMBRA_PX)[1].identifiable  # wider than a blur spot: few samples suffice
-    assert any("narrower than the resolution" in w for w in judge(3, 0.5)[1].warnings)
+    assert any("under the photo's blur spot" in w for w in judge(3, 0.5)[1].warnings)
     assert any("narrower than the resolution" in w for w in judge(0, None)[1].warnings)
 
 
@@ -376,7 +379,7 @@ def test_the_other_flags():
     assert verdict.reliable and not verdict.identifiable and estimate.range_k > 0.0057
     assert any("the penumbra is under the photo's blur spot; range_k is an upper bound" in w
                for w in verdict.warnings)
-    assert rules.judge_fit(_fit(penumbra_px=1.6, blur_px=0.7), GroupContext(3))[1].identifiable  # the spot: 1.51 px
+    assert rules.judge_fit(_fit(penumbra_px=2.3, blur_px=0.7), GroupContext(3))[1].identifiable  # the spot: 2.27 px
     assert rules.judge_fit(_fit(penumbra_px=3.0, blur_px=0.7, receiver="depth"), GroupContext(3))[1].reliable
 
 

@@ -40,7 +40,7 @@ from .outcome import Estimate, Verdict
 __all__ = [
     "NO_SHADOW_DEPTH", "DEPTH_RATIO", "MIN_PHOTO_SHADOW_SAMPLES", "MISFIT_MAX", "PHOTO_MISFIT_MAX",
     "UMBRA_RESIDUAL_RATIO", "UMBRA_RESIDUAL_MIN", "DEPTH_MISMATCH_MAX", "RELIEF_UMBRA_BIAS_RATIO", "TEXTURE_DEPTH_RATIO", "TEXTURE_PENUMBRA_PX", "MIN_PHOTO_UMBRA_SAMPLES",
-    "MIN_PHOTO_PENUMBRA_SAMPLES", "PHOTO_SYS_SHARE", "DISAGREE_MAX_RATIO", "MIN_PENUMBRA_PX", "MAX_K_REL_STDERR",
+    "MIN_PHOTO_PENUMBRA_SAMPLES", "PHOTO_SYS_SHARE", "DISAGREE_MAX_RATIO", "MAX_K_REL_STDERR",
     "MIN_PENUMBRA_SAMPLES", "NARROW_PENUMBRA_PX", "MIN_UMBRA_SAMPLES", "RESOLVED_BLUR_WIDTHS",
     "MIN_PROFILES", "SOLVER_SETTLED_SE", "SUN_SETTLED_DEG", "SUN_FREE_MAX_DEG", "SUN_FREE_SHIFT", "SUN_CHECK_GAIN", "CLOCK_ALONG_PATH", "ELEVATION_ONLY", "LOD_SHIFT_MAX",
     "failed", "no_shadow", "photo_to_leave_out", "wants_sun_check", "sun_moves", "judge_fit", "range_upper_bound", "unresolved_k",
@@ -129,9 +129,9 @@ DISAGREE_MAX_RATIO = 8.0
 
 # -- 5. identifiability and the rest ------------------------------------------------------------------
 
-#: k is not identifiable below this penumbra width (pixels) or above this relative statistical
-#: error of k.
-MIN_PENUMBRA_PX, MAX_K_REL_STDERR = 0.8, 0.5
+#: k is not identifiable above this relative statistical error of k (nor under the blur spot,
+#: ``RESOLVED_BLUR_WIDTHS``).
+MAX_K_REL_STDERR = 0.5
 #: Not identifiable when fewer samples than MIN_PENUMBRA_SAMPLES lie inside a fitted penumbra
 #: (|u| < 1) narrower than NARROW_PENUMBRA_PX: its width, as wide as a camera's blur spot
 #: (2 sqrt(1/12 + blur^2) = 1.6 px at 0.7 px of blur), and k then rest on a handful of pixels,
@@ -149,8 +149,11 @@ MIN_UMBRA_SAMPLES = 5
 #: blur (the blur spot, sqrt(1/12 + blur^2) px) is not resolved by the photo: the fitted blur and k
 #: trade off, and k is an upper bound (physical 400x300 folders, penumbrae of 1.1-1.6 px under
 #: 0.6-0.9 px of blur: k -14 % to +13 %; in the calibration study the knot at 344x258, a 1.1 px
-#: penumbra under a 1.2 px spot, read k 2.6 times the truth, 3.7 stated errors).
-RESOLVED_BLUR_WIDTHS = 2.0
+#: penumbra under a 1.2 px spot, read k 2.6 times the truth, 3.7 stated errors). At 3 the ramp's own
+#: variance (width^2 / 12) is at least 3/4 of the spot's; at 2, a third, and in the study (216 groups)
+#: a knot read a 1.5 px penumbra for a 0.85 px truth under a 0.55 px spot (k +4.0 stated errors,
+#: reliable); at 3 no confident miss is left from the blur spot, and 6 more groups report k as a bound.
+RESOLVED_BLUR_WIDTHS = 3.0
 #: On a receiver that is not the plane (range images, a mesh) the receiver's relief shares the pixels
 #: of such a penumbra, and rho rests on the blur model too: the group is unreliable when its umbra is
 #: not fitted as one level at its noise, that is when the umbra residual's RMS is above this multiple
@@ -247,6 +250,11 @@ def _blur_spot_px(blur_px: float | None) -> float:
     """The narrowest penumbra (image pixels) the photos resolve: ``RESOLVED_BLUR_WIDTHS`` standard
     deviations of the pixel's area plus the camera's blur (``blur_px``; None: not fitted, 0)."""
     return RESOLVED_BLUR_WIDTHS * math.sqrt(1.0 / 12.0 + float(blur_px or 0.0) ** 2)
+
+
+def _resolved(fit: FitEvidence) -> bool:
+    """The fitted penumbra is at least as wide as the photos' blur spot (``_blur_spot_px``)."""
+    return _finite(fit.penumbra_px) and fit.penumbra_px >= _blur_spot_px(fit.blur_px)
 
 
 def unresolved_k(fit: FitEvidence) -> float:
@@ -492,7 +500,7 @@ def _birge_ratio(fit: FitEvidence, name: str) -> tuple[float, str | None]:
     if name == "k":
         value, sys, fmt = fit.k, fit.k_stderr_sys, ".4g"
         # Under a penumbra narrower than the resolution no photo measures k (it is a bound).
-        resolved = _finite(fit.penumbra_px) and fit.penumbra_px >= MIN_PENUMBRA_PX
+        resolved = _resolved(fit)
         pairs = [(p, p.k, p.k_stderr) for p in fit.photos if p.n_penumbra >= MIN_PHOTO_PENUMBRA_SAMPLES and resolved]
     else:
         value, sys, fmt = fit.rho, fit.rho_stderr_sys, ".3f"
@@ -513,11 +521,12 @@ def _birge_ratio(fit: FitEvidence, name: str) -> tuple[float, str | None]:
 def _identifiability(fit: FitEvidence) -> str | None:
     """Why k is not measured from the penumbra's width and samples and its own noise, or None."""
     px = fit.penumbra_px
-    resolved = _finite(px) and px >= MIN_PENUMBRA_PX
-    if resolved and fit.n_in_penumbra < MIN_PENUMBRA_SAMPLES and px < NARROW_PENUMBRA_PX:
+    if _finite(px) and not _resolved(fit):
+        return "the penumbra is under the photo's blur spot"
+    if _finite(px) and fit.n_in_penumbra < MIN_PENUMBRA_SAMPLES and px < NARROW_PENUMBRA_PX:
         # Blur and JPEG widen a penumbra that few pixels sample: k reads high, so it bounds k.
         return f"only {fit.n_in_penumbra} samples lie inside the fitted penumbra (fewer than {MIN_PENUMBRA_SAMPLES})"
-    if not resolved or fit.k_stderr_stat > MAX_K_REL_STDERR * max(fit.k, 1e-12):
+    if not _finite(px) or fit.k_stderr_stat > MAX_K_REL_STDERR * max(fit.k, 1e-12):
         return "the penumbra is narrower than the resolution"
     return None
 
