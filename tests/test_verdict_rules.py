@@ -440,3 +440,21 @@ def test_edge_rules():
     assert edge_rules.judge_edges(_edges(modes=((math.log(0.2), 40), (math.log(0.3), 5)))).reliable
     assert edge_rules.judge_edges(_edges(dark_side_regions=(6, 1, 1, 1))).reliable
     assert edge_rules.judge_edges(_edges(outlines=((math.log(0.2), 37), (math.log(0.4), 3)))).reliable
+
+
+def test_k_beyond_the_band_on_a_scene_that_fits_asks_for_a_wider_band_once():
+    beyond = _fit(k=0.033, penumbra_px=12.0)
+    assert rules.wants_wider_band(beyond, GroupContext(3))
+    assert not rules.wants_wider_band(_fit(), GroupContext(3))  # k within the band
+    # Once widened, never again; a scene the model does not fit, or whose sun explains k, is not refitted.
+    assert not rules.wants_wider_band(beyond, GroupContext(3, band_widened_from=(0.03, 0.033)))
+    misfit = _fit(k=0.033, penumbra_px=12.0, photos=[_photo(f"{i}.jpg", misfit=3.0) for i in range(3)])
+    assert not rules.wants_wider_band(misfit, GroupContext(3))
+    explained = SunCheck(d_azimuth_deg=2.0, d_elevation_deg=0.5, misfit_before=1.0, misfit_after=0.9, k_after=0.01)
+    assert not rules.wants_wider_band(beyond, GroupContext(3, sun_check=explained))
+    # The refit's verdict names what happened, as a note.
+    widened = _fit(k=0.033, penumbra_px=12.0, range_k_max=0.06)
+    _, verdict = rules.judge_fit(widened, GroupContext(3, band_widened_from=(0.03, 0.0331)))
+    assert verdict.reliable and verdict.warnings == (
+        "k read 0.0331, beyond the band of k <= 0.03 the samples were planned for: refitted with the band "
+        "widened to 0.06",)

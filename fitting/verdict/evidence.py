@@ -174,13 +174,16 @@ class GroupContext:
     """What lies around one group's fit: the number of photos given to the group, the photos
     left out of it with their reasons, the level of detail, a diagnostic refit with the sun free
     (None: not run), and when the sun was fitted, how far it moved (degrees, azimuth plus elevation)
-    in the last of the refits that re-plan the samples around it (None: not fitted)."""
+    in the last of the refits that re-plan the samples around it (None: not fitted); when the fit was
+    repeated with a wider band of samples (``rules.wants_wider_band``), the band's k it was first
+    planned for and the k it read then (None: not repeated)."""
 
     photos_given: int = 0
     left_out: tuple[tuple[str, str], ...] = ()
     level_of_detail: LevelOfDetail = LevelOfDetail()
     sun_check: SunCheck | None = None
     sun_last_move_deg: float | None = None
+    band_widened_from: tuple[float, float] | None = None
 
 
 @dataclasses.dataclass(frozen=True)
