@@ -82,7 +82,7 @@ def run_sweep(settings: SweepSettings, fit: bool = True, progress=print) -> dict
         from .fit_baseline import bench_fit_baseline
         out["fit_baseline"] = bench_fit_baseline(settings.fit_photos, settings.fit_caps,
                                                  seeds=settings.fit_baseline_seeds,
-                                                 repeats=1)
+                                                 repeats=1 if settings.quick else 2)
     return out
 
 
