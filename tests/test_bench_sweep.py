@@ -174,8 +174,24 @@ def test_time_mitsuba_needs_is_interpolated_or_extrapolated():
     hit = time_to_reach(t, e, 0.008, floor=0.006)
     assert hit["ms"] == pytest.approx(160.0 * (1e-4 - 3.6e-5) / (6.4e-5 - 3.6e-5)) and "floor" in hit["how"]
     below = time_to_reach(t, e, 0.005, floor=0.006)
-    assert below["ms"] is None and below["how"].startswith("not reached")
+    assert below["ms"] is None and below["how"].startswith("not reached") and below["at_least_ms"] == 160.0
     assert time_to_reach(t, e, 0.02, floor=0.006)["how"] == "interpolated"  # measured points need no model
+
+
+def test_mitsuba_report_states_a_floor_and_a_lower_bound():
+    from benchmarks.speed_report import _mitsuba_section
+    case = {"spp": 64, "pixels": 32, "median_ms": 100.0, "noise_rms_band": 0.003, "floor_rms_band": 0.005,
+            "error": {"rms": 0.001, "rms_band": 0.0058, "max_abs": 0.1}}
+    reach = {"rms_band": {"target": 0.004, "softshadow_ms": 2.0, "mitsuba_ms": None, "ratio": None,
+                          "ratio_at_least": 50.0, "how": "not reached: below Mitsuba's floor 0.0050 against this truth"},
+             "noise_band": {"target": 0.004, "softshadow_ms": 2.0, "mitsuba_ms": 200.0, "ratio": 100.0,
+                            "how": "interpolated"}}
+    run = {"variant": "llvm_ad_rgb", "setup_label": "disk sun", "reference_noise_rms_band": 0.003,
+           "cases": [case], "time_to_reach": {"softshadow (wedge)": reach}}
+    text = "\n".join(_mitsuba_section({"dragon": run}))
+    assert "| dragon | softshadow (wedge) | penumbra band | 0.0040 | 2.0 | not reached |" in text and "| > 50 |" in text
+    assert "penumbra band, Mitsuba's noise only | 0.0040 | 2.0 | 200 | interpolated | 100 |" in text
+    assert "differ by 0.0040 (RMS, band)" in text  # sqrt(0.005^2 - 0.003^2)
 
 
 def test_mitsuba_setup_checks_its_options_and_names_itself():
