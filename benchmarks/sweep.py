@@ -18,6 +18,8 @@ samples per photo (same-model data against the Cramer-Rao bound, ``fit.bench_sam
 
 from __future__ import annotations
 
+import dataclasses
+
 from .meshes import decimated
 from .scenes import BenchScene, SweepSettings, build_scenes
 
@@ -32,10 +34,12 @@ def _mitsuba_setups() -> dict:
             "envmap": MitsubaSetup(sun="envmap", sampler="multijitter"),
             "sun share 0.8": MitsubaSetup(sampler="multijitter", sun_share=0.8),
             "efficient": EFFICIENT,
+            "efficient, ground at z = 0": dataclasses.replace(EFFICIENT, ground_at_ray_offset=False),
             "16 light samples": MitsubaSetup(sampler="multijitter", sun_share=0.9, emitter_samples=16)}
 
 
-MITSUBA_SETUPS = ("plain", "multijitter", "envmap", "sun share 0.8", "efficient", "16 light samples")
+MITSUBA_SETUPS = ("plain", "multijitter", "envmap", "sun share 0.8", "efficient", "efficient, ground at z = 0",
+                  "16 light samples")
 
 
 def run_sweep(settings: SweepSettings, fit: bool = True, progress=print) -> dict:
