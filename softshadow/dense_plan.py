@@ -40,7 +40,8 @@ class DensePlan:
     edges: the silhouette's ``EdgeSet``; hard (n,) 0/1: the hard shadow (attached shadow
     included) of every point; band (m,) int64: the points in a penumbra band, ascending;
     edge_id (m, K) int32, near_boundary (m,): their candidate edges and boundary flags
-    (``PointPlan``'s meanings).
+    (``PointPlan``'s meanings); edge_count: the silhouette's edges, the first of ``edges`` (the
+    rest is padding).
     """
 
     edges: EdgeSet
@@ -48,6 +49,7 @@ class DensePlan:
     band: np.ndarray
     edge_id: np.ndarray
     near_boundary: np.ndarray
+    edge_count: int
 
     def band_plan(self, size: int | None = None) -> PointPlan:
         """A ``PointPlan`` of the band points only, padded to ``size`` (default: a power-of-two
@@ -81,7 +83,7 @@ class DensePlan:
 def _empty(occ: Occluder, sil, hard: np.ndarray) -> DensePlan:
     """No point in a band: the silhouette's edges without a raster, and the hard shadow."""
     return DensePlan(_pack_edges(occ, sil), hard, np.zeros(0, np.int64), np.zeros((0, N_CANDIDATES), np.int32),
-                     np.zeros(0))
+                     np.zeros(0), len(sil.vertex_ids))
 
 
 def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k_max: float,
@@ -213,7 +215,8 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
         _candidates_kernel()(uv_p, sel, grid.origin_m[0], grid.origin_m[1], pixel_m, raster.edge_label, neighbours,
                              _CANDIDATE_OFFSETS, edge_id)
     near_b = near_b[:n_band]
-    return DensePlan(_pack_edges(occ, sil, raster=raster), hard, band, edge_id, near_b.astype(np.float64))
+    return DensePlan(_pack_edges(occ, sil, raster=raster), hard, band, edge_id, near_b.astype(np.float64),
+                     len(sil.vertex_ids))
 
 
 def _spacing(uv: np.ndarray, cell_m: float, lo: np.ndarray, hi: np.ndarray) -> float:
