@@ -37,7 +37,6 @@ from collections.abc import Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from .camera import GroundGrid, PinholeCamera
@@ -133,8 +132,9 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
         if pool is None:
             t = _lap(ms, "projectors", t, add=True)
         if sun is not None and n:
+            # The points go into the sun's view while the second thread still finds the silhouette.
             plan = plan_dense_points(model.occluder, pose, sun, vis.points, range_k_max, vis.normals,
-                                     rule=model.rule, posed=_result(posed), faces=on_object, scratch=scratch)
+                                     rule=model.rule, posed=posed, world=world, faces=on_object, scratch=scratch)
             t = _lap(ms, "sun_plan", t, add=pool is None)
         h, w = vis.shape
         image = scratch_array(scratch, "frame.image", (h * w, 3))
@@ -366,12 +366,12 @@ def band_alpha(plan: DensePlan, points: np.ndarray, model: SoftShadowModel, pose
     total = chunks[-1][0] + chunks[-1][1]
     s = plan.edge_count
     n_edges = _edge_capacity(s) if scratch is None else scratch.capacity("penumbra.edges", s, _edge_capacity)
-    edges = jax.tree_util.tree_map(jnp.asarray, _padded_edges(plan.edges, s, n_edges))
+    edges = jax.device_put(_padded_edges(plan.edges, s, n_edges))  # once for every chunk
     pts = scratch_array(scratch, "penumbra.points", (total, 3))
     pts[:m] = points[plan.band]
     pts[m:] = 0.0
     whole = plan.band_plan(total)
-    key = (n_edges, model.rule, model.profile, bool(model.corners), jnp.asarray(0.0).dtype)
+    key = (n_edges, model.rule, model.profile, bool(model.corners), jax.dtypes.canonicalize_dtype(np.float64))
     for size in PENUMBRA_CHUNKS:  # every chunk shape compiled at once: no compile when the band's size changes
         if (size, *key) not in _compiled:
             empty = PointPlan(edges, np.zeros((size, N_CANDIDATES), np.int32), np.zeros(size), np.zeros(size, bool),

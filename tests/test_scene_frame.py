@@ -412,3 +412,27 @@ def test_scratch_capacity_keeps_a_size_while_the_count_fits():
     assert scratch.capacity("f", 3, grow) == 6  # per name
     with pytest.raises(ValueError, match="less than"):
         scratch.capacity("g", 4, lambda n: n - 1)
+
+
+def test_dense_plan_while_the_posed_occluder_is_made_on_another_thread():
+    """The points projected into the sun's view while another thread poses the occluder: the
+    same plan; a posed occluder under another sun, or none of its vertices, is refused."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from softshadow.posed import PosedOccluder, posed_vertices
+    model = model_of("pillar")
+    pose = Pose(rotation_deg=(0.0, 0.0, 25.0))
+    cam, _ = _scene()
+    vis = visible_surfaces(cam, [_object_surface(model, pose, 0.8)], 0.8)
+    sun = Sun(250.0, 35.0)
+    world, rotation = posed_vertices(model.occluder, pose)
+    ref = plan_dense_points(model.occluder, pose, sun, vis.points, 0.02, vis.normals)
+    with ThreadPoolExecutor(1) as pool:
+        made = pool.submit(PosedOccluder.lit_by, model.occluder, world, rotation, sun.light_np)
+        _plans_equal(ref.point_plan(), plan_dense_points(model.occluder, pose, sun, vis.points, 0.02, vis.normals,
+                                                         posed=made, world=world).point_plan())
+        other = pool.submit(PosedOccluder.lit_by, model.occluder, world, rotation, Sun(120.0, 35.0).light_np)
+        with pytest.raises(ValueError, match="not the world vertices under this sun"):
+            plan_dense_points(model.occluder, pose, sun, vis.points, 0.02, vis.normals, posed=other, world=world)
+        with pytest.raises(ValueError, match="needs its world vertices"):
+            plan_dense_points(model.occluder, pose, sun, vis.points, 0.02, vis.normals, posed=made)
