@@ -44,7 +44,7 @@ from .dense_plan import DensePlan, plan_dense_points
 from .evaluate import plan_alpha_jit
 from .parallel_loops import parallel_numba
 from .params import Pose, Sun
-from .plan import N_CANDIDATES, EdgeSet, PointPlan, grid_bucket_size
+from .plan import EdgeSet, grid_bucket_size
 from .posed import PosedOccluder, posed_vertices
 from .projector import Projector, projector_shadow_map
 from .render import SoftShadowModel
@@ -370,20 +370,27 @@ def band_alpha(plan: DensePlan, points: np.ndarray, model: SoftShadowModel, pose
     pts = scratch_array(scratch, "penumbra.points", (total, 3))
     pts[:m] = points[plan.band]
     pts[m:] = 0.0
+    # The chunks' plans as the whole band's rows, made from the plan's leaves (as jit sees them):
+    # a PointPlan's constructor, with its checks, costs a third of a millisecond.
     whole = plan.band_plan(total)
+    treedef = jax.tree_util.tree_structure(whole)
+    edge_leaves = jax.tree_util.tree_leaves(edges)
+    rows = (whole.edge_id, whole.hard, whole.active, whole.near_boundary)
+
+    def chunk(a: int, size: int):
+        return jax.tree_util.tree_unflatten(treedef, [*edge_leaves, *(x[a:a + size] for x in rows)])
+
     key = (n_edges, model.rule, model.profile, bool(model.corners), jax.dtypes.canonicalize_dtype(np.float64))
     for size in PENUMBRA_CHUNKS:  # every chunk shape compiled at once: no compile when the band's size changes
         if (size, *key) not in _compiled:
-            empty = PointPlan(edges, np.zeros((size, N_CANDIDATES), np.int32), np.zeros(size), np.zeros(size, bool),
-                              np.zeros(size))
-            plan_alpha_jit(np.zeros((size, 3)), empty, pose, sun, range_k, model.rule, model.profile, None,
+            inactive = jax.tree_util.tree_unflatten(treedef, [*edge_leaves, *(np.zeros((size, *x.shape[1:]), x.dtype)
+                                                                               for x in rows)])
+            plan_alpha_jit(np.zeros((size, 3)), inactive, pose, sun, range_k, model.rule, model.profile, None,
                            model.corners).block_until_ready()
             _compiled.add((size, *key))
     # All chunks dispatched before any is waited for (JAX runs them while this thread goes on).
-    pending = [plan_alpha_jit(pts[a:a + size], PointPlan(edges, whole.edge_id[a:a + size], whole.hard[a:a + size],
-                                                         whole.active[a:a + size], whole.near_boundary[a:a + size]),
-                              pose, sun, range_k, model.rule, model.profile, None, model.corners)
-               for a, size in chunks]
+    pending = [plan_alpha_jit(pts[a:a + size], chunk(a, size), pose, sun, range_k, model.rule, model.profile, None,
+                              model.corners) for a, size in chunks]
     alpha = np.full(m, np.nan)  # a point no chunk wrote would show
     for (a, size), out in zip(chunks, pending):
         alpha[a:min(a + size, m)] = np.asarray(out)[:min(size, m - a)]
@@ -402,18 +409,19 @@ def _padded_edges(edges: EdgeSet, count: int, size: int) -> EdgeSet:
     if size == len(edges.outward_sign):
         return edges
 
-    def padded(a: np.ndarray | None, fill) -> np.ndarray | None:
-        if a is None:
-            return None
+    def padded(path, a: np.ndarray) -> np.ndarray:
         out = np.empty((size, *a.shape[1:]), a.dtype)
-        out[count:] = fill
+        out[count:] = _EDGE_PADDING[path[0].name]
         out[:count] = a[:count]
         return out
 
-    unit = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])  # padding edges are unit segments
-    return EdgeSet(padded(edges.vertices_local, unit), padded(edges.outward_sign, 1.0),
-                   padded(edges.paper_normal_local, np.array([0.0, 0.0, 1.0])), padded(edges.neighbours, -1),
-                   padded(edges.jump, 0.0))
+    # By field (tree_map, not EdgeSet's constructor and its checks: see band_alpha).
+    return jax.tree_util.tree_map_with_path(padded, edges)
+
+
+#: What ``plan._pack_edges`` puts in the padding edges' fields (unit segments).
+_EDGE_PADDING = {"vertices_local": np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]), "outward_sign": 1.0,
+                 "paper_normal_local": np.array([0.0, 0.0, 1.0]), "neighbours": -1, "jump": 0.0}
 
 
 def _shade(shading: tuple, light, background, image: np.ndarray, band: np.ndarray, alpha_band: np.ndarray) -> None:

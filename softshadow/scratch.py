@@ -14,6 +14,7 @@ place is seen), other objects by identity, numbers and strings by value.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import Any
 
@@ -34,8 +35,8 @@ class Scratch:
     def array(self, name: str, shape, dtype=np.float64) -> np.ndarray:
         """An uninitialised array of ``shape`` and ``dtype``: a view of the buffer kept as ``name``."""
         dtype = np.dtype(dtype)
-        shape = tuple(int(s) for s in np.atleast_1d(shape))
-        size = int(np.prod(shape))
+        shape = (int(shape),) if np.ndim(shape) == 0 else tuple(int(s) for s in shape)
+        size = math.prod(shape)  # not np.prod: this runs some twenty times a frame
         buf = self._buffers.get(name)
         if buf is None or buf.dtype != dtype or buf.size < size:
             buf = np.empty(max(size, 1), dtype)
