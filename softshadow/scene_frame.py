@@ -53,7 +53,7 @@ from .scratch import Scratch, scratch_array
 from .sun import check_sun_above_horizon
 from .visibility import Surface, VisibleSurfaces, visible_surfaces
 
-__all__ = ["FRAME_STEPS", "FrameRenderer", "SceneFrame", "band_alpha", "render_frame"]
+__all__ = ["FRAME_STEPS", "FrameRenderer", "SceneFrame", "band_alpha", "render_frame", "wait_for_penumbra_compiles"]
 
 #: The steps ``SceneFrame.milliseconds`` times (wall time; with a second thread, "shading" is the
 #: wait for its light and shading (made while this one evaluates the penumbra, "sun_band") and the
@@ -383,6 +383,14 @@ def band_alpha(plan: DensePlan, points: np.ndarray, model: SoftShadowModel, pose
                 lambda n, p: plan_alpha_jit(np.zeros((n, 3)), p, pose, sun, range_k, model.rule, model.profile, None,
                                             model.corners).block_until_ready(), other, inactive)
     return np.asarray(alpha, np.float64)[:m]
+
+
+def wait_for_penumbra_compiles() -> None:
+    """Wait until the penumbra's sizes being compiled ahead (``band_alpha``) are compiled: a
+    benchmark's warm-up, so that no compile shares the machine with the timed frames."""
+    for making in list(_compiles.values()):
+        if isinstance(making, Future):
+            making.result()
 
 
 def _bucket_below(size: int) -> int:
