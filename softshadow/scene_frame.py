@@ -344,9 +344,10 @@ def band_alpha(plan: DensePlan, points: np.ndarray, model: SoftShadowModel, pose
     """alpha (m,) at the plan's band points: the model's penumbra formula (``plan_alpha``, JAX),
     in one call on the band padded to one of four sizes per octave (``grid_bucket_size``).
 
-    A new size compiles (a frame stalled by one to two seconds), so the sizes next to this
-    frame's are compiled ahead on another thread: a band that grows or shrinks as the sun turns
-    finds its next size ready. The edge arrays are padded to a quarter above their count
+    A new size compiles (a frame stalled by one to two seconds), so with scratch (a stream of
+    frames) the sizes next to this frame's are compiled ahead on another thread: a band that
+    grows or shrinks as the sun turns finds its next size ready (while a size compiles, it
+    shares the machine with the frames). The edge arrays are padded to a quarter above their count
     (``_edge_capacity``), and with scratch kept at that size while the count fits, so that the
     silhouette's few changing edges compile nothing either. Each point's alpha depends on that
     point alone, the same whatever the padding.
@@ -369,12 +370,20 @@ def band_alpha(plan: DensePlan, points: np.ndarray, model: SoftShadowModel, pose
     band_plan = jax.tree_util.tree_unflatten(treedef, [*edge_leaves, whole.edge_id, whole.hard, whole.active,
                                                        whole.near_boundary])
     key = (n_edges, model.rule, model.profile, bool(model.corners), jax.dtypes.canonicalize_dtype(np.float64))
+    # A stream of frames (scratch) has the sizes next to this one compiled ahead: two on each side
+    # at its first frame, then one, so that a band moving by one size compiles nothing.
+    ahead = 0 if scratch is None else 1 if (size, *key) in _compiles else 2
     making = _compiles.get((size, *key))
     if isinstance(making, Future):
         making.result()  # being compiled on the other thread: wait rather than compile it twice
     alpha = plan_alpha_jit(pts, band_plan, pose, sun, range_k, model.rule, model.profile, None, model.corners)
     _compiles[(size, *key)] = None
-    for other in (_bucket_below(size), grid_bucket_size(size + 1)):
+    below = above = size
+    others = []
+    for _ in range(ahead):
+        below, above = _bucket_below(below), grid_bucket_size(above + 1)
+        others += [above, below]
+    for other in others:
         if other and (other, *key) not in _compiles:
             rows = [np.zeros((other, *x.shape[1:]), x.dtype) for x in
                     (whole.edge_id, whole.hard, whole.active, whole.near_boundary)]
