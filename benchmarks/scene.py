@@ -6,9 +6,8 @@ per pixel, lit by the sun (its soft shadow: the renderer's expanded shadow volum
 one slide projector (the paper's lattice slide, 15 cycles, amplitude 1, its own shadow map)
 and an ambient term (``softshadow.MaskingScene``). Each level is drawn by ``FrameRenderer``
 (``render_frame``: forward only, the image ``render_scene`` draws) for ``frames`` frames after
-``warmup`` frames (and the penumbra's next band sizes compiled, ``band_alpha``), the sun moving
-by 0.05 degrees of azimuth every frame: every frame makes the sun's shadow map, plan and
-penumbra anew. The camera, the object and the projector stay, so the
+``warmup`` frames, the sun moving by 0.05 degrees of azimuth every frame: every frame makes the
+sun's shadow map, plan and penumbra anew. The camera, the object and the projector stay, so the
 renderer keeps the projector's shadow map, what each pixel sees and the projector's light at
 every pixel (it keeps each while its inputs stay); the same frames with the projector moving by
 1 mm every frame (its map and light made anew each time) and with the camera moving by 1 mm
@@ -42,7 +41,6 @@ SCENE_LEVELS = (20000, 10000, 5000, 2500, 1000, 300)
 def bench_scene(quick: bool = False, progress=None) -> dict:
     from softshadow import FrameRenderer, MaskingScene, Pose, SoftShadowModel, lod_series, one_blas_thread, \
         render_scene
-    from softshadow.internal import wait_for_penumbra_compiles
 
     from .environment import load_average
     from .meshes import mit_dragon
@@ -75,9 +73,6 @@ def bench_scene(quick: bool = False, progress=None) -> dict:
                         t, c = time.perf_counter(), time.process_time()
                         frame = renderer.render(view, model, Pose(), lights, sun, [projector],
                                                 object_albedo=scene.albedo, ground_albedo=scene.albedo)
-                        if i == warmup - 1:
-                            # The penumbra's next band sizes, compiled ahead on another thread.
-                            wait_for_penumbra_compiles()
                         if i >= warmup:
                             times.append(1e3 * (time.perf_counter() - t))
                             cpu.append(1e3 * (time.process_time() - c))

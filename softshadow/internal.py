@@ -24,7 +24,7 @@ __getattr__, __dir__, __all__ = _lazy.attach("softshadow", submod_attrs={
     "projector": ["FALLOFFS", "ProjectorShadowMap", "projector_shadow_map"],
     "raster": ["project_to_ground", "winding_fill"],
     "render": ["object_mask"],
-    "scene_frame": ["FRAME_STEPS", "band_alpha", "wait_for_penumbra_compiles"],
+    "scene_frame": ["FRAME_STEPS", "band_alpha"],
     "scene_render": ["projector_light"],
     "scratch": ["Scratch"],
     "shadowmap": ["BIAS_PX", "LightFrame", "ShadowMap", "depth_bias", "faces_away", "rasterise_depth",

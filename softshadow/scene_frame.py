@@ -53,7 +53,7 @@ from .scratch import Scratch, scratch_array
 from .sun import check_sun_above_horizon
 from .visibility import Surface, VisibleSurfaces, visible_surfaces
 
-__all__ = ["FRAME_STEPS", "FrameRenderer", "SceneFrame", "band_alpha", "render_frame", "wait_for_penumbra_compiles"]
+__all__ = ["FRAME_STEPS", "PENUMBRA_CHUNKS", "FrameRenderer", "SceneFrame", "band_alpha", "render_frame"]
 
 #: The steps ``SceneFrame.milliseconds`` times (wall time; with a second thread, "shading" is the
 #: wait for its light and shading (made while this one evaluates the penumbra, "sun_band") and the
@@ -334,87 +334,67 @@ def _result(value):
     return value.result() if isinstance(value, Future) else value
 
 
-#: The penumbra's shapes compiled, or being compiled on another thread (a Future), by
-#: (points, edges, rule, profile, corners, dtype).
-_compiles: dict = {}
+#: The penumbra's chunk sizes (points): the band is evaluated in chunks of the largest and one
+#: padded chunk of the smallest size that holds the rest, so the compiled function sees these
+#: shapes only (per size of the edge arrays). A band that grows or shrinks as the sun turns then
+#: compiles nothing: a compile stalls a frame for about a second. Each call also pays for every
+#: edge (their pose), hence few large chunks.
+PENUMBRA_CHUNKS = (1024, 4096)
+
+#: The shapes ``band_alpha`` has compiled: (edges, chunk, rule, profile, corners, dtype).
+_compiled: set = set()
 
 
 def band_alpha(plan: DensePlan, points: np.ndarray, model: SoftShadowModel, pose: Pose, sun: Sun,
                range_k: float, *, scratch: Scratch | None = None) -> np.ndarray:
-    """alpha (m,) at the plan's band points: the model's penumbra formula (``plan_alpha``, JAX),
-    in one call on the band padded to one of four sizes per octave (``grid_bucket_size``).
+    """alpha (m,) at the plan's band points: the model's penumbra formula (``plan_alpha``, JAX).
 
-    A new size compiles (a frame stalled by one to two seconds), so with scratch (a stream of
-    frames) the sizes next to this frame's are compiled ahead on another thread: a band that
-    grows or shrinks as the sun turns finds its next size ready (while a size compiles, it
-    shares the machine with the frames). The edge arrays are padded to a quarter above their count
-    (``_edge_capacity``), and with scratch kept at that size while the count fits, so that the
-    silhouette's few changing edges compile nothing either. Each point's alpha depends on that
-    point alone, the same whatever the padding.
+    The band is evaluated in chunks of fixed sizes (``PENUMBRA_CHUNKS``), its edge arrays padded
+    to a quarter above their count (``_edge_capacity``), and with scratch, kept at that size while
+    the count fits: after the first frame, a frame compiles nothing whatever its band's size
+    (each point's alpha depends on that point alone), nor while the silhouette's edges stay
+    within the first frame's capacity. Every chunk size is compiled when the first is.
     """
     m = len(plan.band)
     if not m:
         return np.zeros(0)
-    size = grid_bucket_size(m)
+    small, large = PENUMBRA_CHUNKS
+    chunks = [(a, large) for a in range(0, m - m % large, large)]
+    rest = m % large
+    if rest:
+        chunks.append((m - rest, small if rest <= small else large))
+    total = chunks[-1][0] + chunks[-1][1]
     s = plan.edge_count
     n_edges = _edge_capacity(s) if scratch is None else scratch.capacity("penumbra.edges", s, _edge_capacity)
-    edges = _padded_edges(plan.edges, s, n_edges)
-    pts = scratch_array(scratch, "penumbra.points", (size, 3))
+    edges = jax.device_put(_padded_edges(plan.edges, s, n_edges))  # once for every chunk
+    pts = scratch_array(scratch, "penumbra.points", (total, 3))
     pts[:m] = points[plan.band]
     pts[m:] = 0.0
-    # The plan made from its leaves (as jit sees them): a PointPlan's constructor, with its
-    # checks, costs a third of a millisecond.
-    whole = plan.band_plan(size)
+    # The chunks' plans as the whole band's rows, made from the plan's leaves (as jit sees them):
+    # a PointPlan's constructor, with its checks, costs a third of a millisecond.
+    whole = plan.band_plan(total)
     treedef = jax.tree_util.tree_structure(whole)
     edge_leaves = jax.tree_util.tree_leaves(edges)
-    band_plan = jax.tree_util.tree_unflatten(treedef, [*edge_leaves, whole.edge_id, whole.hard, whole.active,
-                                                       whole.near_boundary])
+    rows = (whole.edge_id, whole.hard, whole.active, whole.near_boundary)
+
+    def chunk(a: int, size: int):
+        return jax.tree_util.tree_unflatten(treedef, [*edge_leaves, *(x[a:a + size] for x in rows)])
+
     key = (n_edges, model.rule, model.profile, bool(model.corners), jax.dtypes.canonicalize_dtype(np.float64))
-    # A stream of frames (scratch) has the sizes next to this one compiled ahead: two on each side
-    # at its first frame, then one, so that a band moving by one size compiles nothing.
-    ahead = 0 if scratch is None else 1 if (size, *key) in _compiles else 2
-    making = _compiles.get((size, *key))
-    if isinstance(making, Future):
-        making.result()  # being compiled on the other thread: wait rather than compile it twice
-    alpha = plan_alpha_jit(pts, band_plan, pose, sun, range_k, model.rule, model.profile, None, model.corners)
-    _compiles[(size, *key)] = None
-    below = above = size
-    others = []
-    for _ in range(ahead):
-        below, above = _bucket_below(below), grid_bucket_size(above + 1)
-        others += [above, below]
-    for other in others:
-        if other and (other, *key) not in _compiles:
-            rows = [np.zeros((other, *x.shape[1:]), x.dtype) for x in
-                    (whole.edge_id, whole.hard, whole.active, whole.near_boundary)]
-            inactive = jax.tree_util.tree_unflatten(treedef, [*edge_leaves, *rows])
-            _compiles[(other, *key)] = _compiler().submit(
-                lambda n, p: plan_alpha_jit(np.zeros((n, 3)), p, pose, sun, range_k, model.rule, model.profile, None,
-                                            model.corners).block_until_ready(), other, inactive)
-    return np.asarray(alpha, np.float64)[:m]
-
-
-def wait_for_penumbra_compiles() -> None:
-    """Wait until the penumbra's sizes being compiled ahead (``band_alpha``) are compiled: a
-    benchmark's warm-up, so that no compile shares the machine with the timed frames."""
-    for making in list(_compiles.values()):
-        if isinstance(making, Future):
-            making.result()
-
-
-def _bucket_below(size: int) -> int:
-    """The largest ``grid_bucket_size`` below ``size`` (0: none)."""
-    n = size - 1
-    if n < 256:
-        return 0
-    step = 1 << (int(np.floor(np.log2(n))) - 2)
-    return n // step * step
-
-
-@functools.cache
-def _compiler() -> ThreadPoolExecutor:
-    """The thread that compiles the penumbra's next sizes ahead of need."""
-    return ThreadPoolExecutor(1, thread_name_prefix="softshadow-penumbra-compile")
+    for size in PENUMBRA_CHUNKS:  # every chunk shape compiled at once: no compile when the band's size changes
+        if (size, *key) not in _compiled:
+            inactive = jax.tree_util.tree_unflatten(treedef, [*edge_leaves, *(np.zeros((size, *x.shape[1:]), x.dtype)
+                                                                               for x in rows)])
+            plan_alpha_jit(np.zeros((size, 3)), inactive, pose, sun, range_k, model.rule, model.profile, None,
+                           model.corners).block_until_ready()
+            _compiled.add((size, *key))
+    # All chunks dispatched before any is waited for (JAX runs them while this thread goes on).
+    pending = [plan_alpha_jit(pts[a:a + size], chunk(a, size), pose, sun, range_k, model.rule, model.profile, None,
+                              model.corners) for a, size in chunks]
+    alpha = np.full(m, np.nan)  # a point no chunk wrote would show
+    for (a, size), out in zip(chunks, pending):
+        alpha[a:min(a + size, m)] = np.asarray(out)[:min(size, m - a)]
+    return alpha
 
 
 def _edge_capacity(count: int) -> int:
