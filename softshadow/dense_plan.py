@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from concurrent.futures import Future
 
 import numpy as np
 
@@ -40,7 +41,8 @@ class DensePlan:
     edges: the silhouette's ``EdgeSet``; hard (n,) 0/1: the hard shadow (attached shadow
     included) of every point; band (m,) int64: the points in a penumbra band, ascending;
     edge_id (m, K) int32, near_boundary (m,): their candidate edges and boundary flags
-    (``PointPlan``'s meanings).
+    (``PointPlan``'s meanings); edge_count: the silhouette's edges, the first of ``edges`` (the
+    rest is padding).
     """
 
     edges: EdgeSet
@@ -48,6 +50,7 @@ class DensePlan:
     band: np.ndarray
     edge_id: np.ndarray
     near_boundary: np.ndarray
+    edge_count: int
 
     def band_plan(self, size: int | None = None) -> PointPlan:
         """A ``PointPlan`` of the band points only, padded to ``size`` (default: a power-of-two
@@ -81,48 +84,61 @@ class DensePlan:
 def _empty(occ: Occluder, sil, hard: np.ndarray) -> DensePlan:
     """No point in a band: the silhouette's edges without a raster, and the hard shadow."""
     return DensePlan(_pack_edges(occ, sil), hard, np.zeros(0, np.int64), np.zeros((0, N_CANDIDATES), np.int32),
-                     np.zeros(0))
+                     np.zeros(0), len(sil.vertex_ids))
 
 
 def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k_max: float,
                       normals: np.ndarray | None = None, *, rule: str = "edge", margin_px: float = 2.5,
-                      posed: PosedOccluder | None = None, faces: np.ndarray | None = None,
-                      scratch: Scratch | None = None) -> DensePlan:
+                      posed: PosedOccluder | Future | None = None, world: np.ndarray | None = None,
+                      faces: np.ndarray | None = None, scratch: Scratch | None = None) -> DensePlan:
     """``plan_points(occ, pose, sun, points, range_k_max, rule, normals=normals, backend="light",
     margin_px=margin_px)``, compact (``DensePlan``) and faster for many points.
 
     points (N, 3) world metres; normals (N, 3) unit or None; posed: the occluder already posed
-    under this sun (``PosedOccluder.make(occ, pose, sun)``), to share it with other steps;
+    under this sun (``PosedOccluder.make(occ, pose, sun)``), to share it with other steps, or
+    the Future of it (made on another thread) with world, its vertices (V, 3): the points are
+    projected into the sun's view while it is made;
     faces (N,) int, optional: the occluder's face each point lies on (-1: not on it), as a
     camera's z-buffer knows it. A point whose own face is the shadow map's nearest face at its
     pixel is lit without the lookup (the lookup would find that face and the point on it).
     scratch: keep the per-point arrays in these buffers (``softshadow.scratch``; the plan's
     ``hard`` is then overwritten by the next call with the same scratch).
     """
-    posed = PosedOccluder.make(occ, pose, sun) if posed is None else posed
-    sil, light, world = posed.silhouette, posed.light, posed.world
+    if posed is None:
+        posed = PosedOccluder.make(occ, pose, sun)
+    if isinstance(posed, Future):
+        if world is None:
+            raise ValueError("plan_dense_points: a Future of the posed occluder needs its world vertices")
+        light = np.asarray(sun.light_np, np.float64)
+    else:
+        world, light = posed.world, posed.light
     points = np.ascontiguousarray(points, np.float64).reshape(-1, 3)
     n = len(points)
     if normals is not None:
         normals = np.ascontiguousarray(normals, np.float64).reshape(-1, 3)
         if len(normals) != n:
             raise ValueError(f"{len(normals)} normals for {n} receiver points")
-    if not (n and len(sil.vertex_ids)):
-        attached = np.zeros(n, bool) if normals is None else faces_away(normals, light)
-        return _empty(occ, sil, attached.astype(np.float64))
     # Per column: (V, 3).min(0) is several times slower.
     lo_w = np.array([world[:, j].min() for j in range(3)])
     hi_w = np.array([world[:, j].max() for j in range(3)])
     frame = LightFrame.of_light(light, 0.5 * (lo_w + hi_w))
-    uv_v, d_v = frame.project(world)
     # Attached shadow (``faces_away``), light-space positions (``LightFrame.project``) and the
-    # deepest point, in one pass.
+    # deepest point, in one pass (needing neither the silhouette nor the light-space vertices).
     uv_all = scratch_array(scratch, "sun.uv", (n, 2))
     d_all = scratch_array(scratch, "sun.depth", n)
     hard = scratch_array(scratch, "sun.hard", n)
     basis = np.stack([frame.origin, frame.e1, frame.e2, frame.light])
     d_max = _project_kernel()(points, np.zeros((0, 3)) if normals is None else normals, basis, -FACING_TOL,
-                              uv_all, d_all, hard)
+                              uv_all, d_all, hard) if n else -np.inf
+    if isinstance(posed, Future):
+        posed = posed.result()
+        if not ((posed.world is world or np.array_equal(posed.world, world)) and np.array_equal(posed.light, light)):
+            raise ValueError("plan_dense_points: the posed occluder is not the world vertices under this sun")
+    sil = posed.silhouette
+    if not (n and len(sil.vertex_ids)):
+        attached = np.zeros(n, bool) if normals is None else faces_away(normals, light)
+        return _empty(occ, sil, attached.astype(np.float64))
+    uv_v, d_v = frame.project(world)
     ids = sil.vertex_ids
     edge_depth = np.minimum(d_v[ids[:, 0]], d_v[ids[:, 1]])
     # The region the shadow can reach, as plan_points takes it (its comments give the reasons).
@@ -213,7 +229,8 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
         _candidates_kernel()(uv_p, sel, grid.origin_m[0], grid.origin_m[1], pixel_m, raster.edge_label, neighbours,
                              _CANDIDATE_OFFSETS, edge_id)
     near_b = near_b[:n_band]
-    return DensePlan(_pack_edges(occ, sil, raster=raster), hard, band, edge_id, near_b.astype(np.float64))
+    return DensePlan(_pack_edges(occ, sil, raster=raster), hard, band, edge_id, near_b.astype(np.float64),
+                     len(sil.vertex_ids))
 
 
 def _spacing(uv: np.ndarray, cell_m: float, lo: np.ndarray, hi: np.ndarray) -> float:

@@ -36,6 +36,7 @@ import time
 from collections.abc import Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 
+import jax
 import numpy as np
 
 from .camera import GroundGrid, PinholeCamera
@@ -43,7 +44,7 @@ from .dense_plan import DensePlan, plan_dense_points
 from .evaluate import plan_alpha_jit
 from .parallel_loops import parallel_numba
 from .params import Pose, Sun
-from .plan import grid_bucket_size
+from .plan import EdgeSet, grid_bucket_size
 from .posed import PosedOccluder, posed_vertices
 from .projector import Projector, projector_shadow_map
 from .render import SoftShadowModel
@@ -52,7 +53,7 @@ from .scratch import Scratch, scratch_array
 from .sun import check_sun_above_horizon
 from .visibility import Surface, VisibleSurfaces, visible_surfaces
 
-__all__ = ["FRAME_STEPS", "FrameRenderer", "SceneFrame", "band_alpha", "render_frame"]
+__all__ = ["FRAME_STEPS", "PENUMBRA_CHUNKS", "FrameRenderer", "SceneFrame", "band_alpha", "render_frame"]
 
 #: The steps ``SceneFrame.milliseconds`` times (wall time; with a second thread, "shading" is the
 #: wait for its light and shading (made while this one evaluates the penumbra, "sun_band") and the
@@ -131,8 +132,9 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
         if pool is None:
             t = _lap(ms, "projectors", t, add=True)
         if sun is not None and n:
+            # The points go into the sun's view while the second thread still finds the silhouette.
             plan = plan_dense_points(model.occluder, pose, sun, vis.points, range_k_max, vis.normals,
-                                     rule=model.rule, posed=_result(posed), faces=on_object, scratch=scratch)
+                                     rule=model.rule, posed=posed, world=world, faces=on_object, scratch=scratch)
             t = _lap(ms, "sun_plan", t, add=pool is None)
         h, w = vis.shape
         image = scratch_array(scratch, "frame.image", (h * w, 3))
@@ -145,7 +147,7 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
             # The second thread shades every pixel with its hard shadow while this one evaluates
             # the penumbra (JAX); the band's pixels are shaded again with it after.
             shaded = pool.submit(_shade, shading, light, background, image, band[:0], np.zeros(0))
-            alpha_band = band_alpha(plan, vis.points, model, pose, sun, k)
+            alpha_band = band_alpha(plan, vis.points, model, pose, sun, k, scratch=scratch)
             t = _lap(ms, "sun_band", t)
             shaded.result()
             pixel, normals, surface, albedos, ambient, sun_irradiance, sun_dir, _ = shading
@@ -153,7 +155,7 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
                                alpha_band, image)
         else:
             if plan is not None:
-                alpha_band = band_alpha(plan, vis.points, model, pose, sun, k)
+                alpha_band = band_alpha(plan, vis.points, model, pose, sun, k, scratch=scratch)
                 t = _lap(ms, "sun_band", t)
             _shade(shading, light, background, image, band, alpha_band)
     finally:
@@ -332,19 +334,94 @@ def _result(value):
     return value.result() if isinstance(value, Future) else value
 
 
+#: The penumbra's chunk sizes (points): the band is evaluated in chunks of the largest and one
+#: padded chunk of the smallest size that holds the rest, so the compiled function sees these
+#: shapes only (per size of the edge arrays). A band that grows or shrinks as the sun turns then
+#: compiles nothing: a compile stalls a frame for about a second. Each call also pays for every
+#: edge (their pose), hence few large chunks.
+PENUMBRA_CHUNKS = (1024, 4096)
+
+#: The shapes ``band_alpha`` has compiled: (edges, chunk, rule, profile, corners, dtype).
+_compiled: set = set()
+
+
 def band_alpha(plan: DensePlan, points: np.ndarray, model: SoftShadowModel, pose: Pose, sun: Sun,
-               range_k: float) -> np.ndarray:
-    """alpha (m,) at the plan's band points: the model's penumbra formula (``plan_alpha``, JAX),
-    on the band padded to one of a few sizes per octave so that it compiles once per size."""
+               range_k: float, *, scratch: Scratch | None = None) -> np.ndarray:
+    """alpha (m,) at the plan's band points: the model's penumbra formula (``plan_alpha``, JAX).
+
+    The band is evaluated in chunks of fixed sizes (``PENUMBRA_CHUNKS``), its edge arrays padded
+    to a quarter above their count (``_edge_capacity``), and with scratch, kept at that size while
+    the count fits: after the first frame, a frame compiles nothing whatever its band's size
+    (each point's alpha depends on that point alone), nor while the silhouette's edges stay
+    within the first frame's capacity. Every chunk size is compiled when the first is.
+    """
     m = len(plan.band)
     if not m:
         return np.zeros(0)
-    size = grid_bucket_size(m)
-    pts = np.zeros((size, 3))
+    small, large = PENUMBRA_CHUNKS
+    chunks = [(a, large) for a in range(0, m - m % large, large)]
+    rest = m % large
+    if rest:
+        chunks.append((m - rest, small if rest <= small else large))
+    total = chunks[-1][0] + chunks[-1][1]
+    s = plan.edge_count
+    n_edges = _edge_capacity(s) if scratch is None else scratch.capacity("penumbra.edges", s, _edge_capacity)
+    edges = jax.device_put(_padded_edges(plan.edges, s, n_edges))  # once for every chunk
+    pts = scratch_array(scratch, "penumbra.points", (total, 3))
     pts[:m] = points[plan.band]
-    alpha = plan_alpha_jit(pts, plan.band_plan(size), pose, sun, range_k, model.rule, model.profile, None,
-                           model.corners)
-    return np.asarray(alpha, np.float64)[:m]
+    pts[m:] = 0.0
+    # The chunks' plans as the whole band's rows, made from the plan's leaves (as jit sees them):
+    # a PointPlan's constructor, with its checks, costs a third of a millisecond.
+    whole = plan.band_plan(total)
+    treedef = jax.tree_util.tree_structure(whole)
+    edge_leaves = jax.tree_util.tree_leaves(edges)
+    rows = (whole.edge_id, whole.hard, whole.active, whole.near_boundary)
+
+    def chunk(a: int, size: int):
+        return jax.tree_util.tree_unflatten(treedef, [*edge_leaves, *(x[a:a + size] for x in rows)])
+
+    key = (n_edges, model.rule, model.profile, bool(model.corners), jax.dtypes.canonicalize_dtype(np.float64))
+    for size in PENUMBRA_CHUNKS:  # every chunk shape compiled at once: no compile when the band's size changes
+        if (size, *key) not in _compiled:
+            inactive = jax.tree_util.tree_unflatten(treedef, [*edge_leaves, *(np.zeros((size, *x.shape[1:]), x.dtype)
+                                                                               for x in rows)])
+            plan_alpha_jit(np.zeros((size, 3)), inactive, pose, sun, range_k, model.rule, model.profile, None,
+                           model.corners).block_until_ready()
+            _compiled.add((size, *key))
+    # All chunks dispatched before any is waited for (JAX runs them while this thread goes on).
+    pending = [plan_alpha_jit(pts[a:a + size], chunk(a, size), pose, sun, range_k, model.rule, model.profile, None,
+                              model.corners) for a, size in chunks]
+    alpha = np.full(m, np.nan)  # a point no chunk wrote would show
+    for (a, size), out in zip(chunks, pending):
+        alpha[a:min(a + size, m)] = np.asarray(out)[:min(size, m - a)]
+    return alpha
+
+
+def _edge_capacity(count: int) -> int:
+    """The edges the penumbra's arrays hold for ``count`` silhouette edges: a quarter more, on one
+    of four sizes per octave (a sun that turns changes the count by a few percent)."""
+    return grid_bucket_size(count + count // 4 + 1, 64)
+
+
+def _padded_edges(edges: EdgeSet, count: int, size: int) -> EdgeSet:
+    """The first ``count`` edges (the real ones) padded to ``size`` (>= count), as
+    ``plan._pack_edges`` pads them: padding edges are never referenced."""
+    if size == len(edges.outward_sign):
+        return edges
+
+    def padded(path, a: np.ndarray) -> np.ndarray:
+        out = np.empty((size, *a.shape[1:]), a.dtype)
+        out[count:] = _EDGE_PADDING[path[0].name]
+        out[:count] = a[:count]
+        return out
+
+    # By field (tree_map, not EdgeSet's constructor and its checks: see band_alpha).
+    return jax.tree_util.tree_map_with_path(padded, edges)
+
+
+#: What ``plan._pack_edges`` puts in the padding edges' fields (unit segments).
+_EDGE_PADDING = {"vertices_local": np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]), "outward_sign": 1.0,
+                 "paper_normal_local": np.array([0.0, 0.0, 1.0]), "neighbours": -1, "jump": 0.0}
 
 
 def _shade(shading: tuple, light, background, image: np.ndarray, band: np.ndarray, alpha_band: np.ndarray) -> None:

@@ -14,6 +14,7 @@ place is seen), other objects by identity, numbers and strings by value.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import Any
 
@@ -29,17 +30,30 @@ class Scratch:
     def __init__(self):
         self._buffers: dict[str, np.ndarray] = {}
         self._memo: dict[str, tuple[tuple, Any]] = {}
+        self._sizes: dict[str, int] = {}
 
     def array(self, name: str, shape, dtype=np.float64) -> np.ndarray:
         """An uninitialised array of ``shape`` and ``dtype``: a view of the buffer kept as ``name``."""
         dtype = np.dtype(dtype)
-        shape = tuple(int(s) for s in np.atleast_1d(shape))
-        size = int(np.prod(shape))
+        shape = (int(shape),) if np.ndim(shape) == 0 else tuple(int(s) for s in shape)
+        size = math.prod(shape)  # not np.prod: this runs some twenty times a frame
         buf = self._buffers.get(name)
         if buf is None or buf.dtype != dtype or buf.size < size:
             buf = np.empty(max(size, 1), dtype)
             self._buffers[name] = buf
         return buf[:size].reshape(shape)
+
+    def capacity(self, name: str, n: int, grow: Callable[[int], int]) -> int:
+        """A size kept under ``name`` that holds ``n``: the kept one while n fits in it, else
+        ``grow(n)`` (>= n), kept from then on. Arrays padded to it keep their shape while the
+        count moves below it."""
+        kept = self._sizes.get(name)
+        if kept is None or n > kept:
+            kept = int(grow(n))
+            if kept < n:
+                raise ValueError(f"capacity {name!r}: grow({n}) gave {kept}, less than {n}")
+            self._sizes[name] = kept
+        return kept
 
     def memo(self, name: str, inputs: tuple, make: Callable[[], Any]) -> Any:
         """``make()``, or the result kept under ``name`` when it was made from the same ``inputs``

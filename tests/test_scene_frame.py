@@ -15,6 +15,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 
 import jax
@@ -353,3 +354,85 @@ def test_zbuffer_on_two_threads_equals_one(dtype):
     assert (one[1] >= 0).sum() > 2500 and (one[1] >= len(faces) // 2).sum() > 500, "both halves must win pixels"
     np.testing.assert_array_equal(one[0], two[0])
     np.testing.assert_array_equal(one[1], two[1])
+
+
+@pytest.mark.parametrize("m", [1, 8, 9, 32, 33, 72, 75])
+def test_band_alpha_in_chunks_equals_one_evaluation(monkeypatch, m):
+    """The penumbra evaluated chunk by chunk (full chunks, then a small or a large padded one) is
+    the formula evaluated over the whole band at once, point for point."""
+    from softshadow import scene_frame
+    from softshadow.evaluate import plan_alpha_jit
+    model = model_of("ball")
+    cam, _ = _scene()
+    sun = Sun(230.0, 40.0)
+    vis = visible_surfaces(cam, [_object_surface(model, Pose(), 0.8)], 0.8)
+    plan = plan_dense_points(model.occluder, Pose(), sun, vis.points, 0.02, vis.normals)
+    assert len(plan.band) >= 75
+    whole = plan.band_plan()
+    pts = np.zeros((len(whole.hard), 3))
+    pts[:len(plan.band)] = vis.points[plan.band]
+    ref = np.asarray(plan_alpha_jit(pts, whole, Pose(), sun, 0.02, model.rule, model.profile, None, model.corners))
+    part = dataclasses.replace(plan, band=plan.band[:m], edge_id=plan.edge_id[:m], near_boundary=plan.near_boundary[:m])
+    monkeypatch.setattr(scene_frame, "PENUMBRA_CHUNKS", (8, 32))
+    got = scene_frame.band_alpha(part, vis.points, model, Pose(), sun, 0.02, scratch=ss.internal.Scratch())
+    assert got.shape == (m,)
+    np.testing.assert_allclose(got, ref[:m], rtol=0, atol=1e-12)
+
+
+def test_a_frame_compiles_no_penumbra_as_its_band_changes_size(monkeypatch):
+    """As the sun moves, the band's size and the silhouette's edges change: after the first
+    frame no frame compiles the penumbra again (a compile stalls a frame for about a second)."""
+    from softshadow import scene_frame
+    from softshadow.evaluate import plan_alpha_jit
+    monkeypatch.setattr(scene_frame, "PENUMBRA_CHUNKS", (64, 256))
+    model = model_of("ball")
+    cam = look_at_camera((3.0, -4.0, 2.6), (0.0, 0.0, 0.5), 160, 120, 50.0)
+    renderer = ss.FrameRenderer(threads=1)
+    bands, edges = [], []
+    try:
+        for i, (azimuth, elevation) in enumerate([(200, 40), (215, 35), (230, 30), (245, 25), (260, 20)]):
+            frame = renderer.render(cam, model, Pose(), SceneLights(0.2, 0.8, 0.02), Sun(azimuth, elevation))
+            bands.append(len(frame.plan.band))
+            edges.append(frame.plan.edge_count)
+            if i == 0:
+                compiled = plan_alpha_jit._cache_size()
+    finally:
+        renderer.close()
+    assert max(bands) > 1.25 * min(bands) and len(set(edges)) > 1, (bands, edges)
+    assert plan_alpha_jit._cache_size() == compiled
+
+
+def test_scratch_capacity_keeps_a_size_while_the_count_fits():
+    scratch = ss.internal.Scratch()
+    grow = lambda n: 2 * n  # noqa: E731
+    assert scratch.capacity("e", 10, grow) == 20
+    assert scratch.capacity("e", 5, grow) == 20
+    assert scratch.capacity("e", 20, grow) == 20
+    assert scratch.capacity("e", 21, grow) == 42
+    assert scratch.capacity("f", 3, grow) == 6  # per name
+    with pytest.raises(ValueError, match="less than"):
+        scratch.capacity("g", 4, lambda n: n - 1)
+
+
+def test_dense_plan_while_the_posed_occluder_is_made_on_another_thread():
+    """The points projected into the sun's view while another thread poses the occluder: the
+    same plan; a posed occluder under another sun, or none of its vertices, is refused."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from softshadow.posed import PosedOccluder, posed_vertices
+    model = model_of("pillar")
+    pose = Pose(rotation_deg=(0.0, 0.0, 25.0))
+    cam, _ = _scene()
+    vis = visible_surfaces(cam, [_object_surface(model, pose, 0.8)], 0.8)
+    sun = Sun(250.0, 35.0)
+    world, rotation = posed_vertices(model.occluder, pose)
+    ref = plan_dense_points(model.occluder, pose, sun, vis.points, 0.02, vis.normals)
+    with ThreadPoolExecutor(1) as pool:
+        made = pool.submit(PosedOccluder.lit_by, model.occluder, world, rotation, sun.light_np)
+        _plans_equal(ref.point_plan(), plan_dense_points(model.occluder, pose, sun, vis.points, 0.02, vis.normals,
+                                                         posed=made, world=world).point_plan())
+        other = pool.submit(PosedOccluder.lit_by, model.occluder, world, rotation, Sun(120.0, 35.0).light_np)
+        with pytest.raises(ValueError, match="not the world vertices under this sun"):
+            plan_dense_points(model.occluder, pose, sun, vis.points, 0.02, vis.normals, posed=other, world=world)
+        with pytest.raises(ValueError, match="needs its world vertices"):
+            plan_dense_points(model.occluder, pose, sun, vis.points, 0.02, vis.normals, posed=made)
