@@ -73,7 +73,7 @@ def bench_dragon_fit(quick: bool = False, seed: int = 0, progress=None) -> dict:
 def markdown_table(result: dict) -> str:
     """The fits as a Markdown table (docs/level_of_detail.md)."""
     lines = ["| rule asked | faces | rule used (criterion, se) | k (x 1e-3) | k bias % | k bias / se | rho | "
-             "rho bias | rho bias / se | seconds |", "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|"]
+             "rho bias | rho bias / se | reliable | seconds |", "|---|---:|---|---:|---:|---:|---:|---:|---:|---|---:|"]
     f = lambda x, fmt: "-" if x is None else format(x, fmt)
     for r in result["fits"]:
         crit = "" if r.get("rule_criterion") is None else f" ({r['rule_criterion']:.2f})"
@@ -82,5 +82,6 @@ def markdown_table(result: dict) -> str:
                      f"± {f(1e3 * r['range_stderr'] if r['range_stderr'] else None, '.3f')} | "
                      f"{f(r.get('k_bias_pct'), '+.1f')} | {f(r.get('k_bias_se'), '+.2f')} | "
                      f"{f(r['rho'], '.4f')} ± {f(r['rho_stderr'], '.4f')} | {f(r.get('rho_bias'), '+.4f')} | "
-                     f"{f(r.get('rho_bias_se'), '+.2f')} | {r['seconds']:.1f} |")
+                     f"{f(r.get('rho_bias_se'), '+.2f')} | {'yes' if r.get('reliable') else 'no'} | "
+                     f"{r['seconds']:.1f} |")
     return "\n".join(lines)
