@@ -12,7 +12,7 @@ import pytest
 
 from fitting.samples.photo_samples import PhotoSamples
 from fitting.solve.model import FitParams, Prediction, k_from_raw, rho_from_raw
-from fitting.solve.evidence import no_ramp_k
+from fitting.solve.evidence import no_ramp_k, penumbra_px_per_k
 from fitting.solve.group import (UMBRA_ALPHA, SampleCounts, covariance, k_rho_with_errors, penumbra_width_px,
                                  robust_delta, sample_counts)
 
@@ -110,6 +110,19 @@ def test_penumbra_width_is_two_over_the_pixel_slope_inside_the_penumbra():
     assert iqr == pytest.approx(np.subtract(*np.percentile([4.0, 8.0, 2.0, 4.0], [75, 25])))
     none = Prediction(np.zeros(2), np.zeros(2), np.array([2.0, -3.0]), np.ones(2))
     assert penumbra_width_px([_Samples(2)], none) == (None, None)
+
+
+def test_penumbra_px_per_k_is_the_outlines_width_per_unit_k_at_any_k():
+    # u = distance / half-width, and the half-width is k * 190 px: |du/dpixel| = 1 / (190 k).
+    rng = np.random.default_rng(3)
+    for k in (1e-7, 5e-4, 0.02):
+        distance_px = rng.uniform(-400.0, 400.0, 500)
+        u = distance_px / (190.0 * k)
+        slope = np.full(500, 1.0 / (190.0 * k))
+        u[:50] = 1e6  # beyond the planned bands: no geometry there
+        assert penumbra_px_per_k(u, slope, k) == pytest.approx(380.0)
+    assert penumbra_px_per_k(np.array([1e6, -1e6]), np.ones(2), 5e-4) is None
+    assert penumbra_px_per_k(np.array([3.0]), np.ones(1), 0.0) is None
 
 
 def test_no_ramp_k_is_the_k_whose_penumbra_reaches_the_nearest_sample():

@@ -175,11 +175,27 @@ def test_group_without_a_shadow_in_view_fits_nothing(one_group, tmp_path):
     assert g.error.startswith("no shadow in view") and g.rho is None and g.range_k is None
 
 
-def test_k_beyond_range_k_max_is_not_trusted(one_group):
+def test_k_beyond_a_band_still_too_narrow_after_widening_is_not_trusted(one_group):
     from fitting import FitOptions, fit_folder
-    (g,) = fit_folder(one_group, options=FitOptions(plots=False, range_k_max=0.003)).groups
-    assert g.fitted and g.range_k > 0.003
+    from fitting.verdict.rules import WIDER_BAND
+    # The truth is 0.0056: widened once, a band of 0.002 still stops short of it.
+    (g,) = fit_folder(one_group, options=FitOptions(plots=False, range_k_max=0.002)).groups
+    assert g.fitted and g.range_k > 0.002 * WIDER_BAND
     assert not g.reliable and any("range_k_max" in w for w in g.warnings)
+    assert any("refitted with the band widened to 0.004" in w for w in g.warnings)
+
+
+def test_k_beyond_the_band_on_a_scene_that_fits_is_fitted_again_with_a_wider_band(one_group):
+    """The band planned for k <= 0.004 cuts a 0.0056 penumbra short; the group is fitted again with
+    the band widened to 0.008, says so, and is right and reliable."""
+    from fitting import FitOptions, fit_folder
+    (g,) = fit_folder(one_group, options=FitOptions(plots=False, range_k_max=0.004)).groups
+    truth = _truth(one_group)["13:21"]
+    assert g.reliable and g.identifiable, g.warnings
+    assert abs(g.range_k - truth["range_k"]) <= 2 * g.range_stderr
+    assert abs(g.rho - truth["rho"]) <= 2 * g.rho_stderr
+    assert any(w.startswith("k read ") and "beyond the band of k <= 0.004" in w
+               and "refitted with the band widened to 0.008" in w for w in g.warnings), g.warnings
 
 
 # --------------------------------------------------------------------------- resume and --force

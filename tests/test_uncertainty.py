@@ -116,15 +116,15 @@ def test_edge_rho_error_adds_the_floor_and_the_profile_spread_in_quadrature():
 
 
 def test_resolution_warning_names_a_penumbra_under_the_blur_spot_only():
-    """Warned when the penumbra is narrower than 2 sigma of pixel area plus camera blur
-    (2 sqrt(1/12 + 0.7^2) = 1.49 px), quiet at and above it, and when nothing was measured."""
+    """Warned when the penumbra is narrower than 3 sigma of pixel area plus camera blur
+    (3 sqrt(1/12 + 0.7^2) = 2.27 px), quiet at and above it, and when nothing was measured."""
     from fitting.verdict.rules import RESOLVED_BLUR_WIDTHS, resolution_warning
     spot = RESOLVED_BLUR_WIDTHS * np.sqrt(1 / 12 + 0.7 ** 2)
     text = resolution_warning(1.2, 0.7)
-    assert text is not None and text.startswith("penumbra 1.2 px wide") and "1.5 px" in text
+    assert text is not None and text.startswith("penumbra 1.2 px wide") and "2.3 px" in text
     assert "\n" not in text
     assert resolution_warning(spot + 1e-9, 0.7) is None
     assert resolution_warning(3.0, 0.7) is None
-    # Without a fitted blur the spot is the pixel's own area: 2 sqrt(1/12) = 0.58 px.
-    assert resolution_warning(0.5, None) is not None and resolution_warning(0.6, None) is None
+    # Without a fitted blur the spot is the pixel's own area: 3 sqrt(1/12) = 0.87 px.
+    assert resolution_warning(0.8, None) is not None and resolution_warning(0.9, None) is None
     assert resolution_warning(None, 0.7) is None and resolution_warning(float("nan"), 0.7) is None

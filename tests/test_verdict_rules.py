@@ -285,35 +285,62 @@ def test_identifiable_when_the_penumbra_is_resolved_and_k_is_measured():
     (0.002, 0.0005, None, 0.002 + 2 * 0.0005),  # no sample inside the penumbra
 ])
 def test_not_identifiable_gives_an_upper_bound_and_a_warning(k, se, pen, upper):
-    estimate, verdict = rules.judge_fit(_fit(k=k, k_stderr_stat=se, k_stderr_sys=0.0, penumbra_px=pen),
+    # No camera blur: the blur spot (0.58 px) bounds k below these bounds.
+    estimate, verdict = rules.judge_fit(_fit(k=k, k_stderr_stat=se, k_stderr_sys=0.0, penumbra_px=pen, blur_px=0.0),
                                         GroupContext(3))
     assert not verdict.identifiable
     assert estimate.range_k == pytest.approx(upper) and estimate.range_k >= k
     assert any("upper bound" in w for w in verdict.warnings)
 
 
+@pytest.mark.parametrize("pen, per_k", [(0.3, None), (None, 380.0), (0.114, 380.0)])
+def test_a_penumbra_under_the_blur_spot_bounds_k_by_the_spots_width(pen, per_k):
+    """A fit that traded k for blur (k near 0, a penumbra far under the spot, or none sampled at all)
+    bounds k by the k whose penumbra would fill the blur spot, from the width per unit k at the outline
+    (given, or the fitted width over the fitted k): a knot at 752x564 read k 1e-7 for a truth of
+    0.0036 (a 1.37 px penumbra under a 1.39 px spot), and the bound of 0.0000 was a confident miss."""
+    k, blur = 3e-4, 0.63
+    estimate, verdict = rules.judge_fit(_fit(k=k, k_stderr_stat=1e-5, k_stderr_sys=0.0, penumbra_px=pen,
+                                             blur_px=blur, n_in_penumbra=0 if pen is None else 40,
+                                             no_ramp_k=1e-5 if pen is None else None, penumbra_px_per_k=per_k),
+                                        GroupContext(3))
+    spot = rules.RESOLVED_BLUR_WIDTHS * math.sqrt(1 / 12 + blur ** 2)
+    width_per_k = per_k if per_k is not None else pen / k
+    assert not verdict.identifiable
+    assert estimate.range_k == pytest.approx(spot / width_per_k)
+    assert rules.unresolved_k(_fit(k=k, penumbra_px=pen, blur_px=blur, penumbra_px_per_k=per_k)) == pytest.approx(
+        spot / width_per_k)
+    assert math.isnan(rules.unresolved_k(_fit(k=k, penumbra_px=None, blur_px=blur)))
+    # A resolved penumbra keeps its measured k: the spot bounds only what the photos do not resolve.
+    estimate, verdict = rules.judge_fit(_fit(penumbra_px_per_k=per_k or 400.0), GroupContext(3))
+    assert verdict.identifiable and estimate.range_k == 0.0057
+
+
 def test_identifiability_thresholds():
     k = 0.01
-    ident = lambda **kw: rules.judge_fit(_fit(k=k, k_stderr_stat=0.001, blur_px=0.0, **kw),
+    ident = lambda **kw: rules.judge_fit(_fit(**{"k": k, "k_stderr_stat": 0.001, "blur_px": 0.0, **kw}),
                                          GroupContext(3))[1].identifiable
-    assert ident(penumbra_px=rules.MIN_PENUMBRA_PX)
-    assert not ident(penumbra_px=rules.MIN_PENUMBRA_PX * 0.99)
-    assert rules.judge_fit(_fit(k=k, k_stderr_stat=rules.MAX_K_REL_STDERR * k, penumbra_px=2.0),
-                           GroupContext(3))[1].identifiable
-    assert not rules.judge_fit(_fit(k=k, k_stderr_stat=rules.MAX_K_REL_STDERR * k * 1.01, penumbra_px=2.0),
-                               GroupContext(3))[1].identifiable
+    # The blur spot without blur: the pixel's area, 3 sqrt(1/12) = 0.87 px.
+    spot = rules.RESOLVED_BLUR_WIDTHS * math.sqrt(1 / 12)
+    assert ident(penumbra_px=spot * 1.001)
+    assert not ident(penumbra_px=spot * 0.999)
+    assert not rules.judge_fit(_fit(k=k, k_stderr_stat=0.001, blur_px=0.5, penumbra_px=spot * 1.001),
+                               GroupContext(3))[1].identifiable  # a blurred photo's spot is wider
+    assert ident(k_stderr_stat=rules.MAX_K_REL_STDERR * k, penumbra_px=2.0)
+    assert not ident(k_stderr_stat=rules.MAX_K_REL_STDERR * k * 1.01, penumbra_px=2.0)
 
 
 def test_too_few_samples_inside_a_narrow_penumbra_make_k_an_upper_bound():
     narrow = 0.99 * rules.NARROW_PENUMBRA_PX
-    judge = lambda n, px=narrow: rules.judge_fit(_fit(k=0.01, k_stderr_stat=0.001, k_stderr_sys=0.002,
+    # A sharp camera (0.3 px of blur, a 1.25 px spot) resolves a penumbra under NARROW_PENUMBRA_PX.
+    judge = lambda n, px=narrow: rules.judge_fit(_fit(k=0.01, k_stderr_stat=0.001, k_stderr_sys=0.002, blur_px=0.3,
                                                       penumbra_px=px, n_in_penumbra=n), GroupContext(3))
     assert judge(rules.MIN_PENUMBRA_SAMPLES)[1].identifiable
     estimate, verdict = judge(rules.MIN_PENUMBRA_SAMPLES - 1)
     assert not verdict.identifiable and estimate.range_k == pytest.approx(0.01 + 2 * math.hypot(0.001, 0.002))
     assert any(f"only {rules.MIN_PENUMBRA_SAMPLES - 1} samples" in w and "upper bound" in w for w in verdict.warnings)
     assert judge(3, rules.NARROW_PENUMBRA_PX)[1].identifiable  # wider than a blur spot: few samples suffice
-    assert any("narrower than the resolution" in w for w in judge(3, 0.5)[1].warnings)
+    assert any("under the photo's blur spot" in w for w in judge(3, 0.5)[1].warnings)
     assert any("narrower than the resolution" in w for w in judge(0, None)[1].warnings)
 
 
@@ -352,7 +379,7 @@ def test_the_other_flags():
     assert verdict.reliable and not verdict.identifiable and estimate.range_k > 0.0057
     assert any("the penumbra is under the photo's blur spot; range_k is an upper bound" in w
                for w in verdict.warnings)
-    assert rules.judge_fit(_fit(penumbra_px=1.6, blur_px=0.7), GroupContext(3))[1].identifiable  # the spot: 1.51 px
+    assert rules.judge_fit(_fit(penumbra_px=2.3, blur_px=0.7), GroupContext(3))[1].identifiable  # the spot: 2.27 px
     assert rules.judge_fit(_fit(penumbra_px=3.0, blur_px=0.7, receiver="depth"), GroupContext(3))[1].reliable
 
 
@@ -413,3 +440,21 @@ def test_edge_rules():
     assert edge_rules.judge_edges(_edges(modes=((math.log(0.2), 40), (math.log(0.3), 5)))).reliable
     assert edge_rules.judge_edges(_edges(dark_side_regions=(6, 1, 1, 1))).reliable
     assert edge_rules.judge_edges(_edges(outlines=((math.log(0.2), 37), (math.log(0.4), 3)))).reliable
+
+
+def test_k_beyond_the_band_on_a_scene_that_fits_asks_for_a_wider_band_once():
+    beyond = _fit(k=0.033, penumbra_px=12.0)
+    assert rules.wants_wider_band(beyond, GroupContext(3))
+    assert not rules.wants_wider_band(_fit(), GroupContext(3))  # k within the band
+    # Once widened, never again; a scene the model does not fit, or whose sun explains k, is not refitted.
+    assert not rules.wants_wider_band(beyond, GroupContext(3, band_widened_from=(0.03, 0.033)))
+    misfit = _fit(k=0.033, penumbra_px=12.0, photos=[_photo(f"{i}.jpg", misfit=3.0) for i in range(3)])
+    assert not rules.wants_wider_band(misfit, GroupContext(3))
+    explained = SunCheck(d_azimuth_deg=2.0, d_elevation_deg=0.5, misfit_before=1.0, misfit_after=0.9, k_after=0.01)
+    assert not rules.wants_wider_band(beyond, GroupContext(3, sun_check=explained))
+    # The refit's verdict names what happened, as a note.
+    widened = _fit(k=0.033, penumbra_px=12.0, range_k_max=0.06)
+    _, verdict = rules.judge_fit(widened, GroupContext(3, band_widened_from=(0.03, 0.0331)))
+    assert verdict.reliable and verdict.warnings == (
+        "k read 0.0331, beyond the band of k <= 0.03 the samples were planned for: refitted with the band "
+        "widened to 0.06",)

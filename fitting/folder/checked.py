@@ -87,16 +87,19 @@ def _sun_check(model, pose, views: list[PhotoView], group: PhotoGroup, options: 
 
 def fit_checked(model, pose, views: list[PhotoView], group: PhotoGroup, options: FitOptions, sky_model=None, *,
                 level_of_detail: LevelOfDetail | None = None,
-                sun_path: tuple[float, float] | None = None, samples=None) -> tuple[GroupResult, list[dict]]:
+                sun_path: tuple[float, float] | None = None, samples=None,
+                _band_widened_from: tuple[float, float] | None = None) -> tuple[GroupResult, list[dict]]:
     """Fit a group and judge it (``fitting.verdict.rules``): a photo the rules find out of place is
     left out (a ``skipped`` entry naming the group and why) and the group refitted without it; a
     group that shows no shadow gets "no shadow in view" and no values; a misfit is traced to its
     likely cause with a refit with the sun free. level_of_detail: the mesh level fitted (evidence);
     sun_path: the sun's daily motion at the group's time, (d azimuth, d elevation) in degrees per
     minute (None: not known); samples: the samples already drawn for these views
-    (``fitting.solve.lod``), used by the first fit."""
+    (``fitting.solve.lod``), used by the first fit. A k beyond the samples' band on a scene the
+    model fits is fitted again, once, with the band widened (``rules.wants_wider_band``)."""
     start = _time.perf_counter()
     level_of_detail = level_of_detail or LevelOfDetail()
+    all_views = list(views)
     given = max(len(views), len(group.photos))
     left_out: list[tuple[str, str]] = []
     while True:
@@ -117,10 +120,19 @@ def fit_checked(model, pose, views: list[PhotoView], group: PhotoGroup, options:
         left_out.append(leave)
         views = [v for v in views if v.name != leave[0]]
     if result.fitted and result.evidence is not None:
-        context = GroupContext(given, tuple(left_out), level_of_detail, sun_last_move_deg=sun_moved)
+        context = GroupContext(given, tuple(left_out), level_of_detail, sun_last_move_deg=sun_moved,
+                               band_widened_from=_band_widened_from)
         if rules.wants_sun_check(result.evidence):
             context = dataclasses.replace(context, sun_check=_sun_check(model, pose, views, group, options, sky_model,
                                                                         result, sun_path))
+        if rules.wants_wider_band(result.evidence, context):
+            wider = dataclasses.replace(options, range_k_max=rules.WIDER_BAND * options.range_k_max)
+            # All the photos again: the wider band may keep a photo the first fit left out.
+            refit, skipped = fit_checked(model, pose, all_views, group, wider, sky_model,
+                                         level_of_detail=level_of_detail, sun_path=sun_path,
+                                         _band_widened_from=(options.range_k_max, float(result.evidence.k)))
+            seconds = _time.perf_counter() - start
+            return dataclasses.replace(refit, diagnostics=dataclasses.replace(refit.diagnostics, seconds=seconds)), skipped
         estimate, verdict = rules.judge_fit(result.evidence, context)
         result = dataclasses.replace(result, estimate=estimate, verdict=verdict)
     diagnostics = dataclasses.replace(result.diagnostics, seconds=_time.perf_counter() - start,

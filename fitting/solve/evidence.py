@@ -29,7 +29,7 @@ from ..verdict.evidence import NAN, PhotoEvidence
 from .model import K_SCALE, FitParams, Prediction
 
 __all__ = ["REGION_MARGIN_PX", "photo_evidence", "photo_estimates", "photos_evidence", "no_ramp_k",
-           "remaining_step_se"]
+           "penumbra_px_per_k", "remaining_step_se"]
 
 #: A sample counts for the lit ground's or the umbra's noise when it lies this many pixels beyond
 #: the fitted penumbra: the camera's blur (0.5-0.9 px on the synthetic cameras) and a penumbra a
@@ -184,6 +184,26 @@ def photos_evidence(samples, rows: list[slice], solution, est, errors, sun_cos: 
         e = photo_evidence(s.name, s.observed, prediction, est.rho, sun_cos[sl], sky_hidden[sl])
         out.append(dataclasses.replace(e, k=k, k_stderr=k_se, rho=rho, rho_stderr=rho_se))
     return out
+
+
+#: The share of the samples nearest the shadow's outline (smallest |u|) over which the penumbra's
+#: width per unit k is taken: the outline's own geometry, away from the far ends of the bands.
+_NEAREST_SHARE = 0.1
+
+
+def penumbra_px_per_k(u: np.ndarray, slope: np.ndarray, k: float) -> float | None:
+    """The penumbra's width in image pixels per unit k, the median over the samples nearest the
+    outline: the width 2 / |du/dpixel| grows in proportion to k, so width / k is the outline's
+    geometry and tells the width any k would have, even when the fitted k leaves no sample inside
+    the penumbra. u, slope (n,) without padding; None when no sample lies within the planned bands."""
+    u = np.abs(np.asarray(u, dtype=np.float64))
+    slope = np.asarray(slope, dtype=np.float64)
+    keep = (u < 1e5) & np.isfinite(slope) & (slope > 0)
+    if not keep.any() or not k > 0:
+        return None
+    u, slope = u[keep], slope[keep]
+    nearest = u <= np.quantile(u, _NEAREST_SHARE)
+    return float(np.median(2.0 / (slope[nearest] * k)))
 
 
 def no_ramp_k(u: np.ndarray, k: float) -> float | None:

@@ -36,7 +36,7 @@ from ..report.results import FitDiagnostics, GroupResult, OverlayPlotData, PlotD
 from .saved_programs import call_saved
 from ..samples.ground import select_samples
 from ..samples.photo_samples import NoShadowInView, PhotoSamples
-from .evidence import no_ramp_k, photos_evidence, remaining_step_se
+from .evidence import no_ramp_k, penumbra_px_per_k, photos_evidence, remaining_step_se
 from .uncertainty import cluster_covariance, combine_errors, edge_clusters
 from ..verdict.evidence import FitEvidence, GroupContext, SunFree
 from ..verdict.rules import judge_fit
@@ -514,6 +514,7 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
         photos=tuple(photos_evidence(samples, _photo_slices(samples), sol, est, errors, sun_cos, sky_hidden,
                                      fit_sun=fit_sun, fit_blur=bool(float(cfg.fit_blur)))),
         no_ramp_k=no_ramp_k(sol.prediction.u[:n_eff], est.range_k), sun_fitted=fit_sun, sun_free=sun_free,
+        penumbra_px_per_k=penumbra_px_per_k(sol.prediction.u[:n_eff], sol.prediction.slope[:n_eff], est.range_k),
         photos_without_shadow=tuple(_split_reason(w) for w in no_shadow),
         receiver=getattr(used[0].receiver, "kind", "plane") if used[0].receiver is not None else "plane",
         remaining_step_se=remaining_step_se(sol.params, sol.residuals, sol.jacobian, errors.range_stderr_stat,

@@ -99,6 +99,8 @@ class FitEvidence:
     fitted). n_in_penumbra, n_in_umbra: the group's samples inside the fitted penumbra (|u| < 1)
     and in the fitted umbra (alpha, blur included, at least 0.99). no_ramp_k: when no sample lies
     inside the fitted penumbra, the largest k the samples allow (None: not known).
+    penumbra_px_per_k: the penumbra's width in image pixels per unit k at the shadow's outline (the
+    width any k would have; None: not known).
     n_profiles: stretches of shadow edge sampled; converged: the solver's outcome.
     range_k_max: the largest k the samples' band was planned for. sun_fitted: the sun was fitted
     with k and rho (not known from a time and site, or given). photos: each photo's evidence.
@@ -131,6 +133,7 @@ class FitEvidence:
     sun_free: SunFree | None = None
     receiver: str = "plane"
     remaining_step_se: float = NAN
+    penumbra_px_per_k: float | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -171,13 +174,16 @@ class GroupContext:
     """What lies around one group's fit: the number of photos given to the group, the photos
     left out of it with their reasons, the level of detail, a diagnostic refit with the sun free
     (None: not run), and when the sun was fitted, how far it moved (degrees, azimuth plus elevation)
-    in the last of the refits that re-plan the samples around it (None: not fitted)."""
+    in the last of the refits that re-plan the samples around it (None: not fitted); when the fit was
+    repeated with a wider band of samples (``rules.wants_wider_band``), the band's k it was first
+    planned for and the k it read then (None: not repeated)."""
 
     photos_given: int = 0
     left_out: tuple[tuple[str, str], ...] = ()
     level_of_detail: LevelOfDetail = LevelOfDetail()
     sun_check: SunCheck | None = None
     sun_last_move_deg: float | None = None
+    band_widened_from: tuple[float, float] | None = None
 
 
 @dataclasses.dataclass(frozen=True)
