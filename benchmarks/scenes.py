@@ -49,7 +49,7 @@ class SweepSettings:
         self.table1_pixels, self.table1_samples = (64, 64) if quick else (512, 512)
         self.profiles, self.dtypes = ("linear", "disk"), ("float32", "float64")
         # The Mitsuba peer (when installed): samples per pixel, on these meshes.
-        self.mitsuba_spps = (1, 4) if quick else (4, 16, 64, 256)
+        self.mitsuba_spps = (1, 4) if quick else (16, 64, 256, 1024)
         self.mitsuba_meshes = ("pillar",) if quick else ("pillar", "dragon")
         # Baseline 6 and the fit's scaling: photos per group and samples per photo (cap).
         self.fit_photos = (1, 2) if quick else (1, 2, 4, 8)

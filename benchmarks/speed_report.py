@@ -14,6 +14,8 @@ def image_cases(result: dict) -> list[tuple[str, str, dict]]:
     for key in ("pillar", "ball", "dragon", "knot"):
         if key in result:
             out.append((key, f"{result[key]['pixels']} px", result[key]))
+    for key, c in result.get("wedge", {}).items():
+        out.append((key, f"wedge {c['pixels']} px", c))
     for c in result.get("resolution", []):
         out.append(("pillar", f"{c['pixels']} px", c))
     for c in result.get("profile", []):
@@ -35,6 +37,11 @@ def mitsuba_runs(result: dict) -> dict:
     """{mesh: Mitsuba run} of the sweep ({} when it was skipped)."""
     m = result.get("mitsuba") or {}
     return {} if "skipped" in m else m
+
+
+def _renderer(case: dict) -> str:
+    name = case.get("renderer", "softshadow")
+    return f"{name} (wedge)" if case.get("rule") == "wedge" else name
 
 
 def pareto_front(points: list[tuple[float, float]]) -> list[int]:
@@ -59,12 +66,12 @@ def pareto_plot(result: dict, path: Path) -> None:
     cols = 2 if len(meshes) > 1 else 1
     rows = (len(meshes) + cols - 1) // cols
     fig, axes = plt.subplots(rows, cols, figsize=(6.5 * cols, 4.8 * rows), squeeze=False)
-    markers = {"softshadow": "o", "paper": "s", "paper (hard)": "v", "mitsuba": "^"}
+    markers = {"softshadow": "o", "softshadow (wedge)": "D", "paper": "s", "paper (hard)": "v", "mitsuba": "^"}
     for ax, mesh in zip(axes.ravel(), meshes):
         mine = [(lab, c) for m, lab, c in cases if m == mesh]
         groups = {}
         for lab, c in mine:
-            groups.setdefault(c.get("renderer", "softshadow"), []).append((lab, c))
+            groups.setdefault(_renderer(c), []).append((lab, c))
         for renderer, items in groups.items():
             ax.scatter([c["median_ms"] for _, c in items], [c["error"]["rms_band"] for _, c in items],
                        label=renderer, s=22, marker=markers.get(renderer, "o"))
@@ -99,7 +106,7 @@ def pareto_table(result: dict) -> list[str]:
         pts = [(c["median_ms"], c["error"]["rms_band"]) for _, c in mine]
         for i in pareto_front(pts):
             lab, c = mine[i]
-            L.append(f"| {mesh} | {lab} | {c.get('renderer', 'softshadow')} | {c['median_ms']:.1f} | "
+            L.append(f"| {mesh} | {lab} | {_renderer(c)} | {c['median_ms']:.1f} | "
                      f"{c['error']['rms_band']:.4f} |")
     return L
 
@@ -188,37 +195,94 @@ def _load(x) -> str:
     return "n/a" if not x else " / ".join(f"{v:.1f}" for v in x)
 
 
+def _ms(r: dict) -> str:
+    return f"{r['mitsuba_ms']:.0f}" if r["mitsuba_ms"] is not None else "not reached"
+
+
+def _ratio(r: dict) -> str:
+    if r["ratio"] is not None:
+        return f"{r['ratio']:.0f}"
+    return f"> {r['ratio_at_least']:.0f}" if r.get("ratio_at_least") else "n/a"
+
+
+_MEASURES = {"rms": "whole map", "rms_band": "penumbra band", "noise_band": "penumbra band, Mitsuba's noise only"}
+
+
+def _setups_section(setups: dict) -> list[str]:
+    """Mitsuba's set-ups against each other (``mitsuba_setups`` of the sweep)."""
+    L = ["## Mitsuba's set-ups", ""]
+    if "skipped" in setups:
+        return L + [f"Skipped: {setups['skipped']}."]
+    L += ["Where Mitsuba's error comes from, and which of its set-ups reaches a given error fastest. The same "
+          "light throughout (the sun's disk, radius and irradiance, and the uniform sky; direct light; box "
+          "pixel filter), sampled in different ways: `disk sun` is a uniform disk area light 100 km away "
+          "beside a constant sky emitter, `envmap sun` one environment map holding the sun's disk (on the "
+          "map's pole, so that the disk is whole rows) and the sky, importance-sampled as a whole; the "
+          "sampler; the sun's share of the light samples (Mitsuba's emitter `sampling_weight`; by default "
+          "the two emitters are picked alike); light + BSDF samples per camera sample (the `direct` "
+          "integrator's `emitter_samples`, `bsdf_samples`). Every set-up but one lowers the ground by Mitsuba's "
+          "shadow-ray offset (float32 Mitsuba starts a shadow ray (1 + max |coordinate|) x 8.9e-5 m along the "
+          "normal, about 0.18 mm at 1 m from the origin, which moves a penumbra by that over tan(elevation)), so "
+          "that its shadow rays leave from z = 0 as the truth's do; `ground at z = 0` leaves it. Each set-up renders the map twice at the same "
+          "spp, timed round-robin: the band's noise is half the RMS difference of the two renders times "
+          "sqrt 2 (RMS(a - b) / sqrt 2), the floor is the error against the truth that is not that noise "
+          "(sqrt(error^2 - noise^2): Mitsuba's bias against the truth plus the truth's own noise, quoted "
+          "beside it), and the efficiency is 1 / (noise^2 x time) over the plain set-up's: how many times "
+          "faster a set-up reaches equal noise.", "",
+          "| mesh | set-up | spp | time (ms) | RMS band | band noise | floor | truth's noise | efficiency | RMS |",
+          "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for mesh, rows in setups.items():
+        for r in rows:
+            L.append(f"| {mesh} | {r['setup']} | {r['spp']} | {r['median_ms']:.0f} | {_f(r['error']['rms_band'])} | "
+                     f"{r['noise_rms_band']:.4f} | {r['floor_rms_band']:.4f} | {_f(r.get('reference_noise_rms_band'))} | "
+                     f"{r['efficiency']:.2f} | {_f(r['error']['rms'])} |")
+    return L
+
+
 def _mitsuba_section(mitsuba: dict) -> list[str]:
     L = ["## Mitsuba 3, measured in the same run", ""]
     if "skipped" in mitsuba:
         return L + [f"Skipped: {mitsuba['skipped']} (`pip install 'softshadow[peers]'`)."]
     runs = list(mitsuba.values())
-    L += [f"Mitsuba 3 (`{runs[0]['variant']}` variant) path-traces the same scene: the mesh on a Lambertian "
-          "ground, a uniform sun disk (a disk light 100 km away subtending the sun's radius; at 1 km, as "
-          "before 2026-11-24 evening, its parallax moved the pillar's shadow tip by two pixels and Mitsuba's "
-          "band error levelled off at 0.060; the rest of that gap was the truth's sky next to the walls, now "
-          "traced) and a uniform sky (a constant emitter), direct light only (`direct` integrator), an orthographic top-down camera over "
-          "the same square with a box pixel filter and a low-discrepancy sampler, at the truth's size. Time is "
-          "the wall time of a render after a warm-up render at the same samples per pixel (spp), its "
-          "kernel compiled, except where the table says \"first\" (high spp: the first render at that spp, "
-          "its kernel compilation of a second or two included); error against the same converged physical "
-          "truth as every other case.", "",
-          "| mesh | spp | pixels | time (ms) | RMS | RMS band | max abs |", "|---|---:|---:|---:|---:|---:|---:|"]
+    L += [f"Mitsuba 3 (`{runs[0]['variant']}` variant) path-traces the same scene in the set-up that reached "
+          f"a given noise fastest above ({runs[0].get('setup_label', 'disk sun')}): the mesh on a Lambertian "
+          "ground, the sun's disk and the uniform sky, direct light only (`direct` integrator), an "
+          "orthographic top-down camera over the same square with a box pixel filter, at the truth's size. "
+          "Time is the median wall time of renders after a first render at the same samples per pixel "
+          "(spp), which compiles its kernel and is the image compared with the same converged physical "
+          "truth as every other case; the band's noise and floor as above, from that render and a timed one.",
+          "", "| mesh | spp | pixels | time (ms) | RMS | RMS band | band noise | floor | max abs |",
+          "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for name, run in mitsuba.items():
         for c in run["cases"]:
             e = c["error"]
-            first = "" if c.get("warmed_up", True) else " (first)"
-            L.append(f"| {name} | {c['spp']} | {c['pixels']} | {c['median_ms']:.0f}{first} | {_f(e['rms'])} | "
-                     f"{_f(e['rms_band'])} | {_f(e['max_abs'], '{:.3f}')} |")
-    L += ["", "The time Mitsuba needs to reach this renderer's error on the same mesh and map (log-log "
-          "interpolation between the measured spp, or past the last one with Monte Carlo's error ~ time^-1/2):",
-          "", "| mesh | error measure | this renderer's error | this renderer (ms) | Mitsuba (ms) | how | ratio |",
-          "|---|---|---:|---:|---:|---|---:|"]
+            L.append(f"| {name} | {c['spp']} | {c['pixels']} | {c['median_ms']:.0f} | {_f(e['rms'])} | "
+                     f"{_f(e['rms_band'])} | {_f(c.get('noise_rms_band'))} | {_f(c.get('floor_rms_band'))} | "
+                     f"{_f(e['max_abs'], '{:.3f}')} |")
+    L += ["", "The time Mitsuba needs to reach this renderer's error on the same mesh and map, both timed warm in "
+          "this run: log-log interpolation between the measured spp, or past the last one with Monte Carlo's "
+          "noise ~ time^-1/2 above the floor measured at the last spp (the whole map: error ~ time^-1/2); "
+          "`not reached` where this renderer's error lies below Mitsuba's floor against the truth, the ratio "
+          "then a lower bound (Mitsuba's longest render, which did not reach it, over this renderer's time). "
+          "`Mitsuba's noise only` measures Mitsuba as against its own converged render (its band noise "
+          "from two renders reaching this renderer's band error against the truth): the comparison as if "
+          "Mitsuba's floor were the truth's fault.",
+          "", "| mesh | renderer | error measure | this renderer's error | this renderer (ms) | Mitsuba (ms) | how | ratio |",
+          "|---|---|---|---:|---:|---:|---|---:|"]
     for name, run in mitsuba.items():
-        for metric, r in run["time_to_reach"]["softshadow"].items():
-            L.append(f"| {name} | {'whole map' if metric == 'rms' else 'penumbra band'} | {r['target']:.4f} | "
-                     f"{r['softshadow_ms']:.1f} | {r['mitsuba_ms']:.0f} | {r['how']} | {r['ratio']:.0f} |")
+        for renderer, reach in run["time_to_reach"].items():
+            for metric, r in reach.items():
+                L.append(f"| {name} | {renderer} | {_MEASURES[metric]} | {r['target']:.4f} | "
+                         f"{r['softshadow_ms']:.1f} | {_ms(r)} | {r['how']} | {_ratio(r)} |")
     L += [""] + [line for name, run in mitsuba.items() for line in _levels_off(name, run["cases"])]
+    for name, run in mitsuba.items():
+        last, ref = run["cases"][-1], run.get("reference_noise_rms_band")
+        if ref is not None and last.get("floor_rms_band") is not None:
+            beyond = max(last["floor_rms_band"] ** 2 - ref ** 2, 0.0) ** 0.5
+            L.append(f"- {name}: at {last['spp']} spp Mitsuba's band error {last['error']['rms_band']:.4f} is its "
+                     f"noise {last['noise_rms_band']:.4f} and a floor {last['floor_rms_band']:.4f}; the truth's own "
+                     f"noise is {ref:.4f}, so the two physical renders differ by {beyond:.4f} (RMS, band) beyond "
+                     "both renders' noise.")
     return L
 
 
@@ -424,7 +488,8 @@ def write_report(result: dict, md_path: Path, json_name: str | None = None) -> N
           "![Pareto plot](img/speed_vs_error_pareto.png)", "",
           "The Pareto front of each mesh (no other case of that mesh is both faster and closer to the truth):",
           ""] + pareto_table(result) + ["", "## The meshes", ""]
-    L += _case_table([(k, result[k]) for k in ("pillar", "ball", "dragon", "knot") if k in result])
+    L += _case_table([(k, result[k]) for k in ("pillar", "ball", "dragon", "knot") if k in result]
+                     + [(f"{k} (wedge rule)", c) for k, c in result.get("wedge", {}).items()])
     L += ["", "## Resolution (pillar)", ""]
     L += _case_table([(f"{c['pixels']} px", c) for c in result.get("resolution", [])])
     L += ["", "## Penumbra profile and precision (pillar)", ""]
@@ -451,6 +516,8 @@ def write_report(result: dict, md_path: Path, json_name: str | None = None) -> N
         L += [""] + _fit_baseline_section(result["fit_baseline"])
     if "paper" in result:
         L += [""] + _paper_sections(result["paper"])
+    if "mitsuba_setups" in result:
+        L += [""] + _setups_section(result["mitsuba_setups"])
     if "mitsuba" in result:
         L += [""] + _mitsuba_section(result["mitsuba"])
     if result.get("table1"):
@@ -502,8 +569,8 @@ def write_overview_report(result: dict, md_path: Path, json_name: str | None = N
             for renderer, reach in run["time_to_reach"].items():
                 for metric, r in reach.items():
                     label = name if renderer == "softshadow" else f"{name} ({renderer})"
-                    L.append(f"| {label} | {'whole map' if metric == 'rms' else 'penumbra band'} | "
-                             f"{r['target']:.4f} | {r['mitsuba_ms']:.0f} | {r['how']} | {r['ratio']:.0f} |")
+                    L.append(f"| {label} | {_MEASURES[metric]} | {r['target']:.4f} | {_ms(r)} | {r['how']} | "
+                             f"{_ratio(r)} |")
     else:
         L += ["", f"Mitsuba: skipped: {result['mitsuba'].get('skipped', 'not run')} "
               "(`pip install 'softshadow[peers]'`)."]

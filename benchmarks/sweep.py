@@ -18,10 +18,28 @@ samples per photo (same-model data against the Cramer-Rao bound, ``fit.bench_sam
 
 from __future__ import annotations
 
+import dataclasses
+
 from .meshes import decimated
 from .scenes import BenchScene, SweepSettings, build_scenes
 
-__all__ = ["fit_samples_sweep", "mitsuba_sweep", "run_sweep"]
+__all__ = ["MITSUBA_SETUPS", "fit_samples_sweep", "mitsuba_setups_sweep", "mitsuba_sweep", "run_sweep"]
+
+
+def _mitsuba_setups() -> dict:
+    """The Mitsuba set-ups compared (names -> mitsuba_peer.MitsubaSetup), the plain one first."""
+    from .mitsuba_peer import EFFICIENT, PLAIN, MitsubaSetup
+    return {"plain": PLAIN,
+            "multijitter": MitsubaSetup(sampler="multijitter"),
+            "envmap": MitsubaSetup(sun="envmap", sampler="multijitter"),
+            "sun share 0.8": MitsubaSetup(sampler="multijitter", sun_share=0.8),
+            "efficient": EFFICIENT,
+            "efficient, ground at z = 0": dataclasses.replace(EFFICIENT, ground_at_ray_offset=False),
+            "16 light samples": MitsubaSetup(sampler="multijitter", sun_share=0.9, emitter_samples=16)}
+
+
+MITSUBA_SETUPS = ("plain", "multijitter", "envmap", "sun share 0.8", "efficient", "efficient, ground at z = 0",
+                  "16 light samples")
 
 
 def run_sweep(settings: SweepSettings, fit: bool = True, progress=print) -> dict:
@@ -30,6 +48,10 @@ def run_sweep(settings: SweepSettings, fit: bool = True, progress=print) -> dict
     for name, scene in scenes.items():
         progress(f"bench sweep: {name}")
         out[name] = scene.case(settings.base_pixels, repeats=settings.repeats)
+    out["wedge"] = {}
+    for name, scene in scenes.items():
+        progress(f"bench sweep: the wedge rule on {name}")
+        out["wedge"][name] = scene.case(settings.base_pixels, profile="disk", rule="wedge", repeats=settings.repeats)
     progress("bench sweep: resolution")
     out["resolution"] = [scenes["pillar"].case(p, repeats=settings.repeats) for p in settings.resolutions]
     progress("bench sweep: profile and dtype")
@@ -50,6 +72,7 @@ def run_sweep(settings: SweepSettings, fit: bool = True, progress=print) -> dict
     progress("bench sweep: Table 1 (expansion ratios)")
     from .table1 import bench_table1
     out["table1"] = bench_table1(pixels=settings.table1_pixels, samples=settings.table1_samples)
+    out["mitsuba_setups"] = mitsuba_setups_sweep(scenes, settings, progress)
     out["mitsuba"] = mitsuba_sweep(scenes, out, settings, progress)
     progress("bench sweep: scaling against faces and pixels")
     from .scaling import bench_scaling
@@ -82,6 +105,21 @@ def mitsuba_sweep(scenes: dict, out: dict, settings: SweepSettings, progress=pri
             targets["softshadow (wedge)"] = out["wedge"][name]
         result[name] = bench_mitsuba(scenes[name], settings.mitsuba_spps, repeats=1, targets=targets)
     return result
+
+
+def mitsuba_setups_sweep(scenes: dict, settings: SweepSettings, progress=print) -> dict:
+    """Mitsuba's set-ups (``MITSUBA_SETUPS``) against each other on ``settings.mitsuba_meshes`` at
+    64 spp (4 quick; mitsuba_peer.compare_setups), or {"skipped": ...}."""
+    from .mitsuba_peer import compare_setups, mitsuba_available
+    if not mitsuba_available():
+        return {"skipped": "mitsuba not installed"}
+    setups = _mitsuba_setups()
+    out = {}
+    for name in settings.mitsuba_meshes:
+        progress(f"bench sweep: Mitsuba's set-ups on {name}")
+        out[name] = compare_setups(scenes[name], setups, 4 if settings.quick else 64,
+                                   repeats=1)
+    return out
 
 
 def fit_samples_sweep(settings: SweepSettings) -> list[dict]:

@@ -170,6 +170,80 @@ def test_time_mitsuba_needs_is_interpolated_or_extrapolated():
     far = time_to_reach(t, e, 0.005)
     assert far["ms"] == pytest.approx(640.0) and far["how"].startswith("extrapolated")
     assert time_to_reach(t, e, 0.05)["how"] == "at the fewest samples measured"
+    # Above a floor of 0.006 only the noise part falls: (0.01^2 - 0.006^2) / (0.008^2 - 0.006^2) x 160 ms.
+    hit = time_to_reach(t, e, 0.008, floor=0.006)
+    assert hit["ms"] == pytest.approx(160.0 * (1e-4 - 3.6e-5) / (6.4e-5 - 3.6e-5)) and "floor" in hit["how"]
+    below = time_to_reach(t, e, 0.005, floor=0.006)
+    assert below["ms"] is None and below["how"].startswith("not reached") and below["at_least_ms"] == 160.0
+    assert time_to_reach(t, e, 0.02, floor=0.006)["how"] == "interpolated"  # measured points need no model
+
+
+def test_mitsuba_report_states_a_floor_and_a_lower_bound():
+    from benchmarks.speed_report import _mitsuba_section
+    case = {"spp": 64, "pixels": 32, "median_ms": 100.0, "noise_rms_band": 0.003, "floor_rms_band": 0.005,
+            "error": {"rms": 0.001, "rms_band": 0.0058, "max_abs": 0.1}}
+    reach = {"rms_band": {"target": 0.004, "softshadow_ms": 2.0, "mitsuba_ms": None, "ratio": None,
+                          "ratio_at_least": 50.0, "how": "not reached: below Mitsuba's floor 0.0050 against this truth"},
+             "noise_band": {"target": 0.004, "softshadow_ms": 2.0, "mitsuba_ms": 200.0, "ratio": 100.0,
+                            "how": "interpolated"}}
+    run = {"variant": "llvm_ad_rgb", "setup_label": "disk sun", "reference_noise_rms_band": 0.003,
+           "cases": [case], "time_to_reach": {"softshadow (wedge)": reach}}
+    text = "\n".join(_mitsuba_section({"dragon": run}))
+    assert "| dragon | softshadow (wedge) | penumbra band | 0.0040 | 2.0 | not reached |" in text and "| > 50 |" in text
+    assert "penumbra band, Mitsuba's noise only | 0.0040 | 2.0 | 200 | interpolated | 100 |" in text
+    assert "differ by 0.0040 (RMS, band)" in text  # sqrt(0.005^2 - 0.003^2)
+
+
+def test_mitsuba_setup_checks_its_options_and_names_itself():
+    from benchmarks.mitsuba_peer import EFFICIENT, PLAIN, MitsubaSetup
+    with pytest.raises(ValueError, match="sun_share must be in"):
+        MitsubaSetup(sun_share=1.0)
+    with pytest.raises(ValueError, match="disk sun only"):
+        MitsubaSetup(sun="envmap", sun_share=0.5)
+    assert PLAIN.label == "disk sun, ldsampler"
+    assert EFFICIENT.label == "disk sun, multijitter, sun share 0.8, 4 light + 1 BSDF samples"
+
+
+def test_envmap_sun_holds_the_disks_irradiance_and_points_at_the_sun():
+    """The environment map's sun (whole rows around the map's pole, bilinear between rows) has the
+    irradiance of a uniform disk of the sun's radius, and its pole is turned onto the sun."""
+    import math
+    from data_synth import SunSky
+    from benchmarks.mitsuba_peer import _envmap_rows, _envmap_sun_integral, _sun_sky_envmap
+    r = math.radians(0.2665)
+    h, weight = _envmap_rows(r)
+    assert weight[:17].all() and not weight[17:].any()
+    edge = 16.5 * math.pi / (h - 1)  # half-way between the last lit row and the first dark one
+    assert edge == pytest.approx(r, rel=2e-3)
+    disk = math.pi * math.sin(r) ** 2  # integral of cos over a cone of half-angle r
+    assert _envmap_sun_integral(r) == pytest.approx(disk, rel=1e-3)
+    light = SunSky.from_rho(200.0, 40.0, 0.2)
+    img, to_world = _sun_sky_envmap(light)
+    assert img.shape[0] == h and img.shape[2] == 3
+    np.testing.assert_allclose(img[-1], light.sky_radiance, rtol=1e-6)  # the sky alone away from the sun
+    np.testing.assert_allclose(to_world[:3, 1], light.direction, atol=1e-12)  # local +y, the pole
+    np.testing.assert_allclose(to_world[:3, :3].T @ to_world[:3, :3], np.eye(3), atol=1e-12)
+    assert np.linalg.det(to_world[:3, :3]) == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("setup_kw", [dict(sun="envmap", sampler="multijitter"),
+                                      dict(sampler="multijitter", sun_share=0.8, emitter_samples=4),
+                                      dict(sampler="independent", mono=True)])
+def test_mitsuba_setups_light_open_ground_alike(setup_kw):
+    """Where Mitsuba is installed: every set-up's scene loads and lights open ground at the
+    renderer's unit shading (1), away from the object."""
+    pytest.importorskip("mitsuba")
+    import trimesh
+    from data_synth import SunSky
+    from softshadow import GroundGrid
+    from benchmarks.mitsuba_peer import MitsubaScene, MitsubaSetup, mitsuba_variant
+    setup = MitsubaSetup(**setup_kw)
+    far_box = trimesh.creation.box(extents=(0.05, 0.05, 0.05))
+    far_box.apply_translation((50.0, 50.0, 0.025))
+    ms = MitsubaScene(far_box, SunSky.from_rho(200.0, 40.0, 0.2), GroundGrid.around((0.0, 0.0), 1.0, 16), setup)
+    assert mitsuba_variant(mono=setup.mono) in ("llvm_ad_mono", "llvm_ad_rgb", "scalar_rgb")
+    img = ms.render(64)
+    assert img.shape == (16, 16) and abs(img.mean() - 1.0) < 0.02
 
 
 def test_mitsuba_peer_renders_the_bench_scene(tmp_path, monkeypatch):
@@ -188,6 +262,23 @@ def test_mitsuba_peer_renders_the_bench_scene(tmp_path, monkeypatch):
     assert run["variant"] in ("llvm_ad_rgb", "scalar_rgb") and [c["spp"] for c in run["cases"]] == [16, 64]
     # The same scene: a mirrored or misplaced shadow would read tenths, not hundredths.
     assert errs[1] < 0.03 and run["time_to_reach"]["x"]["rms"]["mitsuba_ms"] > 0
+    for c in run["cases"]:  # two independent renders: noise, and the error that is not noise
+        assert 0 < c["noise_rms_band"] and c["floor_rms_band"] ** 2 <= c["error"]["rms_band"] ** 2 + 1e-15
+    assert run["setup_label"] == "disk sun, multijitter, sun share 0.8, 4 light + 1 BSDF samples"
+
+
+def test_mitsuba_setups_compared_round_robin(tmp_path, monkeypatch):
+    pytest.importorskip("mitsuba")
+    from benchmarks.meshes import bench_mesh
+    from benchmarks.mitsuba_peer import EFFICIENT, PLAIN, compare_setups
+    from benchmarks.scenes import BenchScene, SweepSettings
+    monkeypatch.setenv("SOFTSHADOW_BENCH_CACHE", str(tmp_path / "cache"))
+    s = SweepSettings.tiny()
+    s.reference_pixels, s.reference_samples = 32, 64
+    scene = BenchScene(bench_mesh("pillar"), s, name="pillar")
+    rows = compare_setups(scene, {"plain": PLAIN, "efficient": EFFICIENT}, 16, repeats=1)
+    assert [r["name"] for r in rows] == ["plain", "efficient"] and rows[0]["efficiency"] == pytest.approx(1.0)
+    assert all(r["median_ms"] > 0 and r["noise_rms_band"] > 0 and r["error"]["rms"] < 0.1 for r in rows)
 
 
 def test_truth_traces_the_sky_next_to_walls_where_the_sky_map_is_coarse():
