@@ -153,6 +153,12 @@ def _run_bench(args, progress) -> int:
         from .startup import bench_startup, write_startup_report
         result = _run_and_report(lambda: {"startup": bench_startup(quick=args.quick, progress=progress)},
                                  write_startup_report, result, args.json_path, getattr(args, "report", None))
+    if args.what == "dragon-fit":
+        from .dragon_fit import bench_dragon_fit
+        from .environment import environment, load_average
+        result = {"environment": environment(), **result}
+        result["dragon_fit"] = bench_dragon_fit(quick=args.quick, progress=progress)
+        result["environment"]["load_average_at_end"] = load_average()
     if args.what == "floor":
         from .floor import bench_floor
         result["floor"] = bench_floor(quick=args.quick, progress=progress)

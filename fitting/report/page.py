@@ -102,6 +102,7 @@ def _group_section(group: Mapping, out_dir: Path) -> str:
     details = [("rmse", group.get("rmse")), ("profiles", group.get("n_profiles")),
                ("samples", group.get("n_samples")), ("penumbra (px)", group.get("penumbra_px")),
                ("blur (px)", group.get("blur_px")), ("profile", group.get("profile")),
+               ("rule", group.get("rule")), ("rule criterion", group.get("rule_criterion")),
                ("sun from", group.get("sun_source")), ("mesh faces fitted", group.get("lod_faces")),
                ("seconds", group.get("seconds"))]
     shown = [f"{name} {_fmt(v) if isinstance(v, float) else html.escape(str(v))}"

@@ -76,7 +76,9 @@ class SunUsed:
 @dataclasses.dataclass(frozen=True)
 class FitDiagnostics:
     """How the fit went: rmse (relative residual), n_profiles and n_samples, converged, the
-    penumbra profile ("linear" or "disk"), blur_px (the photos' camera blur, root mean square),
+    penumbra profile ("linear" or "disk"), the rule that drew it ("edge", "paper" or "wedge",
+    ``fitting.solve.rule_choice``) and, when the fit chose it, rule_criterion (the RMS difference
+    of the two rules' shading at the samples over the photos' noise), blur_px (the photos' camera blur, root mean square),
     the penumbra's median width and interquartile range in pixels (and metres, top-down without
     geometry), the worst camera registration (px), the level of detail fitted (faces of the
     mesh's), and the seconds spent (``solve_seconds``: the least-squares part)."""
@@ -86,6 +88,8 @@ class FitDiagnostics:
     n_samples: int = 0
     converged: bool = False
     profile: str | None = None
+    rule: str | None = None
+    rule_criterion: float | None = None
     blur_px: float | None = None
     penumbra_px: float | None = None
     penumbra_px_iqr: float | None = None
@@ -163,6 +167,8 @@ class GroupResult:
     n_samples = _part("diagnostics", "n_samples")
     converged = _part("diagnostics", "converged")
     profile = _part("diagnostics", "profile")
+    rule = _part("diagnostics", "rule")
+    rule_criterion = _part("diagnostics", "rule_criterion")
     blur_px = _part("diagnostics", "blur_px")
     penumbra_px = _part("diagnostics", "penumbra_px")
     penumbra_px_iqr = _part("diagnostics", "penumbra_px_iqr")
@@ -205,6 +211,7 @@ class GroupResult:
         optional = {"range_stderr_stat": _num(self.range_stderr_stat), "rho_stderr_stat": _num(self.rho_stderr_stat),
                     "range_stderr_sys": _num(self.range_stderr_sys), "rho_stderr_sys": _num(self.rho_stderr_sys),
                     "sun_source": self.sun_source, "profile": d.profile,
+                    "rule": d.rule, "rule_criterion": _num(d.rule_criterion),
                     "blur_px": _num(d.blur_px), "n_samples": d.n_samples or None,
                     "penumbra_px": _num(d.penumbra_px),
                     "penumbra_px_iqr": _num(d.penumbra_px_iqr),

@@ -29,6 +29,7 @@ from softshadow.internal import bucket_size, concatenate_plans
 from .model import (K_SCALE, FitConfig, FitParams, GroupArrays, Prediction, angular_pixel_gradient, predict,
                     raw_from_k, raw_from_rho, residuals, residuals_of)
 from .options import FitOptions
+from .rule_choice import RuleChoice, choose_rule, sampling_rule, wedge_available, wedge_footprints, wedge_plan
 from ..report.overlay import fitted_alpha_image
 from ..samples.receiver_light import shadow_factor
 from ..report.results import FitDiagnostics, GroupResult, OverlayPlotData, PlotData, ProfilePlotData, SunUsed
@@ -84,6 +85,16 @@ def _group_arrays(samples: list[PhotoSamples], views: list[PhotoView]) -> GroupA
                                         else np.zeros(len(s.observed)) for s in samples]))),
         sun_cos=jnp.asarray(pad(cat([s.sun_cos if s.sun_cos is not None
                                      else np.ones(len(s.observed)) for s in samples]), 1.0)))
+
+
+def _with_wedge(arrays: GroupArrays, model: SoftShadowModel, pose: Pose, samples: list[PhotoSamples],
+                views: list[PhotoView], options: FitOptions, params: FitParams, config: FitConfig) -> GroupArrays:
+    """The arrays with the ``wedge`` rule's plan at the samples, over each pixel widened by its
+    photo's camera blur in the fit (params, config) it follows (``rule_choice.wedge_footprints``)."""
+    blur = np.asarray(params.raw_blur, np.float64).reshape(-1) * float(config.fit_blur)
+    axes = wedge_footprints(samples, blur, int(arrays.observed.shape[0]))
+    return dataclasses.replace(arrays, wedge_plan=wedge_plan(model, pose, samples, views, options.range_k_max, axes),
+                               wedge_axes=jnp.asarray(axes))
 
 
 def sample_views(model: SoftShadowModel, pose: Pose, views: list[PhotoView], options: FitOptions,
@@ -242,10 +253,11 @@ def robust_delta(r: np.ndarray, robust: bool) -> float:
     return float(max(3.0 * sigma, 1e-6)) if robust else 0.0
 
 
-def plain_config(options: FitOptions, fit_sun: bool) -> FitConfig:
+def plain_config(options: FitOptions, fit_sun: bool, rule: str | None = None) -> FitConfig:
     """The first solve's configuration: the first candidate profile, blur free when allowed,
-    plain least squares (no robust loss)."""
-    return FitConfig.make(options.profiles[0], True in options.blur, fit_sun, 0.0, options.rule)
+    plain least squares (no robust loss); rule: default the options' sampling rule (``edge`` for
+    the ``wedge`` and ``auto`` rules, whose plan follows this solve: ``fit_group``)."""
+    return FitConfig.make(options.profiles[0], True in options.blur, fit_sun, 0.0, rule or sampling_rule(options.rule))
 
 
 def start_grid(options: FitOptions):
@@ -253,12 +265,13 @@ def start_grid(options: FitOptions):
     return jnp.asarray(raw_from_k(np.geomspace(5e-4, options.range_k_max, 9)))
 
 
-def plain_start(arrays: GroupArrays, pose: Pose, base: FitParams, options: FitOptions, fit_sun: bool
-                ) -> tuple[Solution, GroupArrays, float]:
+def plain_start(arrays: GroupArrays, pose: Pose, base: FitParams, options: FitOptions, fit_sun: bool,
+                rule: str | None = None) -> tuple[Solution, GroupArrays, float]:
     """Step 2b: a plain least-squares pass (blur free) from the best k of a coarse log grid
     (the loss is flat where the band misses the penumbra). Returns its solution, the arrays
-    with their |dT/dpixel|, and the robust loss's scale it sets (``robust_delta``)."""
-    sol = _to_numpy(_solve(base, (arrays, pose, plain_config(options, fit_sun)), options.max_steps,
+    with their |dT/dpixel|, and the robust loss's scale it sets (``robust_delta``). rule: as
+    ``plain_config``."""
+    sol = _to_numpy(_solve(base, (arrays, pose, plain_config(options, fit_sun, rule)), options.max_steps,
                            start_grid(options), jnp.asarray(True)))
     arrays = dataclasses.replace(arrays, grad_t_pixel=jnp.asarray(sol.grad_t_pixel))
     return sol, arrays, robust_delta(sol.residuals, options.robust)
@@ -278,21 +291,23 @@ def covariance(r: np.ndarray, jac: np.ndarray, n_eff: int) -> tuple[np.ndarray, 
 
 
 def choose_model(arrays: GroupArrays, pose: Pose, start: FitParams, options: FitOptions, fit_sun: bool,
-                 delta: float, n_eff: int, log=None) -> tuple[Trial, np.ndarray, float]:
+                 delta: float, n_eff: int, log=None, rule: str | None = None) -> tuple[Trial, np.ndarray, float]:
     """Step 3: the robust fit of each candidate profile (blur free), the lowest BIC kept;
     then blur kept or dropped by BIC. Returns the best trial, its covariance and s2.
 
-    log: called with a line per solve when given."""
+    log: called with a line per solve when given; rule: the penumbra's rule (default the
+    options' sampling rule, ``sampling_rule``)."""
     n_photos = start.n_photos
+    rule = rule or sampling_rule(options.rule)
     grid = jnp.zeros(9)  # not used after the first solve (``prepare`` off)
 
     def run(profile, blur, init):
-        cfg = FitConfig.make(profile, blur, fit_sun, delta, options.rule)
+        cfg = FitConfig.make(profile, blur, fit_sun, delta, rule)
         sol = _to_numpy(_solve(init, (arrays, pose, cfg), options.max_steps, grid, jnp.asarray(False)))
         rss = float(sol.residuals @ sol.residuals)
         bic = _bic(rss, n_eff, _n_free(cfg, n_photos))
         if log:
-            log(f"profile {profile} blur {blur}: {sol.steps} steps, ok {sol.converged}, BIC {bic:.1f}")
+            log(f"rule {rule} profile {profile} blur {blur}: {sol.steps} steps, ok {sol.converged}, BIC {bic:.1f}")
         return Trial(bic, rss, cfg, sol)
 
     blur_first = True in options.blur
@@ -312,7 +327,7 @@ def choose_model(arrays: GroupArrays, pose: Pose, start: FitParams, options: Fit
         inv_jtj = cov[i_blur, i_blur] / max(s2, 1e-300)
         raw_blur = np.asarray(best.solution.params.raw_blur, dtype=np.float64).reshape(-1)
         rss_no_blur = best.rss + float(raw_blur @ np.linalg.pinv(inv_jtj, rcond=COV_RCOND) @ raw_blur)
-        no_blur_cfg = FitConfig.make(best.config.profile, False, fit_sun, delta, options.rule)
+        no_blur_cfg = FitConfig.make(best.config.profile, False, fit_sun, delta, rule)
         bic_no_blur = _bic(rss_no_blur, n_eff, _n_free(no_blur_cfg, n_photos))
         if log:
             log(f"BIC without blur, to second order: {bic_no_blur:.1f}")
@@ -435,6 +450,8 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
     else the samples are drawn here."""
     options = options or FitOptions()
     start = _time.perf_counter()
+    if model.rule == "wedge":  # samples and the nearest edges come from the edge rule's plan
+        model = model.with_options(rule=sampling_rule(options.rule))
     names = [v.name for v in views]
     if samples is not None and tuple(samples[0]) == tuple(names):
         samples, used, no_shadow = samples[1], samples[2], list(samples[3])
@@ -450,9 +467,30 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
     arrays = _group_arrays(samples, used)
     n_eff = sum(len(s.observed) for s in samples)
     base, _ = initial_params(samples)
-    plain, arrays, delta = plain_start(arrays, pose, base, options, fit_sun)
+    # The wedge and auto rules start as the edge rule does: its solve sets the camera blur the
+    # wedge rule's plan is made for (``_with_wedge``).
+    rule = sampling_rule(options.rule)
+    plain, arrays, delta = plain_start(arrays, pose, base, options, fit_sun, rule)
     log = (lambda line: print(f"  {label}: {line}")) if options.verbose else None
-    best, cov, _ = choose_model(arrays, pose, plain.params, options, fit_sun, delta, n_eff, log)
+    wedge = options.rule in ("wedge", "auto") and wedge_available(used)
+    if options.rule == "wedge" and wedge:
+        arrays = _with_wedge(arrays, model, pose, samples, used, options, plain.params, plain_config(options, fit_sun))
+        best, cov, _ = choose_model(arrays, pose, plain.params, options, fit_sun, delta, n_eff, log, "wedge")
+        choice = RuleChoice("wedge", reason="asked for")
+    else:
+        best, cov, _ = choose_model(arrays, pose, plain.params, options, fit_sun, delta, n_eff, log, rule)
+        if options.rule == "auto" and wedge:
+            arrays = _with_wedge(arrays, model, pose, samples, used, options, best.solution.params, best.config)
+            choice = choose_rule(best.solution.params, best.config, arrays, pose, best.solution.prediction,
+                                 best.solution.jacobian, cov, n_eff)
+            if choice.rule == "wedge":
+                best, cov, _ = choose_model(arrays, pose, best.solution.params, options, fit_sun, delta, n_eff, log,
+                                            "wedge")
+        else:
+            choice = RuleChoice(rule, reason="asked for" if rule == options.rule else
+                                "the wedge rule needs the ground plane as receiver")
+    if log:
+        log(f"rule {choice.rule}: {choice.reason}")
     sol, cfg = best.solution, best.config
     clusters = edge_clusters([s.profile_id for s in samples], len(sol.residuals))
     sun_free = None if fit_sun else _sun_free(sol, cfg, arrays, pose, options, float(used[0].sun_elevation_deg))
@@ -492,7 +530,8 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
     registration = [v.reprojection_error_px for v in used if v.reprojection_error_px is not None]
     diagnostics = FitDiagnostics(
         rmse=float(np.sqrt(best.rss / n_eff)), n_profiles=evidence.n_profiles, n_samples=n_eff,
-        converged=bool(sol.converged), profile=cfg.profile, blur_px=blur_px, penumbra_px=penumbra_px,
+        converged=bool(sol.converged), profile=cfg.profile, rule=cfg.rule, rule_criterion=choice.criterion,
+        blur_px=blur_px, penumbra_px=penumbra_px,
         penumbra_px_iqr=penumbra_iqr, reprojection_error_px=max(registration) if registration else None,
         seconds=_time.perf_counter() - start, solve_seconds=solve_seconds)
     sun = SunUsed(float(used[0].sun_azimuth_deg) + float(d[0]), float(used[0].sun_elevation_deg) + float(d[1]),

@@ -54,6 +54,7 @@ from softshadow.internal import Occluder, bucket_size, concatenate_plans, defaul
 
 from ..samples.ground import select_samples
 from ..samples.photo_samples import PhotoSamples
+from .options import sampling_rule
 from .uncertainty import LOD_FLOOR, systematic_errors
 from ..photos.views import PhotoView
 
@@ -440,6 +441,7 @@ def levels_of_detail(mesh: trimesh.Trimesh, rule: str = "edge") -> LevelsOfDetai
     and faces) for the next fit of the same mesh, up to ``_KEPT_MESHES`` meshes: building the
     full mesh's occluder (0.3 s for the 41k-face dragon) and decimating a level (0.1-0.2 s) are
     paid once per process, not once per fit."""
+    rule = sampling_rule(rule)  # the wedge and auto fits sample (and choose levels) with the edge rule
     key = _mesh_key(mesh, rule)
     with _kept_lock:
         if key in _kept:

@@ -19,6 +19,10 @@ pixel's 1/12), one per photo: photos of one group are shot with different focus
 and shake, and with a penumbra of one or two pixels a blur shared by all of them
 is confounded with k (3 photos blurred 0.61/0.66/0.87 px read k 65 % high with
 one blur, within 1 % with the same blur in all three).
+
+With the ``wedge`` rule (``FitConfig.rule``) alpha is the blurred profile of the nearest edge (the
+``edge`` rule's u) plus ``wedge_excess``: the wedge rule's pixel mean less the edge rule's, 0 along
+a lone straight edge, so the fit's blur, slope and u keep their meaning.
 """
 
 from __future__ import annotations
@@ -31,14 +35,14 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int
 
-from softshadow import Pose, blurred_profile_alpha, light_direction
-from softshadow.internal import PROFILES, PointPlan, plan_coordinate_light
+from softshadow import Pose, Sun, blurred_profile_alpha, light_direction
+from softshadow.internal import PROFILES, PointPlan, plan_alpha, plan_coordinate_light
 
 from ..samples.receiver_light import shadow_factor
 
 __all__ = ["GroupArrays", "FitConfig", "FitParams", "Prediction", "K_SCALE", "k_from_raw", "raw_from_k", "rho_from_raw",
            "raw_from_rho", "predict", "angular_pixel_gradient", "residuals", "pseudo_huber",
-           "sample_light", "edge_terms", "shadow_terms", "residuals_of"]
+           "sample_light", "edge_terms", "shadow_terms", "residuals_of", "coordinate_rule", "wedge_excess"]
 
 K_SCALE = 0.01
 
@@ -68,7 +72,9 @@ class GroupArrays(eqx.Module):
     albedo_class (n,); uv_norm (n, 2); plan: one plan for all photos (their edges
     stacked); sun_azimuth_deg, sun_elevation_deg, scale (P,) per photo;
     grad_t_pixel (n,) |dT/dpixel| at the start; sky_hidden (n,) the sky fraction the object
-    hides from each sample (``softshadow.sky``).
+    hides from each sample (``softshadow.sky``); wedge_plan: the ``wedge`` rule's plan at the same
+    samples (its own edges; None when the fit does not use that rule), planned over the footprints
+    wedge_axes (n, 2, 3): each sample's pixel widened by its photo's camera blur (``wedge_excess``).
     """
 
     ground: Float[Array, "n 3"]
@@ -85,6 +91,8 @@ class GroupArrays(eqx.Module):
     grad_t_pixel: Float[Array, " n"]
     sky_hidden: Float[Array, " n"]
     sun_cos: Float[Array, " n"]
+    wedge_plan: PointPlan | None = None
+    wedge_axes: Float[Array, "n 2 3"] | None = None
 
 
 class FitParams(eqx.Module):
@@ -180,7 +188,7 @@ def angular_pixel_gradient(group: GroupArrays, pose: Pose, k, rule: str = "edge"
     light = sample_light(group, jnp.zeros(2), 0.0)
 
     def coord(points):
-        return plan_coordinate_light(points, group.plan, pose, light, k, rule, with_slope=True)
+        return plan_coordinate_light(points, group.plan, pose, light, k, coordinate_rule(rule), with_slope=True)
 
     # Along the receiver's two pixel directions (the columns of d(point)/d(col, row)) in one
     # batched JVP: one trace of the edge geometry, and any receiver surface (not only z = 0).
@@ -206,14 +214,56 @@ def _edge_terms_per_sample(geometry: Float[Array, "3"], raw_blur: Float[Array, "
     """``edge_terms`` from raw_k and the sun corrections (3,) and each sample's own raw blur (n,)."""
     k = k_from_raw(geometry[0])
     light = sample_light(group, geometry[1:3], config.fit_sun)
-    u, dudt = plan_coordinate_light(group.ground, group.plan, pose, light, k, config.rule,
+    u, dudt = plan_coordinate_light(group.ground, group.plan, pose, light, k, coordinate_rule(config.rule),
                                     with_slope=True)
     # Blur variance (px^2) added to the pixel's own 1/12, free in sign so that "no blur" is an
     # interior point (a regular minimum, quick to converge) rather than a boundary.
     variance = 1.0 / 12.0 + config.fit_blur * raw_blur
     slope = dudt * group.grad_t_pixel
     tau = jnp.sqrt(jnp.maximum(variance, 1e-3)) * slope
-    return blurred_profile_alpha(u, tau, config.profile), u, slope
+    alpha = blurred_profile_alpha(u, tau, config.profile)
+    if config.rule == "wedge":
+        alpha = jnp.clip(alpha + wedge_excess(group, pose, light, k, config.profile), 0.0, 1.0)
+    return alpha, u, slope
+
+
+def coordinate_rule(rule: str) -> str:
+    """The rule whose penumbra coordinate u the fit uses: the ``wedge`` rule's alpha is the nearest
+    edge's (``edge`` rule) plus ``wedge_excess``, so u, the pixel's slope and the blur are the edge
+    rule's there."""
+    return "edge" if rule == "wedge" else rule
+
+
+class _SampleSun(Sun):
+    """A sun whose light direction is given per sample (n, 3) (each photo's sun with the fit's
+    correction); ``plan_alpha`` reads only ``light``."""
+
+    per_sample: Float[Array, "n 3"]
+
+    def __init__(self, per_sample):
+        super().__init__(180.0, 45.0)
+        self.per_sample = per_sample
+
+    @property
+    def light(self):
+        return self.per_sample
+
+
+def wedge_excess(group: GroupArrays, pose: Pose, light: Float[Array, "n 3"], k, profile: str) -> Float[Array, " n"]:
+    """The ``wedge`` rule's alpha less the nearest edge's (``edge`` rule), both as means over each
+    sample's footprint ``group.wedge_axes`` (n,): 0 where one straight edge governs it (the two
+    means are the same there), and what crowded edges change elsewhere (gaps narrower than the
+    penumbra, overlapping parts, corners). The footprint is the pixel widened to the variance of
+    the pixel and its photo's camera blur (a box of side sqrt(1 + 12 b^2) pixels, b the blur of
+    the edge fit the wedge plan was made after), so the excess is seen through about the blur the
+    nearest edge's ramp is (``blurred_profile_alpha``, with the fit's own blur)."""
+    if group.wedge_plan is None or group.wedge_axes is None:
+        raise ValueError("the wedge rule needs the samples' wedge plan (GroupArrays.wedge_plan, wedge_axes)")
+    axes = group.wedge_axes
+    sun = _SampleSun(light)
+    wedge = plan_alpha(group.ground, group.wedge_plan, pose, sun, k, "wedge", profile, pixel_axes=axes)
+    edge = plan_alpha(group.ground, group.plan, pose, sun, k, "edge", profile, pixel_axes=axes)
+    return wedge - edge
 
 
 def edge_terms(shape: Float[Array, " shape"], group: GroupArrays, pose: Pose, config: FitConfig):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Literal
 
-__all__ = ["FitOptions"]
+__all__ = ["FitOptions", "sampling_rule"]
 
 
 @dataclasses.dataclass
@@ -19,7 +19,10 @@ class FitOptions:
 
     profiles: tuple[Literal["linear", "disk"], ...] = ("disk",)
     blur: tuple[bool, ...] = (False, True)
-    rule: Literal["edge", "paper", "wedge"] = "edge"
+    # The penumbra's rule: "edge" (the ramp about the nearest silhouette edge), "paper" (the seed's
+    # expanded volume), "wedge" (the sun's hidden fraction), or "auto": "edge", refitted with "wedge"
+    # where the two differ by more than the photos' noise (``fitting.solve.rule_choice``).
+    rule: Literal["edge", "paper", "wedge", "auto"] = "edge"
     range_k_max: float = 0.03
     max_samples_per_photo: int = 1300  # three photos fill a 4,096 bucket
     robust: bool = True
@@ -34,3 +37,9 @@ class FitOptions:
     # a face count (that level, decimated).
     lod: Literal["auto", "off"] | int = "auto"
     lod_tolerance: float = 0.1
+
+
+def sampling_rule(rule: str) -> Literal["edge", "paper"]:
+    """The rule of the model the samples are drawn (and the plan's nearest edges chosen) with: the
+    ``wedge`` and ``auto`` fits draw them as the ``edge`` rule does."""
+    return "paper" if rule == "paper" else "edge"
