@@ -143,7 +143,12 @@ def test_small_end_to_end_fit_on_the_receiver(tmp_path, preset, size):
     (g,) = fit_folder(folder, options=FitOptions(plots=False)).groups
     assert g.error is None, g.error
     assert abs(g.rho - truth["rho"]) < 0.02
-    assert abs(math.log(g.range_k / truth["range_k"])) < math.log(2.0)
+    if g.identifiable:
+        assert abs(math.log(g.range_k / truth["range_k"])) < math.log(2.0)
+    else:
+        # A penumbra under the photo's blur spot: range_k is an upper bound, above the truth and
+        # still telling (the k whose penumbra would fill the spot).
+        assert truth["range_k"] <= g.range_k < 4.0 * truth["range_k"], g.warnings
 
 
 def test_a_receiver_it_cannot_model_is_refused(tmp_path):
