@@ -117,3 +117,13 @@ def k_zero_and_near_maps(mdl, sun, pose, grid):
     from softshadow import ShadowParams
     return tuple(np.asarray(mdl.ground_map(ShadowParams(k, 0.3), sun, pose, grid,
                                            plan=fixed_shape_grid_plan(mdl, sun, pose, grid, k))) for k in (0.0, 1e-7))
+
+
+def assert_jacobian_matches_central_differences(fn, x: np.ndarray, jac: np.ndarray, h: float = 1e-6) -> None:
+    """Each column of ``jac`` (n, p), the Jacobian of ``fn`` (p,) -> (n,) at ``x``, against central
+    differences of step ``h``, to 2e-6 of the column's largest difference (at least 2e-6)."""
+    for i in range(len(x)):
+        e = np.zeros(len(x))
+        e[i] = h
+        fd = (np.asarray(fn(x + e)) - np.asarray(fn(x - e))) / (2 * h)
+        np.testing.assert_allclose(jac[:, i], fd, atol=2e-6 * max(1.0, np.abs(fd).max()), err_msg=f"column {i}")
