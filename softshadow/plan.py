@@ -28,7 +28,7 @@ from .shadowmap import LightFrame, depth_bias, faces_away, shadow_map
 from .wedge_plan import (REACH_MARGIN, WedgeArrays, WedgeEdges, arrangement, concatenate_wedge, gather_candidates,
                          wedge_edges)
 
-__all__ = ["EdgeSet", "PointPlan", "GridPlan", "plan_points", "plan_grid", "concatenate_plans",
+__all__ = ["EDGE_PADDING", "EdgeSet", "PointPlan", "GridPlan", "plan_points", "plan_grid", "concatenate_plans",
            "edge_band_widths", "bucket_size", "grid_bucket_size", "light_band_widths", "BACKENDS"]
 
 MAX_RASTER_SIDE = 2048
@@ -94,27 +94,32 @@ def edge_band_widths(world_a: np.ndarray, world_b: np.ndarray, outward: np.ndarr
     return height * np.hypot(r[:, 0], r[:, 1])
 
 
+#: What a padding edge holds in each ``EdgeSet`` field: a unit segment, never referenced.
+EDGE_PADDING = {"vertices_local": np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]), "outward_sign": 1.0,
+                "paper_normal_local": np.array([0.0, 0.0, 1.0]), "neighbours": -1, "jump": 0.0}
+
+
 def _pack_edges(occ: Occluder, sil, dtype=np.float64, raster: ShadowRaster | None = None,
                 jump: np.ndarray | None = None) -> EdgeSet:
     """The silhouette's EdgeSet padded to a bucket, with the raster's outline neighbours (and
     the ``wedge`` rule's jumps, 0 on padding edges)."""
     s = len(sil.vertex_ids)
     size = bucket_size(s, 16)
-    neighbours = -np.ones((size, 2), np.int32)
+    neighbours = np.full((size, 2), EDGE_PADDING["neighbours"], np.int32)
     if raster is not None and raster.edge_neighbours is not None and s:
         neighbours[:s] = raster.edge_neighbours
-    verts = np.zeros((size, 2, 3), dtype)
-    verts[:, 1, 0] = 1.0  # padding edges are unit segments, never referenced
-    sign = np.ones(size, dtype)
-    paper = np.zeros((size, 3), dtype)
-    paper[:, 2] = 1.0
+    verts = np.empty((size, 2, 3), dtype)
+    verts[:] = EDGE_PADDING["vertices_local"]
+    sign = np.full(size, EDGE_PADDING["outward_sign"], dtype)
+    paper = np.empty((size, 3), dtype)
+    paper[:] = EDGE_PADDING["paper_normal_local"]
     if s:
         verts[:s] = occ.vertices[sil.vertex_ids]
         sign[:s] = sil.outward_sign
         paper[:s] = sil.paper_normal_local
     packed_jump = None
     if jump is not None:
-        packed_jump = np.zeros(size, dtype)
+        packed_jump = np.full(size, EDGE_PADDING["jump"], dtype)
         packed_jump[:s] = jump
     return EdgeSet(verts, sign, paper, neighbours, packed_jump)
 

@@ -44,7 +44,7 @@ from .dense_plan import DensePlan, plan_dense_points
 from .evaluate import plan_alpha_jit
 from .parallel_loops import parallel_numba
 from .params import Pose, Sun
-from .plan import EdgeSet, grid_bucket_size
+from .plan import EDGE_PADDING, EdgeSet, grid_bucket_size
 from .posed import PosedOccluder, posed_vertices
 from .projector import Projector, projector_shadow_map
 from .render import SoftShadowModel
@@ -404,24 +404,20 @@ def _edge_capacity(count: int) -> int:
 
 
 def _padded_edges(edges: EdgeSet, count: int, size: int) -> EdgeSet:
-    """The first ``count`` edges (the real ones) padded to ``size`` (>= count), as
-    ``plan._pack_edges`` pads them: padding edges are never referenced."""
+    """The first ``count`` edges (the real ones) padded to ``size`` (>= count) with
+    ``EDGE_PADDING``: padding edges are never referenced."""
     if size == len(edges.outward_sign):
         return edges
 
     def padded(path, a: np.ndarray) -> np.ndarray:
         out = np.empty((size, *a.shape[1:]), a.dtype)
-        out[count:] = _EDGE_PADDING[path[0].name]
+        out[count:] = EDGE_PADDING[path[0].name]
         out[:count] = a[:count]
         return out
 
     # By field (tree_map, not EdgeSet's constructor and its checks: see band_alpha).
     return jax.tree_util.tree_map_with_path(padded, edges)
 
-
-#: What ``plan._pack_edges`` puts in the padding edges' fields (unit segments).
-_EDGE_PADDING = {"vertices_local": np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]), "outward_sign": 1.0,
-                 "paper_normal_local": np.array([0.0, 0.0, 1.0]), "neighbours": -1, "jump": 0.0}
 
 
 def _shade(shading: tuple, light, background, image: np.ndarray, band: np.ndarray, alpha_band: np.ndarray) -> None:

@@ -26,7 +26,8 @@ from scipy.stats import median_abs_deviation
 from softshadow import GroundGrid, Pose, SoftShadowModel, Sun
 from softshadow.internal import bucket_size, concatenate_plans
 
-from .model import (K_SCALE, FitConfig, FitParams, GroupArrays, Prediction, angular_pixel_gradient, predict,
+from .model import (K_SCALE, FitConfig, FitParams, GroupArrays, Prediction, angular_pixel_gradient, k_rho_slopes,
+                    predict,
                     raw_from_k, raw_from_rho, residuals, residuals_of)
 from .options import FitOptions
 from .rule_choice import RuleChoice, choose_rule, sampling_rule, wedge_available, wedge_footprints, wedge_plan
@@ -360,8 +361,7 @@ def k_rho_with_errors(params: FitParams, cov: np.ndarray) -> KRho:
     lay = FitParams.layout(params.n_photos)
     ik, ir = lay["raw_k"].start, lay["raw_rho"].start
     k, rho = _k_np(params.raw_k), _rho_np(params.raw_rho)
-    dk = K_SCALE * _rho_np(params.raw_k)  # d softplus = sigmoid
-    drho = rho * (1 - rho)
+    dk, drho = k_rho_slopes(params.raw_k, params.raw_rho)
     var_k, var_rho = cov[ik, ik] * dk ** 2, cov[ir, ir] * drho ** 2
     return KRho(k, rho, float(np.sqrt(max(var_k, 0.0))), float(np.sqrt(max(var_rho, 0.0))))
 

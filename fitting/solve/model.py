@@ -42,7 +42,7 @@ from ..samples.receiver_light import shadow_factor
 
 __all__ = ["GroupArrays", "FitConfig", "FitParams", "Prediction", "K_SCALE", "k_from_raw", "raw_from_k", "rho_from_raw",
            "raw_from_rho", "predict", "angular_pixel_gradient", "residuals", "pseudo_huber",
-           "sample_light", "edge_terms", "shadow_terms", "residuals_of", "coordinate_rule", "wedge_excess"]
+           "k_rho_slopes", "sample_light", "edge_terms", "shadow_terms", "residuals_of", "coordinate_rule", "wedge_excess"]
 
 K_SCALE = 0.01
 
@@ -63,6 +63,13 @@ def rho_from_raw(raw):
 def raw_from_rho(rho):
     rho = np.clip(np.asarray(rho, dtype=np.float64), 1e-6, 1 - 1e-6)
     return np.log(rho / (1 - rho))
+
+
+def k_rho_slopes(raw_k, raw_rho) -> tuple[float, float]:
+    """dk/draw_k and drho/draw_rho at the raw values (NumPy floats, after the solve): the
+    reparameterisation's first-order slopes, K_SCALE sigmoid(raw_k) and rho (1 - rho)."""
+    rho = 1.0 / (1.0 + np.exp(-float(raw_rho)))
+    return float(K_SCALE / (1.0 + np.exp(-float(raw_k)))), float(rho * (1.0 - rho))
 
 
 class GroupArrays(eqx.Module):

@@ -26,7 +26,7 @@ from softshadow import Pose, SoftShadowModel, Sun
 from softshadow.internal import PointPlan, bucket_size, concatenate_plans
 
 from .options import sampling_rule
-from .model import K_SCALE, FitConfig, FitParams, GroupArrays, Prediction, predict
+from .model import FitConfig, FitParams, GroupArrays, Prediction, k_rho_slopes, predict, pseudo_huber
 from ..photos.views import PhotoView
 from ..samples.photo_samples import PhotoSamples
 
@@ -110,10 +110,8 @@ def _values_alpha(params: FitParams, group: GroupArrays, pose: Pose, config: Fit
 
 
 def _transformed(r: np.ndarray, delta: float) -> np.ndarray:
-    """``model.pseudo_huber`` in NumPy (the residuals the solver minimises; delta 0: plain)."""
-    if delta <= 0:
-        return r
-    return r * np.sqrt(2.0 / (1.0 + np.sqrt(1.0 + (r / delta) ** 2)))
+    """The residuals the solver minimises: ``pseudo_huber``'s (delta 0: plain)."""
+    return np.asarray(pseudo_huber(r, delta), np.float64) if delta > 0 else r
 
 
 def choose_rule(params: FitParams, config: FitConfig, group: GroupArrays, pose: Pose, edge: Prediction,
@@ -141,10 +139,7 @@ def choose_rule(params: FitParams, config: FitConfig, group: GroupArrays, pose: 
     step = -(vt.T * np.where(keep, 1.0 / np.where(keep, sv, 1.0), 0.0)) @ (u.T @ (r_w - r_e))
     lay = FitParams.layout(params.n_photos)
     ik, ir = lay["raw_k"].start, lay["raw_rho"].start
-    raw_k, raw_rho = float(np.asarray(params.raw_k)), float(np.asarray(params.raw_rho))
-    dk = K_SCALE / (1.0 + np.exp(-raw_k))  # dk / draw_k (softplus' derivative)
-    rho = 1.0 / (1.0 + np.exp(-raw_rho))
-    drho = rho * (1.0 - rho)
+    dk, drho = k_rho_slopes(params.raw_k, params.raw_rho)
     se_k, se_rho = np.sqrt(max(cov[ik, ik], 0.0)) * dk, np.sqrt(max(cov[ir, ir], 0.0)) * drho
     k_move, rho_move = step[ik] * dk, step[ir] * drho
     criterion = float(max(abs(k_move) / max(se_k, 1e-300), abs(rho_move) / max(se_rho, 1e-300)))
