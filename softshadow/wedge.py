@@ -60,6 +60,7 @@ __all__ = ["gnomonic_segments", "pixel_hard_area", "pixel_mean_alpha", "pixel_se
 _DEPTH_MIN = 1e-7       # metres in front of the receiver at which segments are clipped
 _DEPTH_REL = 1e-6       # ... plus this fraction of the vertex's offset (L1 norm)
 _K_MIN = 1e-9           # the disk's radius (tan r) is at least this: keeps 1/k finite
+_SIDE_TOL = 1e-10       # |u| (sun radii, pixels) below this: the origin counts as on the line's lit side
 
 
 def _cross(ax, ay, bx, by):
@@ -127,29 +128,25 @@ def pixel_segments(points, a, b, flip, light, pixel_axes):
     """The segments' shadows on each pixel's plane, in pixel units (the pixel is the unit square
     about the point): v - x = al A + be B + t s along the sun's direction s, A and B the pixel's
     sides (pixel_axes (P, 2, 3)); points, a, b (P, 3); flip (P,) the plan's choice of direction
-    (covered side on the left; mirrored axes are swapped). Returns (ax, ay, bx, by) (P,); the part
-    on the far side of the plane from the sun (t < 0) is clipped off. The arithmetic of
+    (covered side on the left; mirrored axes are swapped). Returns (ax, ay, bx, by) (P,): the whole
+    segment projected along s, on either side of the plane (as the ground's hard shadow projects
+    the whole mesh; a hard cut at t = 0 would jump by a finite part of an edge lying in the plane,
+    the base of an object standing on it, when it tilts by a hair). The arithmetic of
     ``wedge_plan.arrangement``."""
     sg = jax.lax.stop_gradient
     light = jnp.asarray(light)
     s = tuple(-light[..., i] for i in range(3))
     A = tuple(pixel_axes[..., 0, i] for i in range(3))
     B = tuple(pixel_axes[..., 1, i] for i in range(3))
-    c_bs, c_sa, c_ab = _cross3(B, s), _cross3(s, A), _cross3(A, B)
+    c_bs, c_sa = _cross3(B, s), _cross3(s, A)
     det = _dot3(A, c_bs)
     det = jnp.where(det == 0, 1.0, det)
     mirror = sg(det) < 0
     x = tuple(points[..., i] for i in range(3))
     wa = tuple(a[..., i] - x[i] for i in range(3))
     wb = tuple(b[..., i] - x[i] for i in range(3))
-    ta, tb = _dot3(c_ab, wa) / det, _dot3(c_ab, wb) / det
-    den = jnp.where(ta - tb == 0, 1.0, ta - tb)
-    t_lo = jnp.where(ta < 0, ta / den, 0.0)
-    t_hi = jnp.where((ta >= 0) & (tb < 0), ta / den, 1.0)
-    pa, pb = _dot3(c_bs, wa) / det, _dot3(c_sa, wa) / det
-    qa, qb = _dot3(c_bs, wb) / det, _dot3(c_sa, wb) / det
-    px, py = pa + t_lo * (qa - pa), pb + t_lo * (qb - pb)
-    qx, qy = pa + t_hi * (qa - pa), pb + t_hi * (qb - pb)
+    px, py = _dot3(c_bs, wa) / det, _dot3(c_sa, wa) / det
+    qx, qy = _dot3(c_bs, wb) / det, _dot3(c_sa, wb) / det
     px, py = jnp.where(mirror, py, px), jnp.where(mirror, px, py)
     qx, qy = jnp.where(mirror, qy, qx), jnp.where(mirror, qx, qy)
     swap = flip > 0.5
@@ -199,7 +196,26 @@ def _angle_along(ax, ay, lines: _Lines, y, j=None):
     take = (lambda v: v) if j is None else (lambda v: v[j])
     axj, ayj, tx, ty = take(ax), take(ay), take(lines.tx), take(lines.ty)
     yy = y - take(lines.ya)
-    return jnp.arctan2(yy * (axj * ty - ayj * tx), axj * axj + ayj * ayj + yy * (axj * tx + ayj * ty))
+    angle = jnp.arctan2(yy * (axj * ty - ayj * tx), axj * axj + ayj * ayj + yy * (axj * tx + ayj * ty))
+    return _turn_with_side(angle, 0.5 * np.pi, take(lines.u))
+
+
+def _turn_with_side(turn, quarter, u):
+    """A turn along a line (an angle, or a fraction of the square's perimeter; ``quarter`` a
+    quarter turn in its units) with the sign the line's side u gives it when it exceeds a quarter
+    turn: a line through the origin to rounding (the centre of a pixel on an outline's line)
+    sweeps +-half a turn, and the hard term's angles and the area's sectors must pick the same
+    sign there (``_side``). The change is a whole turn or none: the derivative is the turn's own."""
+    sg = jax.lax.stop_gradient
+    return turn + jnp.where(jnp.abs(sg(turn)) > quarter, _side(u) * jnp.abs(sg(turn)) - sg(turn), 0.0)
+
+
+def _side(u):
+    """+1 where the origin lies on a line's covered side (u < 0: its pieces turn counterclockwise
+    about it), else -1. A line within ``_SIDE_TOL`` of the origin counts as on its lit side: XLA
+    may compute u in several fused kernels whose roundings differ in sign when the origin lies on
+    the line (a pixel's centre on the outline), and every use must agree."""
+    return jnp.where(jax.lax.stop_gradient(u) < -_SIDE_TOL, 1.0, -1.0)
 
 
 def _per_point(values, index, n):
@@ -224,7 +240,7 @@ def _disk_mass(lines: _Lines, choices, y_cross, hard, n, profile):
     pp, cj = choices.pair_point, choices.cross[:, 0]
     h = jnp.abs(lines.u)
     one = jnp.ones_like(h)
-    sigma = jnp.where(jax.lax.stop_gradient(lines.u) < 0, 1.0, -1.0)
+    sigma = _side(lines.u)
     ends = sigma * (choices.side_end * _fan(lines.yb, one, h, profile) - choices.side_start * _fan(lines.ya, one, h, profile))
     crossings = sigma[cj] * choices.cross_change * _fan(y_cross, jnp.ones_like(y_cross), h[cj], profile)
     return jnp.clip(hard - (_per_point(ends, pp, n) - _per_point(crossings, pp[cj], n)) / (2.0 * np.pi), 0.0, 1.0)
@@ -281,7 +297,7 @@ def pixel_hard_area(ax, ay, bx, by, choices, n):
         k_in, k_out, u, tx, ty, fxx, fyy = (take(v) for v in (y_in, y_out, lines.u, lines.tx, lines.ty, fx, fy))
         yc = jnp.clip(y, k_in, k_out)
         swept = _square_sector(fxx + yc * tx, fyy + yc * ty) - _square_sector(fxx + k_in * tx, fyy + k_in * ty)
-        return -0.5 * yc * u - (swept - jnp.round(jax.lax.stop_gradient(swept)))
+        return -0.5 * yc * u - _turn_with_side(swept - jnp.round(jax.lax.stop_gradient(swept)), 0.25, u)
 
     pp, cross = choices.pair_point, choices.pixel_cross
     ends = choices.pixel_side_end * term(lines.yb) - choices.pixel_side_start * term(lines.ya)

@@ -829,7 +829,6 @@ def _arrangement_kernel():
                 b0, b1, b2 = axes[p, 1, 0], axes[p, 1, 1], axes[p, 1, 2]
                 cbs0, cbs1, cbs2 = b1 * s2 - b2 * s1, b2 * s0 - b0 * s2, b0 * s1 - b1 * s0
                 csa0, csa1, csa2 = s1 * a2 - s2 * a1, s2 * a0 - s0 * a2, s0 * a1 - s1 * a0
-                cab0, cab1, cab2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
                 det = a0 * cbs0 + a1 * cbs1 + a2 * cbs2
                 if det != 0.0:
                     down = 0.0
@@ -842,21 +841,12 @@ def _arrangement_kernel():
                             continue
                         wa0, wa1, wa2 = a[e, 0] - x0, a[e, 1] - x1, a[e, 2] - x2
                         wb0, wb1, wb2 = b[e, 0] - x0, b[e, 1] - x1, b[e, 2] - x2
-                        ta_ = (cab0 * wa0 + cab1 * wa1 + cab2 * wa2) / det
-                        tb_ = (cab0 * wb0 + cab1 * wb1 + cab2 * wb2) / det
-                        if ta_ < 0.0 and tb_ < 0.0:
-                            continue  # wholly on the far side of the pixel's plane from the sun
-                        pa_ = (cbs0 * wa0 + cbs1 * wa1 + cbs2 * wa2) / det
-                        pb_ = (csa0 * wa0 + csa1 * wa1 + csa2 * wa2) / det
-                        qa_ = (cbs0 * wb0 + cbs1 * wb1 + cbs2 * wb2) / det
-                        qb_ = (csa0 * wb0 + csa1 * wb1 + csa2 * wb2) / det
-                        t_lo, t_hi = 0.0, 1.0
-                        if ta_ < 0.0:
-                            t_lo = ta_ / (ta_ - tb_)
-                        elif tb_ < 0.0:
-                            t_hi = ta_ / (ta_ - tb_)
-                        px, py = pa_ + t_lo * (qa_ - pa_), pb_ + t_lo * (qb_ - pb_)
-                        qx, qy = pa_ + t_hi * (qa_ - pa_), pb_ + t_hi * (qb_ - pb_)
+                        # The whole segment along s, on either side of the plane (no cut at it:
+                        # an edge lying in the plane would lose a finite part to a hair's tilt).
+                        px = (cbs0 * wa0 + cbs1 * wa1 + cbs2 * wa2) / det
+                        py = (csa0 * wa0 + csa1 * wa1 + csa2 * wa2) / det
+                        qx = (cbs0 * wb0 + cbs1 * wb1 + cbs2 * wb2) / det
+                        qy = (csa0 * wb0 + csa1 * wb1 + csa2 * wb2) / det
                         # The covered side: the inward direction of the face less edge-on to the
                         # sun (a silhouette's two faces project to the same side along it).
                         g = 6
