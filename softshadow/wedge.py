@@ -61,6 +61,7 @@ _DEPTH_MIN = 1e-7       # metres in front of the receiver at which segments are 
 _DEPTH_REL = 1e-6       # ... plus this fraction of the vertex's offset (L1 norm)
 _K_MIN = 1e-9           # the disk's radius (tan r) is at least this: keeps 1/k finite
 _SIDE_TOL = 1e-10       # |u| (sun radii, pixels) below this: the origin counts as on the line's lit side
+_SIDE_TOL_32 = 1e-5     # ... in float32
 
 
 def _cross(ax, ay, bx, by):
@@ -212,10 +213,11 @@ def _turn_with_side(turn, quarter, u):
 
 def _side(u):
     """+1 where the origin lies on a line's covered side (u < 0: its pieces turn counterclockwise
-    about it), else -1. A line within ``_SIDE_TOL`` of the origin counts as on its lit side: XLA
-    may compute u in several fused kernels whose roundings differ in sign when the origin lies on
-    the line (a pixel's centre on the outline), and every use must agree."""
-    return jnp.where(jax.lax.stop_gradient(u) < -_SIDE_TOL, 1.0, -1.0)
+    about it), else -1. A line within ``_SIDE_TOL`` of the origin (above u's rounding) counts as
+    on its lit side: XLA may compute u in several fused kernels whose roundings differ in sign
+    when the origin lies on the line (a pixel's centre on the outline), and every use must agree."""
+    tol = _SIDE_TOL if u.dtype == jnp.float64 else _SIDE_TOL_32
+    return jnp.where(jax.lax.stop_gradient(u) < -tol, 1.0, -1.0)
 
 
 def _per_point(values, index, n):
