@@ -231,10 +231,27 @@ def test_a_refit_that_leaves_k_beyond_the_band_does_not_explain_it():
 
 def test_the_texture_rule_is_averaged_across_a_wide_penumbra():
     """A faint shadow (rho 0.67) over asphalt: the lit residual 34 % of the depth, a 25 px penumbra."""
-    rough = [_photo(f"{i}.jpg", rms_lit=0.112, shadow_depth=0.33, predicted_depth=0.33, k=0.018, rho=0.67) for i in range(3)]
-    assert rules.judge_fit(_fit(rough, k=0.018, rho=0.67, penumbra_px=25.5), GroupContext(3))[1].reliable
-    _, verdict = rules.judge_fit(_fit(rough, k=0.018, rho=0.67, penumbra_px=2.6), GroupContext(3))
+    rough = [_photo("a.jpg", rms_lit=0.112, shadow_depth=0.33, predicted_depth=0.33, k=0.018, rho=0.67)]
+    assert rules.judge_fit(_fit(rough, k=0.018, rho=0.67, penumbra_px=25.5), GroupContext(1))[1].reliable
+    _, verdict = rules.judge_fit(_fit(rough, k=0.018, rho=0.67, penumbra_px=2.6), GroupContext(1))
     assert not verdict.reliable and any("texture rivals the shadow" in w for w in verdict.warnings)
+
+
+@pytest.mark.parametrize("rhos, reliable", [
+    ((0.159, 0.159, 0.159), True),  # three views agree: rho stands
+    ((0.159, 0.163, 0.155), False),  # they disagree by 2.8 errors each (Birge ratio 2.8): texture moved them
+    ((0.159, 0.159, None), True),  # the third has too few umbra samples to measure rho: two views agree
+    ((0.159,), False),  # one photo: nothing to compare
+    ((0.159, None), False),  # one view measured rho on its own
+])
+def test_under_texture_rho_stands_when_independent_views_agree(rhos, reliable):
+    photos = [_photo(f"{i}.jpg", rms_lit=0.3, rho=0.159 if r is None else r,
+                     n_umbra=rules.MIN_PHOTO_UMBRA_SAMPLES - 1 if r is None else 300) for i, r in enumerate(rhos)]
+    estimate, verdict = rules.judge_fit(_fit(photos), GroupContext(len(photos)))
+    assert verdict.reliable is reliable
+    assert not verdict.identifiable and estimate.range_k > 0.0057  # k stays a bound either way
+    texture = [w for w in verdict.warnings if "texture rivals the shadow" in w]
+    assert len(texture) == 1 and (("rho stands" in texture[0]) is reliable)
 
 
 def test_a_forced_level_of_detail_that_moves_k_is_named():
@@ -362,7 +379,7 @@ def test_the_other_flags():
         "rho not measured": dict(n_in_umbra=rules.MIN_UMBRA_SAMPLES - 1),
         "only 9 shadow-edge profiles": dict(n_profiles=9),
         "the solver stopped before converging": dict(converged=False),
-        "the ground's texture rivals the shadow": dict(photos=[_photo(f"{i}.jpg", rms_lit=0.3) for i in range(3)]),
+        "the ground's texture rivals the shadow": dict(photos=[_photo("a.jpg", rms_lit=0.3)]),
     }
     for text, kw in flags.items():
         _, verdict = rules.judge_fit(_fit(**kw), GroupContext(3))
