@@ -149,6 +149,22 @@ def test_a_misfit_in_every_photo_flags_the_group_bounds_k_and_names_the_scene():
     assert not any("umbra is not one level" in w or "texture" in w for w in verdict.warnings)
 
 
+@pytest.mark.parametrize("misfits, move_deg, reliable", [
+    ((2.3, 2.6, 2.4), 0.03, True),  # the known sun stays: the penumbra's shape, not the scene
+    ((2.3, 2.6, 2.4), 0.5, False),  # the sun follows the shadow: the scene is misdescribed
+    ((6.0, 8.4, 7.0), 0.0, False),  # too far off to be the penumbra's shape alone
+])
+def test_a_misfit_that_a_free_sun_does_not_follow_is_the_penumbras_shape(misfits, move_deg, reliable):
+    fit = _fit([_photo(f"{i}.jpg", misfit=m) for i, m in enumerate(misfits)],
+               sun_free=SunFree(0.0, move_deg, 0.0057, 0.159, elevation_deg=50.0))
+    estimate, verdict = rules.judge_fit(fit, GroupContext(3))
+    assert verdict.reliable is reliable
+    assert not verdict.identifiable and estimate.range_k > 0.0057  # k is a bound either way
+    shape = any("penumbra's shape does not match" in w for w in verdict.warnings)
+    misdescribed = any(w.startswith("the fitted shadow does not match the photos") for w in verdict.warnings)
+    assert (shape, misdescribed) == (reliable, not reliable)
+
+
 def test_the_cause_of_a_misfit_from_a_refit_with_the_sun_free():
     fit = _misdescribed()
     # A clock 12 minutes fast: the refit moves the sun back along its path (09:20 in April, Iwate).
