@@ -46,9 +46,23 @@ def _view(mesh: trimesh.Trimesh, k: float, noise: float, *, centre: float, side_
                      sun_source="given")
 
 
-def _fit(mesh: trimesh.Trimesh, view: PhotoView):
-    options = FitOptions(rule="auto", blur=(False,), plots=False, max_samples_per_photo=900)
+def _fit(mesh: trimesh.Trimesh, view: PhotoView, rule: str = "auto", blur: bool = False):
+    options = FitOptions(rule=rule, blur=(blur,), plots=False, max_samples_per_photo=900)
     return fit_group(SoftShadowModel.from_mesh(mesh), Pose(), [view], "g", None, options)
+
+
+K_FENCE = 0.01
+
+
+@pytest.fixture(scope="module")
+def fence_fits():
+    """The fence (posts 12 mm wide, 6 mm apart; the penumbra is 2 k d wide, up to 10 mm at the
+    shadows' far end) fitted with ``auto`` and with the ``wedge`` rule asked for, the camera blur
+    free (the wedge rule's footprints then follow the plain solve's blur); one fit of each, shared
+    by the tests below (the wedge solver compiles once)."""
+    fence = _posts(np.arange(-2.5, 3.0) * 0.018, 0.012)
+    view = _view(fence, K_FENCE, 0.012, centre=0.5, side_m=0.48)
+    return _fit(fence, view, "auto", True), _fit(fence, view, "wedge", True)
 
 
 def test_the_wedge_and_auto_rules_sample_and_start_with_the_edge_rule():
@@ -67,17 +81,25 @@ def test_a_lone_post_keeps_the_edge_rule():
     assert g.to_json()["rule"] == "edge"
 
 
-def test_a_fence_with_gaps_narrower_than_the_penumbra_takes_the_wedge_rule():
-    # Posts 12 mm wide, 6 mm apart; the penumbra is 2 k d wide, up to 10 mm at the shadows' far end.
-    k = 0.01
-    fence = _posts(np.arange(-2.5, 3.0) * 0.018, 0.012)
-    g = _fit(fence, _view(fence, k, 0.012, centre=0.5, side_m=0.48))
+def test_a_fence_with_gaps_narrower_than_the_penumbra_takes_the_wedge_rule(fence_fits):
+    g, _ = fence_fits
     assert g.error is None, g.error
     assert g.rule == "wedge"
     assert g.rule_criterion > WEDGE_THRESHOLD
     assert g.to_json()["rule"] == "wedge" and g.to_json()["rule_criterion"] == pytest.approx(g.rule_criterion)
     # The wedge rule's own model of the photo reads its k (the photo is drawn by that rule).
-    assert abs(g.range_k - k) < 3 * g.range_stderr_stat + 0.02 * k
+    assert abs(g.range_k - K_FENCE) < 3 * g.range_stderr_stat + 0.02 * K_FENCE
+
+
+def test_auto_taking_the_wedge_rule_is_the_wedge_rule_asked_for(fence_fits):
+    # One fit, not a refit from the edge fit's solution over the edge fit's blur: the two read
+    # the same k, rho and blur, and auto reports its criterion where the wedge rule asked for has none.
+    auto, wedge = fence_fits
+    assert auto.rule == wedge.rule == "wedge" and wedge.rule_criterion is None
+    assert auto.range_k == pytest.approx(wedge.range_k, rel=1e-9)
+    assert auto.rho == pytest.approx(wedge.rho, rel=1e-9)
+    assert auto.range_stderr_stat == pytest.approx(wedge.range_stderr_stat, rel=1e-6)
+    assert auto.blur_px == pytest.approx(wedge.blur_px, rel=1e-6, abs=1e-12)
 
 
 def test_wedge_residual_jacobian_matches_finite_differences():
