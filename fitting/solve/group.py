@@ -214,7 +214,8 @@ def _solve(params: FitParams, args, max_steps: int, start_raw_ks, prepare) -> So
 
     With ``prepare`` true (a traced switch, so one compiled program serves every call), the
     group's first solve: |dT/dpixel| is computed and raw_k starts at the best value of the
-    grid ``start_raw_ks`` (m,) (``_prepare``). The program is saved between processes when
+    grid ``start_raw_ks`` (m,) (``_prepare``; not under the ``wedge`` rule, whose solves start from
+    a prepared edge solve: there ``prepare`` is ignored). The program is saved between processes when
     the command line asks for it (``fitting.solve.saved_programs``)."""
     vector, converged, steps, r, jac, *rest = call_saved(
         "fitting.solve.group", _solve_arrays, params, args, max_steps, start_raw_ks, prepare)
@@ -226,9 +227,14 @@ def _solve_arrays(params: FitParams, args, max_steps: int, start_raw_ks, prepare
     """``_solve``'s program: the solution as a tuple of arrays (parameter vector, converged,
     steps, residuals, Jacobian, the prediction's fields, |dT/dpixel|)."""
     group, pose, config = args
-    grad_t_pixel, raw_k = jax.lax.cond(
-        prepare, lambda: _prepare(params, start_raw_ks, group, pose, config),
-        lambda: (group.grad_t_pixel, params.raw_k))
+    if config.rule == "wedge":
+        # The wedge rule's solves always start from the plain edge solve (``fit_group``), which
+        # prepared the start; a grid of losses here would compile the wedge rule's forward once more.
+        grad_t_pixel, raw_k = group.grad_t_pixel, params.raw_k
+    else:
+        grad_t_pixel, raw_k = jax.lax.cond(
+            prepare, lambda: _prepare(params, start_raw_ks, group, pose, config),
+            lambda: (group.grad_t_pixel, params.raw_k))
     group = dataclasses.replace(group, grad_t_pixel=grad_t_pixel)
     params = dataclasses.replace(params, raw_k=raw_k)
     args = (group, pose, config)
