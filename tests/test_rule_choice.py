@@ -1,6 +1,8 @@
 """The fitter's choice of the penumbra's rule per group (``FitOptions.rule = "auto"``,
 ``fitting.solve.rule_choice``): a lone post keeps the ``edge`` rule, a fence of thin posts whose
-gaps are narrower than the penumbra takes the ``wedge`` rule; the rule is reported."""
+gaps are narrower than the penumbra takes the ``wedge`` rule and then reads what the ``wedge``
+rule asked for reads; the rule is reported. The fence is fitted once per rule for the whole
+module (the ``wedge`` rule's solver is the dearest program here to compile)."""
 
 from __future__ import annotations
 
@@ -46,9 +48,23 @@ def _view(mesh: trimesh.Trimesh, k: float, noise: float, *, centre: float, side_
                      sun_source="given")
 
 
-def _fit(mesh: trimesh.Trimesh, view: PhotoView):
-    options = FitOptions(rule="auto", blur=(False,), plots=False, max_samples_per_photo=900)
+def _fit(mesh: trimesh.Trimesh, view: PhotoView, rule: str = "auto", blur: bool = False):
+    options = FitOptions(rule=rule, blur=(blur,), plots=False, max_samples_per_photo=900)
     return fit_group(SoftShadowModel.from_mesh(mesh), Pose(), [view], "g", None, options)
+
+
+K_FENCE = 0.01
+
+
+@pytest.fixture(scope="module")
+def fence_fits():
+    """The fence (posts 12 mm wide, 6 mm apart; the penumbra is 2 k d wide, up to 10 mm at the
+    shadows' far end) fitted with ``auto`` and with the ``wedge`` rule asked for, the camera blur
+    free (the wedge rule's footprints then follow the plain solve's blur); one fit of each, shared
+    by the tests below (the wedge solver compiles once)."""
+    fence = _posts(np.arange(-2.5, 3.0) * 0.018, 0.012)
+    view = _view(fence, K_FENCE, 0.012, centre=0.5, side_m=0.48)
+    return _fit(fence, view, "auto", True), _fit(fence, view, "wedge", True)
 
 
 def test_the_wedge_and_auto_rules_sample_and_start_with_the_edge_rule():
@@ -67,17 +83,25 @@ def test_a_lone_post_keeps_the_edge_rule():
     assert g.to_json()["rule"] == "edge"
 
 
-def test_a_fence_with_gaps_narrower_than_the_penumbra_takes_the_wedge_rule():
-    # Posts 12 mm wide, 6 mm apart; the penumbra is 2 k d wide, up to 10 mm at the shadows' far end.
-    k = 0.01
-    fence = _posts(np.arange(-2.5, 3.0) * 0.018, 0.012)
-    g = _fit(fence, _view(fence, k, 0.012, centre=0.5, side_m=0.48))
+def test_a_fence_with_gaps_narrower_than_the_penumbra_takes_the_wedge_rule(fence_fits):
+    g, _ = fence_fits
     assert g.error is None, g.error
     assert g.rule == "wedge"
     assert g.rule_criterion > WEDGE_THRESHOLD
     assert g.to_json()["rule"] == "wedge" and g.to_json()["rule_criterion"] == pytest.approx(g.rule_criterion)
     # The wedge rule's own model of the photo reads its k (the photo is drawn by that rule).
-    assert abs(g.range_k - k) < 3 * g.range_stderr_stat + 0.02 * k
+    assert abs(g.range_k - K_FENCE) < 3 * g.range_stderr_stat + 0.02 * K_FENCE
+
+
+def test_auto_taking_the_wedge_rule_is_the_wedge_rule_asked_for(fence_fits):
+    # One fit, not a refit from the edge fit's solution over the edge fit's blur: the two read
+    # the same k, rho and blur, and auto reports its criterion where the wedge rule asked for has none.
+    auto, wedge = fence_fits
+    assert auto.rule == wedge.rule == "wedge" and wedge.rule_criterion is None
+    assert auto.range_k == pytest.approx(wedge.range_k, rel=1e-9)
+    assert auto.rho == pytest.approx(wedge.rho, rel=1e-9)
+    assert auto.range_stderr_stat == pytest.approx(wedge.range_stderr_stat, rel=1e-6)
+    assert auto.blur_px == pytest.approx(wedge.blur_px, rel=1e-6, abs=1e-12)
 
 
 def test_wedge_residual_jacobian_matches_finite_differences():
@@ -91,8 +115,8 @@ def test_wedge_residual_jacobian_matches_finite_differences():
     import jax.numpy as jnp
 
     from fitting.samples.ground import select_samples
-    from fitting.solve.group import _group_arrays, _prepare, _with_wedge, initial_params
-    from fitting.solve.model import FitConfig, FitParams, raw_from_k, residuals
+    from fitting.solve.group import _group_arrays, _with_wedge, initial_params
+    from fitting.solve.model import FitConfig, FitParams, angular_pixel_gradient, raw_from_k, residuals
     from softshadow.camera import look_at_camera
 
     model = SoftShadowModel.from_mesh("pillar", profile="disk")
@@ -111,9 +135,11 @@ def test_wedge_residual_jacobian_matches_finite_differences():
     config = FitConfig.make("disk", True, True, 0.05, "wedge")
     group = _with_wedge(group, model, Pose(), [samples], [view], FitOptions(), params, config)
     assert group.wedge_plan is not None and bool(np.any(np.asarray(group.wedge_plan.active)))
-    grad_t, _ = _prepare(params, jnp.asarray(raw_from_k(np.array([0.01]))), group, Pose(), config)
-    group = dataclasses.replace(group, grad_t_pixel=grad_t)
+    # The samples' |dT/dpixel| as the solver's first solve sets it (``group._prepare``).
+    group = dataclasses.replace(group, grad_t_pixel=angular_pixel_gradient(group, Pose(), 0.01, config.rule))
     flat = params.vector()
-    fn = jax.jit(lambda x: residuals(FitParams.from_vector(x, 1), (group, Pose(), config)))
-    jac = np.asarray(jax.jit(jax.jacfwd(fn))(flat))
-    assert_jacobian_matches_central_differences(fn, np.asarray(flat), jac)
+    fn = lambda x: residuals(FitParams.from_vector(x, 1), (group, Pose(), config))
+    # One compiled program gives the residuals and their Jacobian (the differences use the former).
+    both = jax.jit(lambda x: (fn(x), jax.jacfwd(fn)(x)))
+    jac = np.asarray(both(flat)[1])
+    assert_jacobian_matches_central_differences(lambda x: both(x)[0], np.asarray(flat), jac)

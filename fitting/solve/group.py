@@ -98,6 +98,17 @@ def _with_wedge(arrays: GroupArrays, model: SoftShadowModel, pose: Pose, samples
                                wedge_axes=jnp.asarray(axes))
 
 
+def _wedge_fit(arrays: GroupArrays, model: SoftShadowModel, pose: Pose, samples: list[PhotoSamples],
+               views: list[PhotoView], options: FitOptions, plain: Solution, fit_sun: bool, delta: float,
+               n_eff: int, log=None) -> tuple[Trial, np.ndarray, GroupArrays]:
+    """The ``wedge`` rule's fit (asked for, or taken by ``auto``: one path, so both read the same):
+    its plan over the footprints of the plain ``edge`` solve's camera blur, ``choose_model`` from
+    that solve's solution. Returns the best trial, its covariance and the arrays with the plan."""
+    arrays = _with_wedge(arrays, model, pose, samples, views, options, plain.params, plain_config(options, fit_sun))
+    best, cov, _ = choose_model(arrays, pose, plain.params, options, fit_sun, delta, n_eff, log, "wedge")
+    return best, cov, arrays
+
+
 def sample_views(model: SoftShadowModel, pose: Pose, views: list[PhotoView], options: FitOptions,
                  sky_model: SoftShadowModel | None = None) -> tuple[list[PhotoSamples], list[PhotoView], list[str]]:
     """Step 1: each photo's samples (``select_samples``; ``sky_model``: the mesh the hidden sky
@@ -203,7 +214,8 @@ def _solve(params: FitParams, args, max_steps: int, start_raw_ks, prepare) -> So
 
     With ``prepare`` true (a traced switch, so one compiled program serves every call), the
     group's first solve: |dT/dpixel| is computed and raw_k starts at the best value of the
-    grid ``start_raw_ks`` (m,) (``_prepare``). The program is saved between processes when
+    grid ``start_raw_ks`` (m,) (``_prepare``; not under the ``wedge`` rule, whose solves start from
+    a prepared edge solve: there ``prepare`` is ignored). The program is saved between processes when
     the command line asks for it (``fitting.solve.saved_programs``)."""
     vector, converged, steps, r, jac, *rest = call_saved(
         "fitting.solve.group", _solve_arrays, params, args, max_steps, start_raw_ks, prepare)
@@ -215,9 +227,14 @@ def _solve_arrays(params: FitParams, args, max_steps: int, start_raw_ks, prepare
     """``_solve``'s program: the solution as a tuple of arrays (parameter vector, converged,
     steps, residuals, Jacobian, the prediction's fields, |dT/dpixel|)."""
     group, pose, config = args
-    grad_t_pixel, raw_k = jax.lax.cond(
-        prepare, lambda: _prepare(params, start_raw_ks, group, pose, config),
-        lambda: (group.grad_t_pixel, params.raw_k))
+    if config.rule == "wedge":
+        # The wedge rule's solves always start from the plain edge solve (``fit_group``), which
+        # prepared the start; a grid of losses here would compile the wedge rule's forward once more.
+        grad_t_pixel, raw_k = group.grad_t_pixel, params.raw_k
+    else:
+        grad_t_pixel, raw_k = jax.lax.cond(
+            prepare, lambda: _prepare(params, start_raw_ks, group, pose, config),
+            lambda: (group.grad_t_pixel, params.raw_k))
     group = dataclasses.replace(group, grad_t_pixel=grad_t_pixel)
     params = dataclasses.replace(params, raw_k=raw_k)
     args = (group, pose, config)
@@ -473,19 +490,18 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
     plain, arrays, delta = plain_start(arrays, pose, base, options, fit_sun, rule)
     log = (lambda line: print(f"  {label}: {line}")) if options.verbose else None
     wedge = options.rule in ("wedge", "auto") and wedge_available(used)
+    fit_wedge = lambda: _wedge_fit(arrays, model, pose, samples, used, options, plain, fit_sun, delta, n_eff, log)
     if options.rule == "wedge" and wedge:
-        arrays = _with_wedge(arrays, model, pose, samples, used, options, plain.params, plain_config(options, fit_sun))
-        best, cov, _ = choose_model(arrays, pose, plain.params, options, fit_sun, delta, n_eff, log, "wedge")
+        best, cov, arrays = fit_wedge()
         choice = RuleChoice("wedge", reason="asked for")
     else:
         best, cov, _ = choose_model(arrays, pose, plain.params, options, fit_sun, delta, n_eff, log, rule)
         if options.rule == "auto" and wedge:
-            arrays = _with_wedge(arrays, model, pose, samples, used, options, best.solution.params, best.config)
-            choice = choose_rule(best.solution.params, best.config, arrays, pose, best.solution.prediction,
+            at_edge = _with_wedge(arrays, model, pose, samples, used, options, best.solution.params, best.config)
+            choice = choose_rule(best.solution.params, best.config, at_edge, pose, best.solution.prediction,
                                  best.solution.jacobian, cov, n_eff)
-            if choice.rule == "wedge":
-                best, cov, _ = choose_model(arrays, pose, best.solution.params, options, fit_sun, delta, n_eff, log,
-                                            "wedge")
+            if choice.rule == "wedge":  # the same fit as the wedge rule asked for
+                best, cov, arrays = fit_wedge()
         else:
             choice = RuleChoice(rule, reason="asked for" if rule == options.rule else
                                 "the wedge rule needs the ground plane as receiver")
