@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from collections.abc import Callable
 from concurrent.futures import Future
 
 import numpy as np
@@ -90,7 +91,8 @@ def _empty(occ: Occluder, sil, hard: np.ndarray) -> DensePlan:
 def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k_max: float,
                       normals: np.ndarray | None = None, *, rule: str = "edge", margin_px: float = 2.5,
                       posed: PosedOccluder | Future | None = None, world: np.ndarray | None = None,
-                      faces: np.ndarray | None = None, scratch: Scratch | None = None) -> DensePlan:
+                      faces: np.ndarray | None = None, scratch: Scratch | None = None,
+                      reached: Callable[[np.ndarray, np.ndarray], None] | None = None) -> DensePlan:
     """``plan_points(occ, pose, sun, points, range_k_max, rule, normals=normals, backend="light",
     margin_px=margin_px)``, compact (``DensePlan``) and faster for many points.
 
@@ -102,7 +104,10 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
     camera's z-buffer knows it. A point whose own face is the shadow map's nearest face at its
     pixel is lit without the lookup (the lookup would find that face and the point on it).
     scratch: keep the per-point arrays in these buffers (``softshadow.scratch``; the plan's
-    ``hard`` is then overwritten by the next call with the same scratch).
+    ``hard`` is then overwritten by the next call with the same scratch). reached(cand, hard),
+    optional: called once the shadow's reach is known, with the points within it (ascending) and
+    the plan's ``hard`` (n,), final already at every point not among them (written at those
+    later): another thread may shade those points while this one goes on.
     """
     if posed is None:
         posed = PosedOccluder.make(occ, pose, sun)
@@ -157,6 +162,8 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
     count = _reach_kernel()(uv_all, d_all, hard, lo_occ, hi_occ, float(edge_depth.min()),
                             1.5 * float(light_band_widths(np.float64(1.0), range_k_max)), margin_m, cand, uv_p, d_p,
                             att, bounds)
+    if reached is not None:
+        reached(cand[:count], hard)
     if not count:
         return _empty(occ, sil, hard)
     cand, uv_p, d_p, att = cand[:count], uv_p[:count], d_p[:count], att[:count]
