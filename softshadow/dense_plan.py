@@ -127,14 +127,11 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
     lo_w = np.array([world[:, j].min() for j in range(3)])
     hi_w = np.array([world[:, j].max() for j in range(3)])
     frame = LightFrame.of_light(light, 0.5 * (lo_w + hi_w))
-    # Attached shadow (``faces_away``), light-space positions (``LightFrame.project``) and the
-    # deepest point, in one pass (needing neither the silhouette nor the light-space vertices).
-    uv_all = scratch_array(scratch, "sun.uv", (n, 2))
-    d_all = scratch_array(scratch, "sun.depth", n)
+    # The deepest point in the sun's view (``LightFrame.project``'s depth), needing neither the
+    # silhouette nor the light-space vertices: made while the posed occluder may still be made.
     hard = scratch_array(scratch, "sun.hard", n)
     basis = np.stack([frame.origin, frame.e1, frame.e2, frame.light])
-    d_max = _project_kernel()(points, np.zeros((0, 3)) if normals is None else normals, basis, -FACING_TOL,
-                              uv_all, d_all, hard) if n else -np.inf
+    d_max = _depth_max_kernel()(points, basis) if n else -np.inf
     if isinstance(posed, Future):
         posed = posed.result()
         if not ((posed.world is world or np.array_equal(posed.world, world)) and np.array_equal(posed.light, light)):
@@ -152,14 +149,17 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
     hi_occ = np.array([uv_v[:, 0].max(), uv_v[:, 1].max()])
     extent = float((hi_occ - lo_occ).max()) + 3.0 * reach
     margin_m = (margin_px + CANDIDATE_REACH_PX + 2) * extent / 256
-    # Each point within its own reach (``plan._within_reach``), gathered in order with its
-    # light-space position, depth and attached shadow; the gathered points' bounds beside.
+    # Per point in one pass: its attached shadow (``faces_away``) into hard, its light-space
+    # position and depth (``LightFrame.project``), and whether it is within its own reach
+    # (``plan._within_reach``): those gathered in order with their position, depth and attached
+    # shadow; the gathered points' bounds beside.
     cand = scratch_array(scratch, "sun.cand", n, np.int64)
     uv_p = scratch_array(scratch, "sun.cand_uv", (n, 2))
     d_p = scratch_array(scratch, "sun.cand_depth", n)
     att = scratch_array(scratch, "sun.cand_attached", n, np.bool_)
     bounds = np.empty(5)
-    count = _reach_kernel()(uv_all, d_all, hard, lo_occ, hi_occ, float(edge_depth.min()),
+    count = _reach_kernel()(points, np.zeros((0, 3)) if normals is None else normals, basis, -FACING_TOL, hard,
+                            lo_occ, hi_occ, float(edge_depth.min()),
                             1.5 * float(light_band_widths(np.float64(1.0), range_k_max)), margin_m, cand, uv_p, d_p,
                             att, bounds)
     if reached is not None:
@@ -277,24 +277,17 @@ _BLOCK = 8192
 
 
 @functools.cache
-def _project_kernel():
-    """Per point: attached shadow (n . L >= -FACING_TOL, as ``faces_away``; 1.0 in hard), the
-    light-space position and depth (``LightFrame.project``); returns the largest depth."""
+def _depth_max_kernel():
+    """The largest depth of the points in the light frame (basis: origin, e1, e2, light; the
+    depth as ``_reach_kernel`` computes it)."""
     numba = parallel_numba()
 
     @numba.njit(cache=True, nogil=True, parallel=True)
-    def kernel(points, normals, basis, tol, uv, d, hard):
-        light = basis[3]
+    def kernel(points, basis):
         d_max = -np.inf
         for i in numba.prange(points.shape[0]):
             x, y, z = points[i, 0] - basis[0, 0], points[i, 1] - basis[0, 1], points[i, 2] - basis[0, 2]
-            uv[i, 0] = x * basis[1, 0] + y * basis[1, 1] + z * basis[1, 2]
-            uv[i, 1] = x * basis[2, 0] + y * basis[2, 1] + z * basis[2, 2]
-            d[i] = x * basis[3, 0] + y * basis[3, 1] + z * basis[3, 2]
-            d_max = max(d_max, d[i])
-            hard[i] = 0.0
-            if normals.shape[0] and normals[i, 0] * light[0] + normals[i, 1] * light[1] + normals[i, 2] * light[2] >= tol:
-                hard[i] = 1.0
+            d_max = max(d_max, x * basis[3, 0] + y * basis[3, 1] + z * basis[3, 2])
         return d_max
 
     return kernel
@@ -302,16 +295,19 @@ def _project_kernel():
 
 @functools.cache
 def _reach_kernel():
-    """``plan._within_reach``'s test (per_m: 1.5 wedge widths per metre behind the nearest
-    edge), the points within reach gathered in order: their index, position, depth and attached
-    shadow (hard > 0), and their bounds (lo u, lo v, hi u, hi v, hi depth). Returns their count."""
+    """Per point: attached shadow (n . L >= -FACING_TOL, as ``faces_away``; 1.0 in hard, else
+    0.0), the light-space position and depth (``LightFrame.project``; basis: origin, e1, e2,
+    light), and ``plan._within_reach``'s test (per_m: 1.5 wedge widths per metre behind the
+    nearest edge): the points within reach gathered in order, their index, position, depth and
+    attached shadow, and their bounds (lo u, lo v, hi u, hi v, hi depth). Returns their count."""
     numba = parallel_numba()
 
     # Parallel over blocks of points: each block's points gathered at its own place first, then
     # moved together (one pass over the points, as one thread's loop).
     @numba.njit(cache=True, nogil=True, parallel=True)
-    def kernel(uv_all, d_all, hard, lo, hi, edge_depth, per_m, margin_m, cand, uv, d, att, bounds):
-        n = uv_all.shape[0]
+    def kernel(points, normals, basis, tol, hard, lo, hi, edge_depth, per_m, margin_m, cand, uv, d, att, bounds):
+        n = points.shape[0]
+        light = basis[3]
         n_blocks = (n + _BLOCK - 1) // _BLOCK
         counts = np.zeros(n_blocks, np.int64)
         box = np.empty((n_blocks, 5))
@@ -319,11 +315,17 @@ def _reach_kernel():
             count = b * _BLOCK
             lo_u, lo_v, hi_u, hi_v, hi_d = np.inf, np.inf, -np.inf, -np.inf, -np.inf
             for i in range(b * _BLOCK, min((b + 1) * _BLOCK, n)):
-                u, v, di = uv_all[i, 0], uv_all[i, 1], d_all[i]
+                x, y, z = points[i, 0] - basis[0, 0], points[i, 1] - basis[0, 1], points[i, 2] - basis[0, 2]
+                u = x * basis[1, 0] + y * basis[1, 1] + z * basis[1, 2]
+                v = x * basis[2, 0] + y * basis[2, 1] + z * basis[2, 2]
+                di = x * basis[3, 0] + y * basis[3, 1] + z * basis[3, 2]
+                attached = normals.shape[0] > 0 and \
+                    normals[i, 0] * light[0] + normals[i, 1] * light[1] + normals[i, 2] * light[2] >= tol
+                hard[i] = 1.0 if attached else 0.0
                 pad = per_m * max(di - edge_depth, 0.0) + margin_m
                 if (u >= lo[0] - pad) & (u <= hi[0] + pad) & (v >= lo[1] - pad) & (v <= hi[1] + pad):
                     # count <= i: never over a point not yet read
-                    cand[count], uv[count, 0], uv[count, 1], d[count], att[count] = i, u, v, di, hard[i] > 0
+                    cand[count], uv[count, 0], uv[count, 1], d[count], att[count] = i, u, v, di, attached
                     lo_u, lo_v, hi_u, hi_v, hi_d = min(lo_u, u), min(lo_v, v), max(hi_u, u), max(hi_v, v), max(hi_d, di)
                     count += 1
             counts[b] = count - b * _BLOCK
