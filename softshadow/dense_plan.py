@@ -16,7 +16,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 from collections.abc import Callable
-from concurrent.futures import Future
+from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
 
@@ -92,7 +92,8 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
                       normals: np.ndarray | None = None, *, rule: str = "edge", margin_px: float = 2.5,
                       posed: PosedOccluder | Future | None = None, world: np.ndarray | None = None,
                       faces: np.ndarray | None = None, scratch: Scratch | None = None,
-                      reached: Callable[[np.ndarray, np.ndarray], None] | None = None) -> DensePlan:
+                      reached: Callable[[np.ndarray, np.ndarray], None] | None = None,
+                      pool: ThreadPoolExecutor | None = None) -> DensePlan:
     """``plan_points(occ, pose, sun, points, range_k_max, rule, normals=normals, backend="light",
     margin_px=margin_px)``, compact (``DensePlan``) and faster for many points.
 
@@ -107,7 +108,9 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
     ``hard`` is then overwritten by the next call with the same scratch). reached(cand, hard),
     optional: called once the shadow's reach is known, with the points within it (ascending) and
     the plan's ``hard`` (n,), final already at every point not among them (written at those
-    later): another thread may shade those points while this one goes on.
+    later): another thread may shade those points while this one goes on. pool: a second thread
+    that packs the silhouette's edges and tests half the points near the outline (after what it
+    was given before) while this one goes on: the same plan.
     """
     if posed is None:
         posed = PosedOccluder.make(occ, pose, sun)
@@ -189,9 +192,12 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
     # raster pixel is too coarse for the side: tested exactly.
     n_near = _lookup_kernel()(uv_p, grid.origin_m[0], grid.origin_m[1], pixel_m, raster.hard, raster.edge_label,
                               raster.boundary_dist_px, 2.0 * pixel_m, att, in_view, label, dist, index)
+    # The silhouette's edges for the penumbra, made on the second thread (if any) meanwhile (from
+    # this frame's raster and silhouette only: left running on an error, it touches no buffer).
+    edges = _submit(pool, _pack_edges, occ, sil, raster=raster)
     if n_near:
         near = index[:n_near].copy()
-        in_view[near] = posed.hard_shadow_at(uv_p[near], projected=uv_v)
+        in_view[near] = _shared_test(pool, lambda q: posed.hard_shadow_at(uv_p[q], projected=uv_v), near)
     lit_ids = np.flatnonzero(sil.lit) if occ.watertight else np.arange(len(occ.faces))
     lit_faces = occ.faces[lit_ids]
     # Farther from the sun than the whole occluder: behind it wherever it is in the way (most of a
@@ -236,8 +242,33 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
         _candidates_kernel()(uv_p, sel, grid.origin_m[0], grid.origin_m[1], pixel_m, raster.edge_label, neighbours,
                              _CANDIDATE_OFFSETS, edge_id)
     near_b = near_b[:n_band]
-    return DensePlan(_pack_edges(occ, sil, raster=raster), hard, band, edge_id, near_b.astype(np.float64),
+    return DensePlan(edges.result() if isinstance(edges, Future) else edges, hard, band, edge_id,
+                     near_b.astype(np.float64),
                      len(sil.vertex_ids))
+
+
+def _submit(pool: ThreadPoolExecutor | None, fn, *args, **kwargs):
+    """fn(...) on the pool's thread (a Future), or here and now without a pool."""
+    return fn(*args, **kwargs) if pool is None else pool.submit(fn, *args, **kwargs)
+
+
+#: Fewer points than this are tested on one thread (handing half to another costs more).
+_SHARED_MIN = 1024
+
+
+def _shared_test(pool: ThreadPoolExecutor | None, test: Callable[[np.ndarray], np.ndarray],
+                 points: np.ndarray) -> np.ndarray:
+    """test(points), a test point by point, with the first half of the points tested on the
+    pool's thread while this one tests the rest (the same values)."""
+    if pool is None or len(points) < _SHARED_MIN:
+        return test(points)
+    half = len(points) // 2
+    first = pool.submit(test, points[:half])
+    try:
+        rest = test(points[half:])
+    finally:
+        first.exception()
+    return np.concatenate([first.result(), rest])
 
 
 def _spacing(uv: np.ndarray, cell_m: float, lo: np.ndarray, hi: np.ndarray) -> float:

@@ -147,7 +147,7 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
             # The points go into the sun's view while the second thread still finds the silhouette.
             plan = plan_dense_points(model.occluder, pose, sun, vis.points, range_k_max, vis.normals,
                                      rule=model.rule, posed=posed, world=world, faces=on_object, scratch=scratch,
-                                     reached=reached)
+                                     reached=reached, pool=pool)
             t = _lap(ms, "sun_plan", t, add=pool is None)
         shading = (*unshadowed, plan.hard if plan is not None else np.zeros(0))
         band = plan.band if plan is not None else np.zeros(0, np.int64)

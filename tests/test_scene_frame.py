@@ -518,3 +518,27 @@ def test_shading_in_two_parts_is_the_shading_in_one():
     np.testing.assert_array_equal(got[others], want[others])
     _shade_listed(shading, light, got, listed)
     np.testing.assert_array_equal(got, want)
+
+
+def test_dense_plan_shares_its_work_with_a_second_thread(monkeypatch):
+    """With a second thread packing the edges and testing half the points near the outline, the
+    plan is ``plan_points``'."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from softshadow import dense_plan
+    monkeypatch.setattr(dense_plan, "_SHARED_MIN", 8)
+    model = model_of("pillar")
+    pose = Pose(rotation_deg=(0.0, 0.0, 25.0))
+    cam = look_at_camera((3.5, -4.0, 3.0), (0.0, 0.0, 0.5), 120, 90, 50.0)
+    vis = visible_surfaces(cam, [_object_surface(model, pose, 0.8), _step()], 0.8)
+    sun = Sun(250.0, 35.0)
+    ref = model.plan_points(sun, pose, vis.points, 0.02, normals=vis.normals, backend="light")
+    tested = []
+    shared_test = dense_plan._shared_test
+    monkeypatch.setattr(dense_plan, "_shared_test", lambda pool, test, points: shared_test(
+        pool, lambda q: tested.append(len(q)) or test(q), points))
+    with ThreadPoolExecutor(1) as pool:
+        dense = plan_dense_points(model.occluder, pose, sun, vis.points, 0.02, vis.normals, pool=pool,
+                                  scratch=ss.internal.Scratch())
+    assert len(tested) == 2 and min(tested) >= 4, tested
+    _plans_equal(ref, dense.point_plan())
