@@ -106,9 +106,10 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
     pixel is lit without the lookup (the lookup would find that face and the point on it).
     scratch: keep the per-point arrays in these buffers (``softshadow.scratch``; the plan's
     ``hard`` is then overwritten by the next call with the same scratch). reached(cand, hard),
-    optional: called once the shadow's reach is known, with the points within it (ascending) and
-    the plan's ``hard`` (n,), final already at every point not among them (written at those
-    later): another thread may shade those points while this one goes on. pool: a second thread
+    optional: called before the light-space raster is made (not at all when no point is within
+    the shadow's reach), with the points within it (ascending) and the plan's ``hard`` (n,),
+    final already at every point not among them (written at those later): another thread may
+    shade those points while this one goes on. pool: a second thread
     that packs the silhouette's edges and tests half the points near the outline (after what it
     was given before) while this one goes on: the same plan.
     """
@@ -165,8 +166,6 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
                             lo_occ, hi_occ, float(edge_depth.min()),
                             1.5 * float(light_band_widths(np.float64(1.0), range_k_max)), margin_m, cand, uv_p, d_p,
                             att, bounds)
-    if reached is not None:
-        reached(cand[:count], hard)
     if not count:
         return _empty(occ, sil, hard)
     cand, uv_p, d_p, att = cand[:count], uv_p[:count], d_p[:count], att[:count]
@@ -182,6 +181,10 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
     if np.any(hi <= lo):
         return _empty(occ, sil, hard)
     grid, map_pixel_m = raster_grid(lo, hi, pixel_m, map_pixel_m)
+    if reached is not None:
+        # Just before the raster (one thread's NumPy and OpenCV, the longest step): work handed to
+        # another thread then takes no core from this one's parallel passes.
+        reached(cand, hard)
     raster = rasterise_shadow(grid, world, light, sil, uv_v)
     m = len(cand)
     in_view = scratch_array(scratch, "sun.in_view", m, np.uint8)
@@ -192,12 +195,12 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
     # raster pixel is too coarse for the side: tested exactly.
     n_near = _lookup_kernel()(uv_p, grid.origin_m[0], grid.origin_m[1], pixel_m, raster.hard, raster.edge_label,
                               raster.boundary_dist_px, 2.0 * pixel_m, att, in_view, label, dist, index)
-    # The silhouette's edges for the penumbra, made on the second thread (if any) meanwhile (from
-    # this frame's raster and silhouette only: left running on an error, it touches no buffer).
-    edges = _submit(pool, _pack_edges, occ, sil, raster=raster)
     if n_near:
         near = index[:n_near].copy()
         in_view[near] = _shared_test(pool, lambda q: posed.hard_shadow_at(uv_p[q], projected=uv_v), near)
+    # The silhouette's edges for the penumbra, made on the second thread (if any) meanwhile (from
+    # this frame's raster and silhouette only: left running on an error, it touches no buffer).
+    edges = _submit(pool, _pack_edges, occ, sil, raster=raster)
     lit_ids = np.flatnonzero(sil.lit) if occ.watertight else np.arange(len(occ.faces))
     lit_faces = occ.faces[lit_ids]
     # Farther from the sun than the whole occluder: behind it wherever it is in the way (most of a
@@ -313,10 +316,12 @@ def _depth_max_kernel():
     depth as ``_reach_kernel`` computes it)."""
     numba = parallel_numba()
 
-    @numba.njit(cache=True, nogil=True, parallel=True)
+    # On one thread: it runs while the second thread poses the occluder (a parallel loop would
+    # wait for a core).
+    @numba.njit(cache=True, nogil=True)
     def kernel(points, basis):
         d_max = -np.inf
-        for i in numba.prange(points.shape[0]):
+        for i in range(points.shape[0]):
             x, y, z = points[i, 0] - basis[0, 0], points[i, 1] - basis[0, 1], points[i, 2] - basis[0, 2]
             d_max = max(d_max, x * basis[3, 0] + y * basis[3, 1] + z * basis[3, 2])
         return d_max
