@@ -245,8 +245,9 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
         _candidates_kernel()(uv_p, sel, grid.origin_m[0], grid.origin_m[1], pixel_m, raster.edge_label, neighbours,
                              _CANDIDATE_OFFSETS, edge_id)
     near_b = near_b[:n_band]
-    return DensePlan(edges.result() if isinstance(edges, Future) else edges, hard, band, edge_id,
-                     near_b.astype(np.float64),
+    if isinstance(edges, Future):  # made here if the second thread has not started them
+        edges = _pack_edges(occ, sil, raster=raster) if edges.cancel() else edges.result()
+    return DensePlan(edges, hard, band, edge_id, near_b.astype(np.float64),
                      len(sil.vertex_ids))
 
 
@@ -262,7 +263,8 @@ _SHARED_MIN = 1024
 def _shared_test(pool: ThreadPoolExecutor | None, test: Callable[[np.ndarray], np.ndarray],
                  points: np.ndarray) -> np.ndarray:
     """test(points), a test point by point, with the first half of the points tested on the
-    pool's thread while this one tests the rest (the same values)."""
+    pool's thread while this one tests the rest (the same values); this one tests both halves
+    when the pool has not started its half by then (busy with work given before)."""
     if pool is None or len(points) < _SHARED_MIN:
         return test(points)
     half = len(points) // 2
@@ -270,8 +272,9 @@ def _shared_test(pool: ThreadPoolExecutor | None, test: Callable[[np.ndarray], n
     try:
         rest = test(points[half:])
     finally:
-        first.exception()
-    return np.concatenate([first.result(), rest])
+        if not first.cancel():
+            first.exception()
+    return np.concatenate([test(points[:half]) if first.cancelled() else first.result(), rest])
 
 
 def _spacing(uv: np.ndarray, cell_m: float, lo: np.ndarray, hi: np.ndarray) -> float:

@@ -413,15 +413,16 @@ def band_alpha(plan: DensePlan, points: np.ndarray, model: SoftShadowModel, pose
     alpha = np.full(m, np.nan)  # a point no chunk wrote would show
     mine, theirs = _shared(chunks) if pool is not None else (chunks, [])
     # The second thread's chunks (after what it was given before) beside this one's: XLA runs one
-    # call on one core.
-    other = pool.submit(evaluate, theirs) if theirs else None
+    # call on one core. Not started when this one is done (the second thread still busy with
+    # earlier work), they are evaluated here.
+    other = pool.submit(evaluate, theirs) if pool is not None and theirs else None
     try:
         done = list(zip(mine, evaluate(mine)))
     finally:
-        if other is not None:
+        if other is not None and not other.cancel():
             other.exception()
     if other is not None:
-        done += list(zip(theirs, other.result()))
+        done += list(zip(theirs, evaluate(theirs) if other.cancelled() else other.result()))
     for (a, size), out in done:
         alpha[a:min(a + size, m)] = out[:min(size, m - a)]
     return alpha

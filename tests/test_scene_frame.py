@@ -357,11 +357,12 @@ def test_zbuffer_on_two_threads_equals_one(dtype):
 
 
 @pytest.mark.parametrize("m, two_threads", [(1, False), (8, False), (9, False), (32, False), (33, False), (72, False),
-                                           (75, False), (33, True), (72, True), (75, True)])
+                                           (75, False), (33, True), (72, True), (75, True), (75, "busy")])
 def test_band_alpha_in_chunks_equals_one_evaluation(monkeypatch, m, two_threads):
     """The penumbra evaluated chunk by chunk (full chunks, then a small or a large padded one),
-    on one thread or shared with a second, is the formula evaluated over the whole band at
-    once, point for point."""
+    on one thread or shared with a second (or with that thread busy throughout: this one
+    evaluates them all), is the formula evaluated over the whole band at once, point for point."""
+    import threading
     from concurrent.futures import ThreadPoolExecutor
 
     from softshadow import scene_frame
@@ -378,18 +379,22 @@ def test_band_alpha_in_chunks_equals_one_evaluation(monkeypatch, m, two_threads)
     ref = np.asarray(plan_alpha_jit(pts, whole, Pose(), sun, 0.02, model.rule, model.profile, None, model.corners))
     part = dataclasses.replace(plan, band=plan.band[:m], edge_id=plan.edge_id[:m], near_boundary=plan.near_boundary[:m])
     monkeypatch.setattr(scene_frame, "PENUMBRA_CHUNKS", (8, 32))
-    pool = ThreadPoolExecutor(1) if two_threads else None
-    on_pool = []
-    if two_threads:  # the chunks the second thread evaluates, seen
-        monkeypatch.setattr(scene_frame, "_shared", lambda chunks: (on_pool.extend(chunks[1::2]) or
-                                                                    (chunks[0::2], chunks[1::2])))
+    pool = ThreadPoolExecutor(1, thread_name_prefix="second") if two_threads else None
+    free = threading.Event()
+    if two_threads == "busy":
+        pool.submit(free.wait, 60.0)
+    evaluated = []  # the threads that evaluated the chunks
+    jitted = scene_frame.plan_alpha_jit
+    monkeypatch.setattr(scene_frame, "plan_alpha_jit", lambda *a: evaluated.append(
+        threading.current_thread().name.startswith("second")) or jitted(*a))
     try:
         got = scene_frame.band_alpha(part, vis.points, model, Pose(), sun, 0.02, scratch=ss.internal.Scratch(),
                                      pool=pool)
     finally:
+        free.set()
         if pool is not None:
             pool.shutdown()
-    assert bool(on_pool) == two_threads
+    assert any(evaluated) == (two_threads is True), evaluated
     assert got.shape == (m,)
     np.testing.assert_allclose(got, ref[:m], rtol=0, atol=1e-12)
 
@@ -520,9 +525,11 @@ def test_shading_in_two_parts_is_the_shading_in_one():
     np.testing.assert_array_equal(got, want)
 
 
-def test_dense_plan_shares_its_work_with_a_second_thread(monkeypatch):
+@pytest.mark.parametrize("busy", [False, True])
+def test_dense_plan_shares_its_work_with_a_second_thread(monkeypatch, busy):
     """With a second thread packing the edges and testing half the points near the outline, the
-    plan is ``plan_points``'."""
+    plan is ``plan_points``'; with that thread busy throughout, this one does its share."""
+    import threading
     from concurrent.futures import ThreadPoolExecutor
 
     from softshadow import dense_plan
@@ -536,9 +543,17 @@ def test_dense_plan_shares_its_work_with_a_second_thread(monkeypatch):
     tested = []
     shared_test = dense_plan._shared_test
     monkeypatch.setattr(dense_plan, "_shared_test", lambda pool, test, points: shared_test(
-        pool, lambda q: tested.append(len(q)) or test(q), points))
-    with ThreadPoolExecutor(1) as pool:
-        dense = plan_dense_points(model.occluder, pose, sun, vis.points, 0.02, vis.normals, pool=pool,
-                                  scratch=ss.internal.Scratch())
-    assert len(tested) == 2 and min(tested) >= 4, tested
+        pool, lambda q: tested.append((len(q), threading.current_thread().name)) or test(q), points))
+    free = threading.Event()
+    with ThreadPoolExecutor(1, thread_name_prefix="second") as pool:
+        if busy:
+            pool.submit(free.wait, 60.0)
+        try:
+            dense = plan_dense_points(model.occluder, pose, sun, vis.points, 0.02, vis.normals, pool=pool,
+                                      scratch=ss.internal.Scratch())
+        finally:
+            free.set()
+    assert len(tested) == 2 and min(n for n, _ in tested) >= 4, tested
+    threads = {name.startswith("second") for _, name in tested}
+    assert threads == ({False} if busy else {False, True}), tested
     _plans_equal(ref, dense.point_plan())
