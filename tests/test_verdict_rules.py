@@ -149,6 +149,22 @@ def test_a_misfit_in_every_photo_flags_the_group_bounds_k_and_names_the_scene():
     assert not any("umbra is not one level" in w or "texture" in w for w in verdict.warnings)
 
 
+@pytest.mark.parametrize("misfits, move_deg, reliable", [
+    ((2.3, 2.6, 2.4), 0.03, True),  # the known sun stays: the penumbra's shape, not the scene
+    ((2.3, 2.6, 2.4), 0.5, False),  # the sun follows the shadow: the scene is misdescribed
+    ((6.0, 8.4, 7.0), 0.0, False),  # too far off to be the penumbra's shape alone
+])
+def test_a_misfit_that_a_free_sun_does_not_follow_is_the_penumbras_shape(misfits, move_deg, reliable):
+    fit = _fit([_photo(f"{i}.jpg", misfit=m) for i, m in enumerate(misfits)],
+               sun_free=SunFree(0.0, move_deg, 0.0057, 0.159, elevation_deg=50.0))
+    estimate, verdict = rules.judge_fit(fit, GroupContext(3))
+    assert verdict.reliable is reliable
+    assert not verdict.identifiable and estimate.range_k > 0.0057  # k is a bound either way
+    shape = any("penumbra's shape does not match" in w for w in verdict.warnings)
+    misdescribed = any(w.startswith("the fitted shadow does not match the photos") for w in verdict.warnings)
+    assert (shape, misdescribed) == (reliable, not reliable)
+
+
 def test_the_cause_of_a_misfit_from_a_refit_with_the_sun_free():
     fit = _misdescribed()
     # A clock 12 minutes fast: the refit moves the sun back along its path (09:20 in April, Iwate).
@@ -231,10 +247,27 @@ def test_a_refit_that_leaves_k_beyond_the_band_does_not_explain_it():
 
 def test_the_texture_rule_is_averaged_across_a_wide_penumbra():
     """A faint shadow (rho 0.67) over asphalt: the lit residual 34 % of the depth, a 25 px penumbra."""
-    rough = [_photo(f"{i}.jpg", rms_lit=0.112, shadow_depth=0.33, predicted_depth=0.33, k=0.018, rho=0.67) for i in range(3)]
-    assert rules.judge_fit(_fit(rough, k=0.018, rho=0.67, penumbra_px=25.5), GroupContext(3))[1].reliable
-    _, verdict = rules.judge_fit(_fit(rough, k=0.018, rho=0.67, penumbra_px=2.6), GroupContext(3))
+    rough = [_photo("a.jpg", rms_lit=0.112, shadow_depth=0.33, predicted_depth=0.33, k=0.018, rho=0.67)]
+    assert rules.judge_fit(_fit(rough, k=0.018, rho=0.67, penumbra_px=25.5), GroupContext(1))[1].reliable
+    _, verdict = rules.judge_fit(_fit(rough, k=0.018, rho=0.67, penumbra_px=2.6), GroupContext(1))
     assert not verdict.reliable and any("texture rivals the shadow" in w for w in verdict.warnings)
+
+
+@pytest.mark.parametrize("rhos, reliable", [
+    ((0.159, 0.159, 0.159), True),  # three views agree: rho stands
+    ((0.159, 0.163, 0.155), False),  # they disagree by 2.8 errors each (Birge ratio 2.8): texture moved them
+    ((0.159, 0.159, None), True),  # the third has too few umbra samples to measure rho: two views agree
+    ((0.159,), False),  # one photo: nothing to compare
+    ((0.159, None), False),  # one view measured rho on its own
+])
+def test_under_texture_rho_stands_when_independent_views_agree(rhos, reliable):
+    photos = [_photo(f"{i}.jpg", rms_lit=0.3, rho=0.159 if r is None else r,
+                     n_umbra=rules.MIN_PHOTO_UMBRA_SAMPLES - 1 if r is None else 300) for i, r in enumerate(rhos)]
+    estimate, verdict = rules.judge_fit(_fit(photos), GroupContext(len(photos)))
+    assert verdict.reliable is reliable
+    assert not verdict.identifiable and estimate.range_k > 0.0057  # k stays a bound either way
+    texture = [w for w in verdict.warnings if "texture rivals the shadow" in w]
+    assert len(texture) == 1 and (("rho stands" in texture[0]) is reliable)
 
 
 def test_a_forced_level_of_detail_that_moves_k_is_named():
@@ -362,7 +395,7 @@ def test_the_other_flags():
         "rho not measured": dict(n_in_umbra=rules.MIN_UMBRA_SAMPLES - 1),
         "only 9 shadow-edge profiles": dict(n_profiles=9),
         "the solver stopped before converging": dict(converged=False),
-        "the ground's texture rivals the shadow": dict(photos=[_photo(f"{i}.jpg", rms_lit=0.3) for i in range(3)]),
+        "the ground's texture rivals the shadow": dict(photos=[_photo("a.jpg", rms_lit=0.3)]),
     }
     for text, kw in flags.items():
         _, verdict = rules.judge_fit(_fit(**kw), GroupContext(3))
