@@ -10,13 +10,15 @@ model with the work a frame needs:
    that ``render_scene`` makes, kept compact (the hard shadow of every point, a plan of the
    band points only);
 4. the expanded-shadow-volume soft shadow in the band: the renderer's own penumbra formula
-   (``evaluate.plan_alpha``, JAX, compiled per bucket of band sizes), at the band points only;
+   (``evaluate.plan_alpha``, JAX, in chunks of fixed sizes), at the band points only;
 5. the shading of every visible pixel in one compiled pass (numba)::
 
        I = albedo * (ambient + projectors + E_sun max(0, n . s) (1 - alpha))
 
-   With a second thread, that thread shades every pixel with its hard shadow while the first
-   evaluates step 4, and the band's pixels are shaded again after (the same image).
+   With a second thread, that thread shades the points out of the shadow's reach (their shadow
+   is final once the reach is known) while the first makes the sun's light-space raster, then
+   the points within it with their hard shadow and part of step 4's chunks while the first
+   evaluates the rest; the band's pixels are shaded again after (the same image).
 
 ``FrameRenderer`` keeps what did not change since its last frame (``Scratch.memo``): the posed
 object, each projector's shadow map, what each pixel sees while the camera, the surfaces and the
@@ -56,9 +58,10 @@ from .visibility import Surface, VisibleSurfaces, visible_surfaces
 __all__ = ["FRAME_STEPS", "PENUMBRA_CHUNKS", "FrameRenderer", "SceneFrame", "band_alpha", "render_frame"]
 
 #: The steps ``SceneFrame.milliseconds`` times (wall time; with a second thread, "shading" is the
-#: wait for its light and shading (made while this one evaluates the penumbra, "sun_band") and the
-#: band's pixels shaded again, and "projectors" is not timed; without one, "sun_plan" includes
-#: posing the occluder and "projectors" both the shadow maps and the light).
+#: wait for its light and shading (made while this one makes the plan and evaluates the penumbra,
+#: "sun_plan" and "sun_band") and the band's pixels shaded again, and "projectors" is not timed;
+#: without one, "sun_plan" includes posing the occluder and "projectors" both the shadow maps and
+#: the light).
 FRAME_STEPS = ("visibility", "projectors", "sun_plan", "sun_band", "shading")
 
 
@@ -87,8 +90,10 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
     arrays in these buffers (the frame's arrays are then overwritten by the next frame made
     with them; ``FrameRenderer`` does this); pool: a thread that poses the occluder and makes the
     projectors' shadow maps while this one finds what each pixel sees, then the projectors'
-    light while this one makes the sun's plan, then the shading while this one evaluates the
-    penumbra.
+    light while this one makes the sun's plan, the shading of the points out of the shadow's
+    reach while this one makes the raster, half the near-outline test and the edges
+    (``plan_dense_points``), then the shading of the rest and part of the penumbra while this
+    one evaluates the other part (work it has not started when this one needs it is done here).
     """
     pose = Pose() if pose is None else pose
     lights = SceneLights() if lights is None else lights
@@ -186,9 +191,10 @@ class FrameRenderer:
     posed object, the projectors' shadow maps, what each pixel sees and the projectors' light
     while their inputs stay (``Scratch.memo``: arrays by value, other objects such as a
     ``Projector`` by identity; a frame's arrays are read-only, as the next frame may reuse them), and
-    a second thread runs the projectors while the first makes the sun's plan and shades the
-    pixels while the first evaluates the penumbra. threads: 2 (that second thread, and the
-    first's compiled loops on two threads) or 1 (all on one).
+    a second thread runs the projectors and shades the pixels while the first makes the sun's
+    plan and shares the penumbra with it (``render_frame``'s pool). threads: 2 (that second
+    thread, and the first's compiled loops on two threads) or 1 (all on one); the images are
+    the same.
 
     ``render(...)`` takes ``render_frame``'s arguments. A frame's arrays (image, visible, plan)
     are overwritten by the next frame: copy what you keep. Not for use from two threads at once.
