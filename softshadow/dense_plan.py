@@ -15,7 +15,8 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-from concurrent.futures import Future
+from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
 
@@ -90,7 +91,9 @@ def _empty(occ: Occluder, sil, hard: np.ndarray) -> DensePlan:
 def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, range_k_max: float,
                       normals: np.ndarray | None = None, *, rule: str = "edge", margin_px: float = 2.5,
                       posed: PosedOccluder | Future | None = None, world: np.ndarray | None = None,
-                      faces: np.ndarray | None = None, scratch: Scratch | None = None) -> DensePlan:
+                      faces: np.ndarray | None = None, scratch: Scratch | None = None,
+                      reached: Callable[[np.ndarray, np.ndarray], None] | None = None,
+                      pool: ThreadPoolExecutor | None = None) -> DensePlan:
     """``plan_points(occ, pose, sun, points, range_k_max, rule, normals=normals, backend="light",
     margin_px=margin_px)``, compact (``DensePlan``) and faster for many points.
 
@@ -102,7 +105,13 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
     camera's z-buffer knows it. A point whose own face is the shadow map's nearest face at its
     pixel is lit without the lookup (the lookup would find that face and the point on it).
     scratch: keep the per-point arrays in these buffers (``softshadow.scratch``; the plan's
-    ``hard`` is then overwritten by the next call with the same scratch).
+    ``hard`` is then overwritten by the next call with the same scratch). reached(cand, hard),
+    optional: called before the light-space raster is made (not at all when no point is within
+    the shadow's reach), with the points within it (ascending) and the plan's ``hard`` (n,),
+    final already at every point not among them (written at those later): another thread may
+    shade those points while this one goes on. pool: a second thread
+    that packs the silhouette's edges and tests half the points near the outline (after what it
+    was given before) while this one goes on: the same plan.
     """
     if posed is None:
         posed = PosedOccluder.make(occ, pose, sun)
@@ -122,14 +131,11 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
     lo_w = np.array([world[:, j].min() for j in range(3)])
     hi_w = np.array([world[:, j].max() for j in range(3)])
     frame = LightFrame.of_light(light, 0.5 * (lo_w + hi_w))
-    # Attached shadow (``faces_away``), light-space positions (``LightFrame.project``) and the
-    # deepest point, in one pass (needing neither the silhouette nor the light-space vertices).
-    uv_all = scratch_array(scratch, "sun.uv", (n, 2))
-    d_all = scratch_array(scratch, "sun.depth", n)
+    # The deepest point in the sun's view (``LightFrame.project``'s depth), needing neither the
+    # silhouette nor the light-space vertices: made while the posed occluder may still be made.
     hard = scratch_array(scratch, "sun.hard", n)
     basis = np.stack([frame.origin, frame.e1, frame.e2, frame.light])
-    d_max = _project_kernel()(points, np.zeros((0, 3)) if normals is None else normals, basis, -FACING_TOL,
-                              uv_all, d_all, hard) if n else -np.inf
+    d_max = _depth_max_kernel()(points, basis) if n else -np.inf
     if isinstance(posed, Future):
         posed = posed.result()
         if not ((posed.world is world or np.array_equal(posed.world, world)) and np.array_equal(posed.light, light)):
@@ -147,14 +153,17 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
     hi_occ = np.array([uv_v[:, 0].max(), uv_v[:, 1].max()])
     extent = float((hi_occ - lo_occ).max()) + 3.0 * reach
     margin_m = (margin_px + CANDIDATE_REACH_PX + 2) * extent / 256
-    # Each point within its own reach (``plan._within_reach``), gathered in order with its
-    # light-space position, depth and attached shadow; the gathered points' bounds beside.
+    # Per point in one pass: its attached shadow (``faces_away``) into hard, its light-space
+    # position and depth (``LightFrame.project``), and whether it is within its own reach
+    # (``plan._within_reach``): those gathered in order with their position, depth and attached
+    # shadow; the gathered points' bounds beside.
     cand = scratch_array(scratch, "sun.cand", n, np.int64)
     uv_p = scratch_array(scratch, "sun.cand_uv", (n, 2))
     d_p = scratch_array(scratch, "sun.cand_depth", n)
     att = scratch_array(scratch, "sun.cand_attached", n, np.bool_)
     bounds = np.empty(5)
-    count = _reach_kernel()(uv_all, d_all, hard, lo_occ, hi_occ, float(edge_depth.min()),
+    count = _reach_kernel()(points, np.zeros((0, 3)) if normals is None else normals, basis, -FACING_TOL, hard,
+                            lo_occ, hi_occ, float(edge_depth.min()),
                             1.5 * float(light_band_widths(np.float64(1.0), range_k_max)), margin_m, cand, uv_p, d_p,
                             att, bounds)
     if not count:
@@ -172,6 +181,10 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
     if np.any(hi <= lo):
         return _empty(occ, sil, hard)
     grid, map_pixel_m = raster_grid(lo, hi, pixel_m, map_pixel_m)
+    if reached is not None:
+        # Just before the raster (one thread's NumPy and OpenCV, the longest step): work handed to
+        # another thread then takes no core from this one's parallel passes.
+        reached(cand, hard)
     raster = rasterise_shadow(grid, world, light, sil, uv_v)
     m = len(cand)
     in_view = scratch_array(scratch, "sun.in_view", m, np.uint8)
@@ -184,7 +197,10 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
                               raster.boundary_dist_px, 2.0 * pixel_m, att, in_view, label, dist, index)
     if n_near:
         near = index[:n_near].copy()
-        in_view[near] = posed.hard_shadow_at(uv_p[near], projected=uv_v)
+        in_view[near] = _shared_test(pool, lambda q: posed.hard_shadow_at(uv_p[q], projected=uv_v), near)
+    # The silhouette's edges for the penumbra, made on the second thread (if any) meanwhile (from
+    # this frame's raster and silhouette only: left running on an error, it touches no buffer).
+    edges = _submit(pool, _pack_edges, occ, sil, raster=raster)
     lit_ids = np.flatnonzero(sil.lit) if occ.watertight else np.arange(len(occ.faces))
     lit_faces = occ.faces[lit_ids]
     # Farther from the sun than the whole occluder: behind it wherever it is in the way (most of a
@@ -229,8 +245,36 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
         _candidates_kernel()(uv_p, sel, grid.origin_m[0], grid.origin_m[1], pixel_m, raster.edge_label, neighbours,
                              _CANDIDATE_OFFSETS, edge_id)
     near_b = near_b[:n_band]
-    return DensePlan(_pack_edges(occ, sil, raster=raster), hard, band, edge_id, near_b.astype(np.float64),
+    if isinstance(edges, Future):  # made here if the second thread has not started them
+        edges = _pack_edges(occ, sil, raster=raster) if edges.cancel() else edges.result()
+    return DensePlan(edges, hard, band, edge_id, near_b.astype(np.float64),
                      len(sil.vertex_ids))
+
+
+def _submit(pool: ThreadPoolExecutor | None, fn, *args, **kwargs):
+    """fn(...) on the pool's thread (a Future), or here and now without a pool."""
+    return fn(*args, **kwargs) if pool is None else pool.submit(fn, *args, **kwargs)
+
+
+#: Fewer points than this are tested on one thread (handing half to another costs more).
+_SHARED_MIN = 1024
+
+
+def _shared_test(pool: ThreadPoolExecutor | None, test: Callable[[np.ndarray], np.ndarray],
+                 points: np.ndarray) -> np.ndarray:
+    """test(points), a test point by point, with the first half of the points tested on the
+    pool's thread while this one tests the rest (the same values); this one tests both halves
+    when the pool has not started its half by then (busy with work given before)."""
+    if pool is None or len(points) < _SHARED_MIN:
+        return test(points)
+    half = len(points) // 2
+    first = pool.submit(test, points[:half])
+    try:
+        rest = test(points[half:])
+    finally:
+        if not first.cancel():
+            first.exception()
+    return np.concatenate([test(points[:half]) if first.cancelled() else first.result(), rest])
 
 
 def _spacing(uv: np.ndarray, cell_m: float, lo: np.ndarray, hi: np.ndarray) -> float:
@@ -270,24 +314,19 @@ _BLOCK = 8192
 
 
 @functools.cache
-def _project_kernel():
-    """Per point: attached shadow (n . L >= -FACING_TOL, as ``faces_away``; 1.0 in hard), the
-    light-space position and depth (``LightFrame.project``); returns the largest depth."""
+def _depth_max_kernel():
+    """The largest depth of the points in the light frame (basis: origin, e1, e2, light; the
+    depth as ``_reach_kernel`` computes it)."""
     numba = parallel_numba()
 
-    @numba.njit(cache=True, nogil=True, parallel=True)
-    def kernel(points, normals, basis, tol, uv, d, hard):
-        light = basis[3]
+    # On one thread: it runs while the second thread poses the occluder (a parallel loop would
+    # wait for a core).
+    @numba.njit(cache=True, nogil=True)
+    def kernel(points, basis):
         d_max = -np.inf
-        for i in numba.prange(points.shape[0]):
+        for i in range(points.shape[0]):
             x, y, z = points[i, 0] - basis[0, 0], points[i, 1] - basis[0, 1], points[i, 2] - basis[0, 2]
-            uv[i, 0] = x * basis[1, 0] + y * basis[1, 1] + z * basis[1, 2]
-            uv[i, 1] = x * basis[2, 0] + y * basis[2, 1] + z * basis[2, 2]
-            d[i] = x * basis[3, 0] + y * basis[3, 1] + z * basis[3, 2]
-            d_max = max(d_max, d[i])
-            hard[i] = 0.0
-            if normals.shape[0] and normals[i, 0] * light[0] + normals[i, 1] * light[1] + normals[i, 2] * light[2] >= tol:
-                hard[i] = 1.0
+            d_max = max(d_max, x * basis[3, 0] + y * basis[3, 1] + z * basis[3, 2])
         return d_max
 
     return kernel
@@ -295,16 +334,19 @@ def _project_kernel():
 
 @functools.cache
 def _reach_kernel():
-    """``plan._within_reach``'s test (per_m: 1.5 wedge widths per metre behind the nearest
-    edge), the points within reach gathered in order: their index, position, depth and attached
-    shadow (hard > 0), and their bounds (lo u, lo v, hi u, hi v, hi depth). Returns their count."""
+    """Per point: attached shadow (n . L >= -FACING_TOL, as ``faces_away``; 1.0 in hard, else
+    0.0), the light-space position and depth (``LightFrame.project``; basis: origin, e1, e2,
+    light), and ``plan._within_reach``'s test (per_m: 1.5 wedge widths per metre behind the
+    nearest edge): the points within reach gathered in order, their index, position, depth and
+    attached shadow, and their bounds (lo u, lo v, hi u, hi v, hi depth). Returns their count."""
     numba = parallel_numba()
 
     # Parallel over blocks of points: each block's points gathered at its own place first, then
     # moved together (one pass over the points, as one thread's loop).
     @numba.njit(cache=True, nogil=True, parallel=True)
-    def kernel(uv_all, d_all, hard, lo, hi, edge_depth, per_m, margin_m, cand, uv, d, att, bounds):
-        n = uv_all.shape[0]
+    def kernel(points, normals, basis, tol, hard, lo, hi, edge_depth, per_m, margin_m, cand, uv, d, att, bounds):
+        n = points.shape[0]
+        light = basis[3]
         n_blocks = (n + _BLOCK - 1) // _BLOCK
         counts = np.zeros(n_blocks, np.int64)
         box = np.empty((n_blocks, 5))
@@ -312,11 +354,17 @@ def _reach_kernel():
             count = b * _BLOCK
             lo_u, lo_v, hi_u, hi_v, hi_d = np.inf, np.inf, -np.inf, -np.inf, -np.inf
             for i in range(b * _BLOCK, min((b + 1) * _BLOCK, n)):
-                u, v, di = uv_all[i, 0], uv_all[i, 1], d_all[i]
+                x, y, z = points[i, 0] - basis[0, 0], points[i, 1] - basis[0, 1], points[i, 2] - basis[0, 2]
+                u = x * basis[1, 0] + y * basis[1, 1] + z * basis[1, 2]
+                v = x * basis[2, 0] + y * basis[2, 1] + z * basis[2, 2]
+                di = x * basis[3, 0] + y * basis[3, 1] + z * basis[3, 2]
+                attached = normals.shape[0] > 0 and \
+                    normals[i, 0] * light[0] + normals[i, 1] * light[1] + normals[i, 2] * light[2] >= tol
+                hard[i] = 1.0 if attached else 0.0
                 pad = per_m * max(di - edge_depth, 0.0) + margin_m
                 if (u >= lo[0] - pad) & (u <= hi[0] + pad) & (v >= lo[1] - pad) & (v <= hi[1] + pad):
                     # count <= i: never over a point not yet read
-                    cand[count], uv[count, 0], uv[count, 1], d[count], att[count] = i, u, v, di, hard[i] > 0
+                    cand[count], uv[count, 0], uv[count, 1], d[count], att[count] = i, u, v, di, attached
                     lo_u, lo_v, hi_u, hi_v, hi_d = min(lo_u, u), min(lo_v, v), max(hi_u, u), max(hi_v, v), max(hi_d, di)
                     count += 1
             counts[b] = count - b * _BLOCK

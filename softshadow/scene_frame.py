@@ -10,13 +10,15 @@ model with the work a frame needs:
    that ``render_scene`` makes, kept compact (the hard shadow of every point, a plan of the
    band points only);
 4. the expanded-shadow-volume soft shadow in the band: the renderer's own penumbra formula
-   (``evaluate.plan_alpha``, JAX, compiled per bucket of band sizes), at the band points only;
+   (``evaluate.plan_alpha``, JAX, in chunks of fixed sizes), at the band points only;
 5. the shading of every visible pixel in one compiled pass (numba)::
 
        I = albedo * (ambient + projectors + E_sun max(0, n . s) (1 - alpha))
 
-   With a second thread, that thread shades every pixel with its hard shadow while the first
-   evaluates step 4, and the band's pixels are shaded again after (the same image).
+   With a second thread, that thread shades the points out of the shadow's reach (their shadow
+   is final once the reach is known) while the first makes the sun's light-space raster, then
+   the points within it with their hard shadow and part of step 4's chunks while the first
+   evaluates the rest; the band's pixels are shaded again after (the same image).
 
 ``FrameRenderer`` keeps what did not change since its last frame (``Scratch.memo``): the posed
 object, each projector's shadow map, what each pixel sees while the camera, the surfaces and the
@@ -56,9 +58,10 @@ from .visibility import Surface, VisibleSurfaces, visible_surfaces
 __all__ = ["FRAME_STEPS", "PENUMBRA_CHUNKS", "FrameRenderer", "SceneFrame", "band_alpha", "render_frame"]
 
 #: The steps ``SceneFrame.milliseconds`` times (wall time; with a second thread, "shading" is the
-#: wait for its light and shading (made while this one evaluates the penumbra, "sun_band") and the
-#: band's pixels shaded again, and "projectors" is not timed; without one, "sun_plan" includes
-#: posing the occluder and "projectors" both the shadow maps and the light).
+#: wait for its light and shading (made while this one makes the plan and evaluates the penumbra,
+#: "sun_plan" and "sun_band") and the band's pixels shaded again, and "projectors" is not timed;
+#: without one, "sun_plan" includes posing the occluder and "projectors" both the shadow maps and
+#: the light).
 FRAME_STEPS = ("visibility", "projectors", "sun_plan", "sun_band", "shading")
 
 
@@ -87,8 +90,10 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
     arrays in these buffers (the frame's arrays are then overwritten by the next frame made
     with them; ``FrameRenderer`` does this); pool: a thread that poses the occluder and makes the
     projectors' shadow maps while this one finds what each pixel sees, then the projectors'
-    light while this one makes the sun's plan, then the shading while this one evaluates the
-    penumbra.
+    light while this one makes the sun's plan, the shading of the points out of the shadow's
+    reach while this one makes the raster, half the near-outline test and the edges
+    (``plan_dense_points``), then the shading of the rest and part of the penumbra while this
+    one evaluates the other part (work it has not started when this one needs it is done here).
     """
     pose = Pose() if pose is None else pose
     lights = SceneLights() if lights is None else lights
@@ -118,6 +123,7 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
         t = _lap(ms, "projectors", t)
     light = shaded = None
     plan, alpha_band = None, np.zeros(0)
+    early: list[tuple[np.ndarray, Future]] = []  # (the points shaded early, the pool's Future)
     try:
         # What each pixel sees (and each point's surface and faces) is kept while the camera, the
         # surfaces and the ground stay: a frame where only the sun or a projector changes keeps it.
@@ -131,23 +137,34 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
         light = _submit(pool, _projector_light, vis, own, projectors, maps, scratch)
         if pool is None:
             t = _lap(ms, "projectors", t, add=True)
-        if sun is not None and n:
-            # The points go into the sun's view while the second thread still finds the silhouette.
-            plan = plan_dense_points(model.occluder, pose, sun, vis.points, range_k_max, vis.normals,
-                                     rule=model.rule, posed=posed, world=world, faces=on_object, scratch=scratch)
-            t = _lap(ms, "sun_plan", t, add=pool is None)
         h, w = vis.shape
         image = scratch_array(scratch, "frame.image", (h * w, 3))
         sun_dir = np.zeros(3) if sun is None else -np.asarray(sun.light_np, np.float64)
-        shading = (vis.pixel, vis.normals, surface, albedos, float(lights.ambient),
-                   float(lights.sun_irradiance) if sun is not None else 0.0, sun_dir,
-                   plan.hard if plan is not None else np.zeros(0))
+        unshadowed = (vis.pixel, vis.normals, surface, albedos, float(lights.ambient),
+                      float(lights.sun_irradiance) if sun is not None else 0.0, sun_dir)
+        reached = None
+        if sun is not None and n:
+            if pool is not None:
+                def reached(cand: np.ndarray, hard: np.ndarray) -> None:
+                    # The points out of the shadow's reach have their final (attached) shadow:
+                    # the second thread shades them while this one makes the raster and the rest.
+                    early.append((cand, pool.submit(_shade_others, (*unshadowed, hard), light, background, image, cand)))
+            # The points go into the sun's view while the second thread still finds the silhouette.
+            plan = plan_dense_points(model.occluder, pose, sun, vis.points, range_k_max, vis.normals,
+                                     rule=model.rule, posed=posed, world=world, faces=on_object, scratch=scratch,
+                                     reached=reached, pool=pool)
+            t = _lap(ms, "sun_plan", t, add=pool is None)
+        shading = (*unshadowed, plan.hard if plan is not None else np.zeros(0))
         band = plan.band if plan is not None else np.zeros(0, np.int64)
         if pool is not None and plan is not None:
-            # The second thread shades every pixel with its hard shadow while this one evaluates
-            # the penumbra (JAX); the band's pixels are shaded again with it after.
-            shaded = pool.submit(_shade, shading, light, background, image, band[:0], np.zeros(0))
-            alpha_band = band_alpha(plan, vis.points, model, pose, sun, k, scratch=scratch)
+            # The second thread shades the points in the shadow's reach with their hard shadow (the
+            # others it shaded while this one made the plan), then evaluates part of the penumbra
+            # (JAX) while this one evaluates the rest; the band's pixels are shaded again with it.
+            if early:
+                shaded = pool.submit(_shade_listed, shading, light, image, early[0][0])
+            else:
+                shaded = pool.submit(_shade, shading, light, background, image, band[:0], np.zeros(0))
+            alpha_band = band_alpha(plan, vis.points, model, pose, sun, k, scratch=scratch, pool=pool)
             t = _lap(ms, "sun_band", t)
             shaded.result()
             pixel, normals, surface, albedos, ambient, sun_irradiance, sun_dir, _ = shading
@@ -161,7 +178,7 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
     finally:
         # The second thread's work finished before anything else uses the buffers (also on an
         # error: the next frame would share them).
-        for pending in (posed, maps, light, shaded):
+        for pending in (posed, maps, light, shaded, *[f for _, f in early]):
             if isinstance(pending, Future):
                 pending.exception()
     _lap(ms, "shading", t)
@@ -174,9 +191,10 @@ class FrameRenderer:
     posed object, the projectors' shadow maps, what each pixel sees and the projectors' light
     while their inputs stay (``Scratch.memo``: arrays by value, other objects such as a
     ``Projector`` by identity; a frame's arrays are read-only, as the next frame may reuse them), and
-    a second thread runs the projectors while the first makes the sun's plan and shades the
-    pixels while the first evaluates the penumbra. threads: 2 (that second thread, and the
-    first's compiled loops on two threads) or 1 (all on one).
+    a second thread runs the projectors and shades the pixels while the first makes the sun's
+    plan and shares the penumbra with it (``render_frame``'s pool). threads: 2 (that second
+    thread, and the first's compiled loops on two threads) or 1 (all on one); the images are
+    the same.
 
     ``render(...)`` takes ``render_frame``'s arguments. A frame's arrays (image, visible, plan)
     are overwritten by the next frame: copy what you keep. Not for use from two threads at once.
@@ -285,8 +303,10 @@ def _projector_light(vis: VisibleSurfaces, own: np.ndarray, projectors: Sequence
     maps (own: each point's face among the casters', -1 none); kept while the visible points, the
     projectors (by identity) and their maps stay."""
     maps = _result(maps)
-    return _memo(scratch, "frame.light", (vis, own, *projectors, *maps), lambda: _light(vis, own, projectors, maps,
-                                                                                       scratch))
+    # vis by identity stands for own too: both are one kept result of ``_seen`` (comparing own's
+    # 307,200 values every frame cost a few tenths of a millisecond).
+    return _memo(scratch, "frame.light", (vis, *projectors, *maps), lambda: _light(vis, own, projectors, maps,
+                                                                                  scratch))
 
 
 def _light(vis: VisibleSurfaces, own: np.ndarray, projectors: Sequence[Projector], maps: Sequence,
@@ -346,14 +366,17 @@ _compiled: set = set()
 
 
 def band_alpha(plan: DensePlan, points: np.ndarray, model: SoftShadowModel, pose: Pose, sun: Sun,
-               range_k: float, *, scratch: Scratch | None = None) -> np.ndarray:
+               range_k: float, *, scratch: Scratch | None = None,
+               pool: ThreadPoolExecutor | None = None) -> np.ndarray:
     """alpha (m,) at the plan's band points: the model's penumbra formula (``plan_alpha``, JAX).
 
     The band is evaluated in chunks of fixed sizes (``PENUMBRA_CHUNKS``), its edge arrays padded
     to a quarter above their count (``_edge_capacity``), and with scratch, kept at that size while
     the count fits: after the first frame, a frame compiles nothing whatever its band's size
     (each point's alpha depends on that point alone), nor while the silhouette's edges stay
-    within the first frame's capacity. Every chunk size is compiled when the first is.
+    within the first frame's capacity. Every chunk size is compiled when the first is. pool: a
+    thread that evaluates some of the chunks (after the work it was given before) while this one
+    evaluates the others: the same values.
     """
     m = len(plan.band)
     if not m:
@@ -388,13 +411,41 @@ def band_alpha(plan: DensePlan, points: np.ndarray, model: SoftShadowModel, pose
             plan_alpha_jit(np.zeros((size, 3)), inactive, pose, sun, range_k, model.rule, model.profile, None,
                            model.corners).block_until_ready()
             _compiled.add((size, *key))
-    # All chunks dispatched before any is waited for (JAX runs them while this thread goes on).
-    pending = [plan_alpha_jit(pts[a:a + size], chunk(a, size), pose, sun, range_k, model.rule, model.profile, None,
-                              model.corners) for a, size in chunks]
+
+    def evaluate(part: list) -> list:
+        # All chunks dispatched before any is waited for (JAX runs them while this thread goes on).
+        pending = [plan_alpha_jit(pts[a:a + size], chunk(a, size), pose, sun, range_k, model.rule, model.profile,
+                                  None, model.corners) for a, size in part]
+        return [np.asarray(out) for out in pending]
+
     alpha = np.full(m, np.nan)  # a point no chunk wrote would show
-    for (a, size), out in zip(chunks, pending):
-        alpha[a:min(a + size, m)] = np.asarray(out)[:min(size, m - a)]
+    mine, theirs = _shared(chunks) if pool is not None else (chunks, [])
+    # The second thread's chunks (after what it was given before) beside this one's: XLA runs one
+    # call on one core. Not started when this one is done (the second thread still busy with
+    # earlier work), they are evaluated here.
+    other = pool.submit(evaluate, theirs) if pool is not None and theirs else None
+    try:
+        done = list(zip(mine, evaluate(mine)))
+    finally:
+        if other is not None and not other.cancel():
+            other.exception()
+    if other is not None:
+        done += list(zip(theirs, evaluate(theirs) if other.cancelled() else other.result()))
+    for (a, size), out in done:
+        alpha[a:min(a + size, m)] = out[:min(size, m - a)]
     return alpha
+
+
+def _shared(chunks: list) -> tuple[list, list]:
+    """The chunks (start, size) split between two threads, each to the one with fewer points so
+    far (this one first)."""
+    parts: tuple[list, list] = ([], [])
+    load = [0, 0]
+    for a, size in chunks:
+        i = int(load[1] < load[0])
+        parts[i].append((a, size))
+        load[i] += size
+    return parts
 
 
 def _edge_capacity(count: int) -> int:
@@ -430,6 +481,24 @@ def _shade(shading: tuple, light, background, image: np.ndarray, band: np.ndarra
                        alpha_band, image)
 
 
+def _shade_others(shading: tuple, light, background, image: np.ndarray, listed: np.ndarray) -> None:
+    """The shading pass (``_shade_kernel``) of the points not in ``listed`` (ascending), each with
+    its hard shadow, into the flat image (H W, 3), the background first where no point is seen."""
+    pixel, normals, surface, albedos, ambient, sun_irradiance, sun_dir, hard = shading
+    if len(pixel) < len(image):
+        image[:] = np.broadcast_to(np.asarray(background, np.float64), (3,))
+    _shade_kernel()[2](pixel, normals, surface, albedos, _result(light), ambient, sun_irradiance, sun_dir, hard, listed,
+                       image)
+
+
+def _shade_listed(shading: tuple, light, image: np.ndarray, listed: np.ndarray) -> None:
+    """The shading pass of the points ``listed``, each with its hard shadow (after ``_shade_others``
+    with the same list: every point shaded once)."""
+    pixel, normals, surface, albedos, ambient, sun_irradiance, sun_dir, hard = shading
+    _shade_kernel()[3](pixel, normals, surface, albedos, _result(light), ambient, sun_irradiance, sun_dir, hard, listed,
+                       image)
+
+
 def _lap(ms: dict, step: str, start: float, add: bool = False) -> float:
     now = time.perf_counter()
     ms[step] = 1e3 * (now - start) + (ms.get(step, 0.0) if add else 0.0)
@@ -443,7 +512,9 @@ def _shade_kernel():
     E max(0, n . s) (1 - alpha), into the flat image. Returns (shade, patch): shade every point,
     alpha the plan's hard shadow or (band points, ascending in ``band``) the penumbra formula's;
     patch only the band's points, with the penumbra formula's alpha (after a shading with an
-    empty band: the same image as one shading with it)."""
+    empty band: the same image as one shading with it); shade_others and shade_listed: the points
+    not in, and the points in, an ascending list, with their hard shadow (sun present; the two
+    together: ``shade`` with an empty band)."""
     numba = parallel_numba()
 
     @numba.njit(inline="always")
@@ -480,7 +551,26 @@ def _shade_kernel():
             point(band[j], alpha_band[j], pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir,
                   image)
 
-    return shade, patch
+    @numba.njit(cache=True, nogil=True, parallel=True)
+    def shade_others(pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, hard, listed, image):
+        n = pixel.shape[0]
+        block = 4096
+        for b in numba.prange((n + block - 1) // block):
+            lo, hi = b * block, min((b + 1) * block, n)
+            j = np.searchsorted(listed, lo)
+            for i in range(lo, hi):
+                if j < listed.shape[0] and listed[j] == i:
+                    j += 1
+                    continue
+                point(i, hard[i], pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, image)
+
+    @numba.njit(cache=True, nogil=True, parallel=True)
+    def shade_listed(pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, hard, listed, image):
+        for j in numba.prange(listed.shape[0]):
+            i = listed[j]
+            point(i, hard[i], pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, image)
+
+    return shade, patch, shade_others, shade_listed
 
 
 def _albedo_of(value) -> np.ndarray:

@@ -356,10 +356,15 @@ def test_zbuffer_on_two_threads_equals_one(dtype):
     np.testing.assert_array_equal(one[1], two[1])
 
 
-@pytest.mark.parametrize("m", [1, 8, 9, 32, 33, 72, 75])
-def test_band_alpha_in_chunks_equals_one_evaluation(monkeypatch, m):
-    """The penumbra evaluated chunk by chunk (full chunks, then a small or a large padded one) is
-    the formula evaluated over the whole band at once, point for point."""
+@pytest.mark.parametrize("m, two_threads", [(1, False), (8, False), (9, False), (32, False), (33, False), (72, False),
+                                           (75, False), (33, True), (72, True), (75, True), (75, "busy")])
+def test_band_alpha_in_chunks_equals_one_evaluation(monkeypatch, m, two_threads):
+    """The penumbra evaluated chunk by chunk (full chunks, then a small or a large padded one),
+    on one thread or shared with a second (or with that thread busy throughout: this one
+    evaluates them all), is the formula evaluated over the whole band at once, point for point."""
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
     from softshadow import scene_frame
     from softshadow.evaluate import plan_alpha_jit
     model = model_of("ball")
@@ -374,32 +379,60 @@ def test_band_alpha_in_chunks_equals_one_evaluation(monkeypatch, m):
     ref = np.asarray(plan_alpha_jit(pts, whole, Pose(), sun, 0.02, model.rule, model.profile, None, model.corners))
     part = dataclasses.replace(plan, band=plan.band[:m], edge_id=plan.edge_id[:m], near_boundary=plan.near_boundary[:m])
     monkeypatch.setattr(scene_frame, "PENUMBRA_CHUNKS", (8, 32))
-    got = scene_frame.band_alpha(part, vis.points, model, Pose(), sun, 0.02, scratch=ss.internal.Scratch())
+    pool = ThreadPoolExecutor(1, thread_name_prefix="second") if two_threads else None
+    free = threading.Event()
+    if two_threads == "busy":
+        pool.submit(free.wait, 60.0)
+    evaluated = []  # the threads that evaluated the chunks
+    jitted = scene_frame.plan_alpha_jit
+    monkeypatch.setattr(scene_frame, "plan_alpha_jit", lambda *a: evaluated.append(
+        threading.current_thread().name.startswith("second")) or jitted(*a))
+    try:
+        got = scene_frame.band_alpha(part, vis.points, model, Pose(), sun, 0.02, scratch=ss.internal.Scratch(),
+                                     pool=pool)
+    finally:
+        free.set()
+        if pool is not None:
+            pool.shutdown()
+    assert any(evaluated) == (two_threads is True), evaluated
     assert got.shape == (m,)
     np.testing.assert_allclose(got, ref[:m], rtol=0, atol=1e-12)
 
 
-def test_a_frame_compiles_no_penumbra_as_its_band_changes_size(monkeypatch):
+@pytest.mark.parametrize("threads", [1, 2])
+def test_a_frame_compiles_no_penumbra_as_its_band_changes_size(monkeypatch, threads):
     """As the sun moves, the band's size and the silhouette's edges change: after the first
-    frame no frame compiles the penumbra again (a compile stalls a frame for about a second)."""
+    frame no frame compiles the penumbra again (a compile stalls a frame for about a second),
+    on one thread or with the chunks shared by two; the two give the same images."""
     from softshadow import scene_frame
     from softshadow.evaluate import plan_alpha_jit
     monkeypatch.setattr(scene_frame, "PENUMBRA_CHUNKS", (64, 256))
     model = model_of("ball")
     cam = look_at_camera((3.0, -4.0, 2.6), (0.0, 0.0, 0.5), 160, 120, 50.0)
-    renderer = ss.FrameRenderer(threads=1)
-    bands, edges = [], []
+    suns = [Sun(200, 40), Sun(215, 35), Sun(230, 30), Sun(245, 25), Sun(260, 20)]
+
+    bands, edges, images, compiled = [], [], [], []
+    renderer = ss.FrameRenderer(threads=threads)
     try:
-        for i, (azimuth, elevation) in enumerate([(200, 40), (215, 35), (230, 30), (245, 25), (260, 20)]):
-            frame = renderer.render(cam, model, Pose(), SceneLights(0.2, 0.8, 0.02), Sun(azimuth, elevation))
+        for sun in suns:
+            frame = renderer.render(cam, model, Pose(), SceneLights(0.2, 0.8, 0.02), sun)
             bands.append(len(frame.plan.band))
             edges.append(frame.plan.edge_count)
-            if i == 0:
-                compiled = plan_alpha_jit._cache_size()
+            images.append(frame.image.copy())
+            compiled.append(plan_alpha_jit._cache_size())
     finally:
         renderer.close()
     assert max(bands) > 1.25 * min(bands) and len(set(edges)) > 1, (bands, edges)
-    assert plan_alpha_jit._cache_size() == compiled
+    assert sum(b > 256 for b in bands) >= 3, "the band must span several chunks"
+    assert compiled[1:] == compiled[:1] * 4, compiled
+    if threads == 2:  # the chunks shared by two threads: the images of one
+        one = ss.FrameRenderer(threads=1)
+        try:
+            for sun, image in zip(suns, images):
+                np.testing.assert_array_equal(image, one.render(cam, model, Pose(), SceneLights(0.2, 0.8, 0.02),
+                                                                sun).image)
+        finally:
+            one.close()
 
 
 def test_scratch_capacity_keeps_a_size_while_the_count_fits():
@@ -436,3 +469,91 @@ def test_dense_plan_while_the_posed_occluder_is_made_on_another_thread():
             plan_dense_points(model.occluder, pose, sun, vis.points, 0.02, vis.normals, posed=other, world=world)
         with pytest.raises(ValueError, match="needs its world vertices"):
             plan_dense_points(model.occluder, pose, sun, vis.points, 0.02, vis.normals, posed=made)
+
+
+def test_penumbra_chunks_shared_by_points():
+    from softshadow.scene_frame import _shared
+    assert _shared([(0, 4096), (4096, 4096), (8192, 1024)]) == ([(0, 4096), (8192, 1024)], [(4096, 4096)])
+    assert _shared([(0, 1024)]) == ([(0, 1024)], [])
+    assert _shared([(0, 8), (8, 8), (16, 8), (24, 8), (32, 32)]) == ([(0, 8), (16, 8), (32, 32)], [(8, 8), (24, 8)])
+
+
+def test_dense_plan_tells_which_points_the_shadow_can_reach():
+    """``reached``: every point outside the shadow's reach has its final hard shadow when it is
+    called (another thread shades them then), the points within it are the band's superset."""
+    model = model_of("ball")
+    cam = look_at_camera((3.0, -3.5, 2.5), (0.3, 0.0, 0.4), 120, 90, 55.0)
+    vis = visible_surfaces(cam, [_object_surface(model, Pose(), 0.8), _step()], 0.8)
+    sun = Sun(215.0, 38.0)
+    seen = []
+
+    def reached(cand, hard):
+        out = np.setdiff1d(np.arange(len(hard)), cand)
+        seen.append((cand.copy(), out, hard[out].copy()))
+
+    plan = plan_dense_points(model.occluder, Pose(), sun, vis.points, 0.02, vis.normals,
+                             scratch=ss.internal.Scratch(), reached=reached)
+    (cand, out, hard_out), = seen
+    assert 0 < len(cand) < len(vis.points) and np.all(np.diff(cand) > 0)
+    assert np.isin(plan.band, cand).all() and plan.hard[cand].sum() > 20 and (1 - plan.hard[out]).sum() > 20
+    np.testing.assert_array_equal(plan.hard[out], hard_out)
+    _plans_equal(plan_dense_points(model.occluder, Pose(), sun, vis.points, 0.02, vis.normals).point_plan(),
+                 plan.point_plan())
+
+
+def test_shading_in_two_parts_is_the_shading_in_one():
+    """The points not listed (shaded while the plan is made, the background first), then the
+    listed ones: the image of one shading pass."""
+    from softshadow.scene_frame import _shade, _shade_listed, _shade_others
+    rng = np.random.default_rng(5)
+    n, h_w = 9000, 9500
+    pixel = rng.permutation(h_w)[:n]
+    normals = rng.normal(size=(n, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    shading = (pixel, normals, rng.integers(-1, 2, n), rng.uniform(0.2, 0.9, (3, 3)), 0.2, 0.8,
+               np.array([0.3, -0.2, 0.93]), rng.integers(0, 2, n).astype(np.float64))
+    light = rng.uniform(0, 0.5, (n, 3))
+    listed = np.sort(rng.choice(n, 3000, replace=False))
+    want = np.full((h_w, 3), np.nan)
+    _shade(shading, light, 0.25, want, np.zeros(0, np.int64), np.zeros(0))
+    got = np.full((h_w, 3), np.nan)
+    _shade_others(shading, light, 0.25, got, listed)
+    others = np.delete(np.arange(h_w), pixel[listed])
+    np.testing.assert_array_equal(got[pixel[listed]], 0.25)  # the background so far
+    np.testing.assert_array_equal(got[others], want[others])
+    _shade_listed(shading, light, got, listed)
+    np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize("busy", [False, True])
+def test_dense_plan_shares_its_work_with_a_second_thread(monkeypatch, busy):
+    """With a second thread packing the edges and testing half the points near the outline, the
+    plan is ``plan_points``'; with that thread busy throughout, this one does its share."""
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    from softshadow import dense_plan
+    monkeypatch.setattr(dense_plan, "_SHARED_MIN", 8)
+    model = model_of("pillar")
+    pose = Pose(rotation_deg=(0.0, 0.0, 25.0))
+    cam = look_at_camera((3.5, -4.0, 3.0), (0.0, 0.0, 0.5), 120, 90, 50.0)
+    vis = visible_surfaces(cam, [_object_surface(model, pose, 0.8), _step()], 0.8)
+    sun = Sun(250.0, 35.0)
+    ref = model.plan_points(sun, pose, vis.points, 0.02, normals=vis.normals, backend="light")
+    tested = []
+    shared_test = dense_plan._shared_test
+    monkeypatch.setattr(dense_plan, "_shared_test", lambda pool, test, points: shared_test(
+        pool, lambda q: tested.append((len(q), threading.current_thread().name)) or test(q), points))
+    free = threading.Event()
+    with ThreadPoolExecutor(1, thread_name_prefix="second") as pool:
+        if busy:
+            pool.submit(free.wait, 60.0)
+        try:
+            dense = plan_dense_points(model.occluder, pose, sun, vis.points, 0.02, vis.normals, pool=pool,
+                                      scratch=ss.internal.Scratch())
+        finally:
+            free.set()
+    assert len(tested) == 2 and min(n for n, _ in tested) >= 4, tested
+    threads = {name.startswith("second") for _, name in tested}
+    assert threads == ({False} if busy else {False, True}), tested
+    _plans_equal(ref, dense.point_plan())
