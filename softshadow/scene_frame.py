@@ -478,7 +478,7 @@ def _shade(shading: tuple, light, background, image: np.ndarray, band: np.ndarra
     if len(pixel) < len(image):  # the shading writes every pixel that sees something; the rest is background
         image[:] = np.broadcast_to(np.asarray(background, np.float64), (3,))
     _shade_kernel()[0](pixel, normals, surface, albedos, _result(light), ambient, sun_irradiance, sun_dir, hard, band,
-                       alpha_band, image)
+                       alpha_band, False, image)
 
 
 def _shade_others(shading: tuple, light, background, image: np.ndarray, listed: np.ndarray) -> None:
@@ -487,15 +487,15 @@ def _shade_others(shading: tuple, light, background, image: np.ndarray, listed: 
     pixel, normals, surface, albedos, ambient, sun_irradiance, sun_dir, hard = shading
     if len(pixel) < len(image):
         image[:] = np.broadcast_to(np.asarray(background, np.float64), (3,))
-    _shade_kernel()[2](pixel, normals, surface, albedos, _result(light), ambient, sun_irradiance, sun_dir, hard, listed,
-                       image)
+    _shade_kernel()[0](pixel, normals, surface, albedos, _result(light), ambient, sun_irradiance, sun_dir, hard, listed,
+                       np.zeros(0), True, image)
 
 
 def _shade_listed(shading: tuple, light, image: np.ndarray, listed: np.ndarray) -> None:
     """The shading pass of the points ``listed``, each with its hard shadow (after ``_shade_others``
     with the same list: every point shaded once)."""
     pixel, normals, surface, albedos, ambient, sun_irradiance, sun_dir, hard = shading
-    _shade_kernel()[3](pixel, normals, surface, albedos, _result(light), ambient, sun_irradiance, sun_dir, hard, listed,
+    _shade_kernel()[2](pixel, normals, surface, albedos, _result(light), ambient, sun_irradiance, sun_dir, hard, listed,
                        image)
 
 
@@ -509,12 +509,12 @@ def _lap(ms: dict, step: str, start: float, add: bool = False) -> float:
 def _shade_kernel():
     """The compiled shading passes (numba): per visible point, its surface's albedo (albedos' row
     surface + 1: the ground's first) times ambient plus the projectors' light plus the sun's,
-    E max(0, n . s) (1 - alpha), into the flat image. Returns (shade, patch): shade every point,
-    alpha the plan's hard shadow or (band points, ascending in ``band``) the penumbra formula's;
-    patch only the band's points, with the penumbra formula's alpha (after a shading with an
-    empty band: the same image as one shading with it); shade_others and shade_listed: the points
-    not in, and the points in, an ascending list, with their hard shadow (sun present; the two
-    together: ``shade`` with an empty band)."""
+    E max(0, n . s) (1 - alpha), into the flat image. Returns (shade, patch, shade_listed): shade
+    every point, alpha the plan's hard shadow or (points of an ascending list) the list's alpha,
+    or with skip_listed the points not in the list only; patch only the band's points, with the
+    penumbra formula's alpha (after a shading with an empty band: the same image as one shading
+    with it); shade_listed the points in an ascending list with their hard shadow (after
+    ``shade`` skipping them: every point shaded once)."""
     numba = parallel_numba()
 
     @numba.njit(inline="always")
@@ -526,23 +526,23 @@ def _shade_kernel():
         for c in range(3):
             image[p, c] = albedos[s, c] * (ambient + light[i, c] + sun)
 
-    # Parallel over blocks of points, each starting at its first band point.
+    # Parallel over blocks of points, each starting at its first listed point.
     @numba.njit(cache=True, nogil=True, parallel=True)
-    def shade(pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, hard, band, alpha_band,
-              image):
+    def shade(pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, hard, listed, alpha_listed,
+              skip_listed, image):
         has_sun = hard.shape[0] > 0
         n = pixel.shape[0]
         block = 4096
         for b in numba.prange((n + block - 1) // block):
             lo, hi = b * block, min((b + 1) * block, n)
-            j = np.searchsorted(band, lo)
+            j = np.searchsorted(listed, lo)
             for i in range(lo, hi):
-                alpha = 1.0  # no sun: E is 0
-                if has_sun:
-                    alpha = hard[i]
-                    if j < band.shape[0] and band[j] == i:
-                        alpha = alpha_band[j]
-                        j += 1
+                alpha = hard[i] if has_sun else 1.0  # no sun: E is 0
+                if j < listed.shape[0] and listed[j] == i:
+                    j += 1
+                    if skip_listed:
+                        continue
+                    alpha = alpha_listed[j - 1]
                 point(i, alpha, pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, image)
 
     @numba.njit(cache=True, nogil=True, parallel=True)
@@ -552,25 +552,12 @@ def _shade_kernel():
                   image)
 
     @numba.njit(cache=True, nogil=True, parallel=True)
-    def shade_others(pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, hard, listed, image):
-        n = pixel.shape[0]
-        block = 4096
-        for b in numba.prange((n + block - 1) // block):
-            lo, hi = b * block, min((b + 1) * block, n)
-            j = np.searchsorted(listed, lo)
-            for i in range(lo, hi):
-                if j < listed.shape[0] and listed[j] == i:
-                    j += 1
-                    continue
-                point(i, hard[i], pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, image)
-
-    @numba.njit(cache=True, nogil=True, parallel=True)
     def shade_listed(pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, hard, listed, image):
         for j in numba.prange(listed.shape[0]):
             i = listed[j]
             point(i, hard[i], pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, image)
 
-    return shade, patch, shade_others, shade_listed
+    return shade, patch, shade_listed
 
 
 def _albedo_of(value) -> np.ndarray:
