@@ -163,6 +163,10 @@ def test_a_misfit_that_a_free_sun_does_not_follow_is_the_penumbras_shape(misfits
     shape = any("penumbra's shape does not match" in w for w in verdict.warnings)
     misdescribed = any(w.startswith("the fitted shadow does not match the photos") for w in verdict.warnings)
     assert (shape, misdescribed) == (reliable, not reliable)
+    # The wedge rule is named where the fitter has it: on the ground plane.
+    assert any("--rule wedge" in w for w in verdict.warnings) is reliable
+    on_steps = rules.judge_fit(dataclasses.replace(fit, receiver="mesh"), GroupContext(3))[1]
+    assert not any("--rule wedge" in w for w in on_steps.warnings)
 
 
 def test_the_cause_of_a_misfit_from_a_refit_with_the_sun_free():

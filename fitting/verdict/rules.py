@@ -578,7 +578,8 @@ def _shape_misfit(fit: FitEvidence) -> str | None:
         return None
     return (f"the fitted penumbra's shape does not match the photos' (residuals {misfit:.1f} times the noise on "
             f"the lit ground and in the umbra; with the sun free it moved {move:.2f} deg, so the scene is described "
-            "right): k is a bound; --rule wedge models crowded edges as sunlight does")
+            "right): k is a bound" + ("; --rule wedge models crowded edges as sunlight does" if fit.receiver == "plane"
+                                      else ""))
 
 
 def _misfit_warning(fit: FitEvidence, context: GroupContext) -> str | None:
