@@ -585,7 +585,7 @@ def _shape_misfit(fit: FitEvidence) -> str | None:
 def _misfit_warning(fit: FitEvidence, context: GroupContext) -> str | None:
     """The goodness-of-fit warning (the model does not describe the photos) naming the likely cause."""
     misfit = misfit_of(fit)
-    if not (_finite(misfit) and misfit > MISFIT_MAX) or _shape_misfit(fit):
+    if not (_finite(misfit) and misfit > MISFIT_MAX):
         return None
     every = all(_finite(p.misfit) and p.misfit > MISFIT_MAX for p in fit.photos)
     return (f"the fitted shadow does not match the photos: residuals {misfit:.1f} times the noise on the lit "
@@ -614,8 +614,10 @@ def _lod_warning(context: GroupContext) -> str | None:
             "fit with --lod auto")
 
 
-def _texture_warning(fit: FitEvidence) -> str | None:
-    """The warning when the ground's texture rivals the shadow's step (``TEXTURE_DEPTH_RATIO``), or None."""
+def _texture_warning(fit: FitEvidence, rho_ratio: float) -> tuple[str | None, bool]:
+    """The warning when the ground's texture rivals the shadow's step (``TEXTURE_DEPTH_RATIO``), or
+    None; and whether rho stands anyway (``TEXTURE_VIEWS`` photos that measured it agree within
+    ``TEXTURE_AGREE_RATIO``, the Birge ratio ``rho_ratio``): then it is a note, not a flag."""
     ratios = [p.rms_lit / p.predicted_depth for p in fit.photos
               if p.n_lit >= _MIN_SIDE_SAMPLES and _finite(p.rms_lit) and _finite(p.predicted_depth)
               and p.predicted_depth > 0]
@@ -623,10 +625,15 @@ def _texture_warning(fit: FitEvidence) -> str | None:
     # Across a penumbra wider than TEXTURE_PENUMBRA_PX, the pixel-scale texture averages out.
     averaging = math.sqrt(min(1.0, TEXTURE_PENUMBRA_PX / px)) if _finite(px) and px > 0 else 1.0
     if not ratios or averaging * median(ratios) <= TEXTURE_DEPTH_RATIO:
-        return None
+        return None, False
+    # Views that mix texture and shadow differently and agree on rho measured it through the texture.
+    views = sum(p.n_umbra >= MIN_PHOTO_UMBRA_SAMPLES for p in fit.photos)
+    stands = views >= TEXTURE_VIEWS and rho_ratio <= TEXTURE_AGREE_RATIO
+    rho = (f"rho stands, its {views} photos agreeing within their errors" if stands
+           else "rho is not measured reliably")
     return (f"the ground's texture rivals the shadow (lit residual {_pct(median(ratios))} of the shadow's depth, "
-            f"above {_pct(TEXTURE_DEPTH_RATIO)}): texture edges pass for the penumbra and shift the levels; rho is "
-            "not measured reliably" + (f"; or {_SUN_SEARCHED}" if fit.sun_fitted else ""))
+            f"above {_pct(TEXTURE_DEPTH_RATIO)}): texture edges pass for the penumbra and shift the levels; {rho}"
+            + (f"; or {_SUN_SEARCHED}" if fit.sun_fitted else "")), stands
 
 
 def _band_warning(fit: FitEvidence, context: GroupContext) -> str:
@@ -681,7 +688,8 @@ def judge_fit(fit: FitEvidence, context: GroupContext | None = None) -> tuple[Es
 
     # 3. Goodness of fit; a misdescribed scene (a misfit, or a penumbra beyond the band that a moved
     # sun explains) also raises the residuals that the umbra's levels and the texture are judged by.
-    misfit = _misfit_warning(fit, context) or _sun_move_warning(fit, context)
+    shape = _shape_misfit(fit)  # a misfit that is the penumbra's shape is a note (below), not a flag
+    misfit = (None if shape else _misfit_warning(fit, context)) or _sun_move_warning(fit, context)
     scene_off = misfit is not None or (fit.k > fit.range_k_max and _sun_explains(context.sun_check, fit))
     flags += [w for w in (misfit, None if misfit else _lod_warning(context)) if w]
 
@@ -691,7 +699,6 @@ def judge_fit(fit: FitEvidence, context: GroupContext | None = None) -> tuple[Es
     if bound is None and scene_off:
         # A misplaced edge is fitted with a wider penumbra: k reads high, and bounds the truth.
         bound = "the fitted shadow does not match the photos"
-    shape = _shape_misfit(fit)
     if bound is None and shape:
         bound = "the fitted penumbra's shape does not match the photos'"
     notes.append(shape)
@@ -701,15 +708,12 @@ def judge_fit(fit: FitEvidence, context: GroupContext | None = None) -> tuple[Es
         # to cover them, so k reads high.
         bound = (f"the fitted sun had not settled (it still moved {moved:.2f} deg in the last refit), and its "
                  "error widens the fitted penumbra")
-    texture = None if scene_off else _texture_warning(fit)
+    texture, rho_stands = (None, False) if scene_off else _texture_warning(fit, rho_ratio)
     if bound is None and texture:
         # What hides the rho measurement hides the penumbra's width too: k is then a bound.
         bound = "the ground's texture hides the penumbra's width"
-    views = sum(p.n_umbra >= MIN_PHOTO_UMBRA_SAMPLES for p in fit.photos)
-    if texture and views >= TEXTURE_VIEWS and rho_ratio <= TEXTURE_AGREE_RATIO:
-        # Views that mix texture and shadow differently agree on rho: a note, not a flag.
-        notes.append(texture.replace("rho is not measured reliably",
-                                     f"rho stands, its {views} photos agreeing within their errors"))
+    if rho_stands:
+        notes.append(texture)
         texture = None
     if unresolved:
         bias = _umbra_bias(fit)
