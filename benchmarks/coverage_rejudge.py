@@ -33,12 +33,20 @@ def _num(x):
     return math.nan if x is None else x
 
 
+def _with_gap(photo: dict) -> dict:
+    """A photo's evidence with its ``depth_gap``: records fitted before the gap was measured sample
+    by sample keep the difference of the two depths in its place."""
+    if "depth_gap" in photo or photo.get("shadow_depth") is None or photo.get("predicted_depth") is None:
+        return photo
+    return {**photo, "depth_gap": photo["shadow_depth"] - photo["predicted_depth"]}
+
+
 def evidence_from_json(d: dict):
     """A ``FitEvidence`` from ``dataclasses.asdict`` of one (as kept in a record)."""
     from fitting.verdict.evidence import FitEvidence, PhotoEvidence, SunFree
     d = dict(d)
     photo_fields = {f.name for f in dataclasses.fields(PhotoEvidence)}
-    d["photos"] = tuple(PhotoEvidence(**{k: (_num(v) if k not in ("photo",) else v) for k, v in p.items()
+    d["photos"] = tuple(PhotoEvidence(**{k: (_num(v) if k not in ("photo",) else v) for k, v in _with_gap(p).items()
                                          if k in photo_fields}) for p in d.get("photos", ()))
     d["photos_without_shadow"] = _tuple_pairs(d.get("photos_without_shadow"))
     if d.get("sun_free") is not None:

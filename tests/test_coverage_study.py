@@ -240,7 +240,7 @@ def test_a_record_is_judged_again_from_what_the_rule_book_saw():
     from fitting.verdict.rules import judge_fit
 
     photos = tuple(PhotoEvidence(f"{i}.jpg", 1300, 700, 300, 80, 0.02, rms_lit=0.02, noise_lit=0.02,
-                                 misfit=0.9 + 0.1 * i, shadow_depth=0.8, predicted_depth=0.8, k=0.0057,
+                                 misfit=0.9 + 0.1 * i, shadow_depth=0.8, predicted_depth=0.8, depth_gap=0.0, k=0.0057,
                                  k_stderr=0.0002, rho=0.16, rho_stderr=0.001) for i in range(3))
     fit = FitEvidence(k=0.0057, rho=0.159, k_stderr_stat=0.00015, rho_stderr_stat=0.0006, k_stderr_sys=0.0005,
                       rho_stderr_sys=0.002, penumbra_px=2.3, blur_px=None, n_in_penumbra=260, n_in_umbra=900,

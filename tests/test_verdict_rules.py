@@ -18,7 +18,7 @@ def _photo(name="a.jpg", **kw) -> PhotoEvidence:
     """A photo that fits well (the numbers of a table2 photo at 640x480)."""
     base = dict(photo=name, n_samples=1300, n_lit=780, n_umbra=300, n_penumbra=80, rms=0.02, rms_lit=0.023,
                 rms_umbra=0.005, rms_penumbra=0.02, noise_lit=0.022, noise_umbra=0.004, misfit=0.9,
-                shadow_depth=0.84, predicted_depth=0.84, k=0.0057,
+                shadow_depth=0.84, predicted_depth=0.84, depth_gap=0.0, k=0.0057,
                 k_stderr=0.0002, rho=0.159, rho_stderr=0.001)
     base.update(kw)
     return PhotoEvidence(**base)
@@ -440,7 +440,7 @@ def test_a_penumbra_under_the_blur_spot_on_relief_flags_the_group_when_its_umbra
 def test_a_photos_shadow_deeper_than_the_fitted_one_flags_the_group(gap, reliable):
     """Deeper: the fitted umbra holds partly lit pixels. Shallower (light the relief sends into the
     umbra) is no flag."""
-    photos = [_photo(f"{i}.jpg", shadow_depth=0.84 + gap, predicted_depth=0.84) for i in range(3)]
+    photos = [_photo(f"{i}.jpg", depth_gap=gap) for i in range(3)]
     _, verdict = rules.judge_fit(_fit(photos), GroupContext(3))
     assert verdict.reliable is reliable and verdict.identifiable
     assert any("the photos' shadow is 6 % of the lit level deeper than the fitted one" in w

@@ -92,11 +92,12 @@ def photo_evidence(name: str, observed: np.ndarray, prediction: Prediction, rho:
     # and then has no sample whose alpha reaches the umbra.
     depth = _median(obs[outside], _MIN_DEPTH_SAMPLES) - _median(obs[inside_umbra], _MIN_DEPTH_SAMPLES)
     predicted = _median(fit[outside], _MIN_DEPTH_SAMPLES) - _median(fit[inside_umbra], _MIN_DEPTH_SAMPLES)
+    gap = _median(r[outside], _MIN_DEPTH_SAMPLES) - _median(r[inside_umbra], _MIN_DEPTH_SAMPLES)
     return PhotoEvidence(
         photo=name, n_samples=int(ok.sum()), n_lit=int(lit.sum()), n_umbra=int(umbra.sum()),
         n_penumbra=int(inside.sum()), rms=_rms(r[ok]), rms_lit=_rms(r[lit]), rms_umbra=_rms(r[umbra]),
         rms_penumbra=_rms(r[inside]), noise_lit=noise_lit, noise_umbra=noise_umbra,
-        misfit=misfit, shadow_depth=depth, predicted_depth=predicted)
+        misfit=misfit, shadow_depth=depth, predicted_depth=predicted, depth_gap=gap)
 
 
 def photo_estimates(params: FitParams, residuals: np.ndarray, jacobian: np.ndarray, photo_rows: list[slice], *,

@@ -47,7 +47,11 @@ class PhotoEvidence:
     what the photo shows, whatever its texture.
     shadow_depth, predicted_depth: the observed and the fitted lit level minus the umbra level
     (relative) where the shadow's geometry puts them (beyond the penumbra on either side, whatever
-    the photo's fitted blur), NaN with fewer than 10 samples on either side.
+    the photo's fitted blur), NaN with fewer than 10 samples on either side. depth_gap: how much
+    deeper the photo's shadow is than the fitted one, sample by sample: the median residual on that
+    lit side minus the median residual in that umbra (relative; NaN as above). Unlike the difference
+    of the two depths, it does not move when the fitted level varies within a region (a receiver's
+    faces turned differently to the sun), where medians of observed and fitted values part.
     k, k_stderr, rho, rho_stderr: the photo's own estimate (the group's fit moved to this
     photo's samples alone, to first order) and its statistical error.
     """
@@ -66,6 +70,7 @@ class PhotoEvidence:
     misfit: float = NAN
     shadow_depth: float = NAN
     predicted_depth: float = NAN
+    depth_gap: float = NAN
     k: float = NAN
     k_stderr: float = NAN
     rho: float = NAN

@@ -500,8 +500,7 @@ def _likely_cause(fit: FitEvidence, context: GroupContext) -> str:
 
 def _depth_mismatch_warning(fit: FitEvidence) -> str | None:
     """The warning when the photos' shadow is deeper than the fitted one (``DEPTH_MISMATCH_MAX``)."""
-    gaps = [p.shadow_depth - p.predicted_depth for p in fit.photos
-            if _finite(p.shadow_depth) and _finite(p.predicted_depth)]
+    gaps = [p.depth_gap for p in fit.photos if _finite(p.depth_gap)]
     if not gaps or median(gaps) <= DEPTH_MISMATCH_MAX:
         return None
     return (f"the photos' shadow is {_pct(median(gaps))} of the lit level deeper than the fitted one (more than "
