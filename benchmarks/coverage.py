@@ -272,8 +272,9 @@ def assemble(records: list[dict], seed: int, environment: dict | None = None) ->
             "coverage": "among the groups reported reliable",
             "confident miss": "reliable, and k or rho beyond 3 stated sigma (a bound: the truth above it by more "
                               "than one range_stderr); its share is among all groups",
-            "false alarm": "a well-described group (no misdescription, no forced level of detail) that is flagged; "
-                           "needless when its k and rho were within their stated errors anyway",
+            "false alarm": "a well-described group (no misdescription, no forced level of detail) that is flagged "
+                           "although its k and rho were within their stated errors; the flags on well-described "
+                           "groups whose values were off are counted apart (flagged rightly)",
         },
         "summary": summarize(records),
         "bins": {factor: bin_table(records, factor) for factor in FACTORS},

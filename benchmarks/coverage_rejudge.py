@@ -113,8 +113,8 @@ def _row(name: str, records: list[dict]) -> str:
     s = summarize(records)
     return (f"{name:15s} groups {s['groups']:3d} reliable {s['reliable']:3d} k {s['k_covered']}/{s['reliable']} "
             f"rho {s['rho_covered']}/{s['reliable']} bounds {s['k_bounds']} flagged {s['flagged']} "
-            f"misses {s['confident_misses']} false alarms {s['false_alarms']}/{s['well_described']} "
-            f"(needless {s['needless_flags']})")
+            f"misses {s['confident_misses']} well described flagged {s['well_described_flagged']}/"
+            f"{s['well_described']} (false alarms {s['false_alarms']})")
 
 
 def table(records: list[dict]) -> list[str]:

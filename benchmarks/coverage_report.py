@@ -34,11 +34,11 @@ def _row(label: str, s: dict) -> str:
     return (f"| {label} | {s['groups']} | {s['reliable']} | {_frac(s['k_covered'], s['reliable'])} "
             f"({_pct(s['k_coverage'])}) | {_frac(s['rho_covered'], s['reliable'])} ({_pct(s['rho_coverage'])}) | "
             f"{s['k_bounds']} | {s['flagged']} ({_pct(s['flagged_share'])}) | {s['confident_misses']} | "
-            f"{_frac(s['false_alarms'], s['well_described'])} ({s.get('needless_flags', 0)} needless) |")
+            f"{_frac(s['well_described_flagged'], s['well_described'])} ({s['false_alarms']}) |")
 
 
 _HEAD = ("| bin | groups | reliable | k covered | rho covered | k bounds | flagged | confident misses | "
-         "false alarms (needless) |", "|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+         "well described flagged (false alarms) |", "|---|---:|---:|---:|---:|---:|---:|---:|---:|")
 
 
 def coverage_plot(records: list[dict], path: Path) -> None:
@@ -218,13 +218,15 @@ def write_coverage_report(result: dict, md_path: Path, json_name: str | None = N
           f"{total['groups']}, {_pct(total['confident_miss_share'])})",
           f"- False alarms on well-described groups <= {MAX_FALSE_ALARMS:.0%}: "
           f"**{'met' if crit['false_alarms_ok'] else 'not met'}** ({total['false_alarms']} of "
-          f"{total['well_described']}, {_pct(total['false_alarm_rate'])}; {total['needless_flags']} of them "
-          "needless: their k and rho were within the stated errors anyway)", ""]
+          f"{total['well_described']}, {_pct(total['false_alarm_rate'])}: flagged although k and rho were within "
+          f"the stated errors). All flags on well-described groups, the right ones included: "
+          f"{total['well_described_flagged']} ({_pct(total['well_described_flagged_share'])})", ""]
     L += ["## All groups", "", *_HEAD, _row("all", total),
           _row("well described", summarize([r for r in records if judge(r).well_described])),
           _row("misdescribed", summarize([r for r in records if not judge(r).well_described])), "",
           "k bounds: reliable groups whose k is not identifiable (covered when the truth is under the bound). "
-          "False alarms count among the well-described groups of the row.", "",
+          "The last column counts among the well-described groups of the row: those flagged, and in brackets the "
+          "false alarms among them (flagged although k and rho were within the stated errors).", "",
           f"![coverage per bin](img/{img_cov.name})", "", f"![pulls](img/{img_pull.name})", ""]
     L += ["## Per factor", ""]
     for factor in FACTORS:
@@ -238,8 +240,8 @@ def write_coverage_report(result: dict, md_path: Path, json_name: str | None = N
     else:
         L += ["None.", ""]
     alarms = _case_rows(records, lambda j, r: j.well_described and j.flagged)
-    L += ["## False alarms", "", "Well-described groups reported unreliable (or failed), with the warnings; "
-          "those whose k and rho were within the stated errors anyway are the needless flags.", ""]
+    L += ["## Well-described groups flagged", "", "Well-described groups reported unreliable (or failed), with "
+          "the warnings; those whose k and rho were within the stated errors anyway are the false alarms.", ""]
     if alarms:
         L += ["| group | draw | k vs truth | rho vs truth | warnings |", "|---|---|---|---|---|", *alarms, ""]
     else:
@@ -338,9 +340,10 @@ def summary_section(result: dict, study_page: str = "uncertainty_study.md") -> s
             + ")") + ".",
          f"- Confident misses (reliable, beyond 3 stated sigma): {total['confident_misses']} of {total['groups']} "
          f"groups ({_pct(total['confident_miss_share'])}; target <= {MAX_CONFIDENT_MISSES:.0%}).",
-         f"- False alarms (well-described groups flagged): {total['false_alarms']} of {total['well_described']} "
-         f"({_pct(total['false_alarm_rate'])}; target <= {MAX_FALSE_ALARMS:.0%}); {total['needless_flags']} "
-         "needless (k and rho within the stated errors anyway).", "",
+         f"- False alarms (well-described groups flagged although k and rho were within the stated errors): "
+         f"{total['false_alarms']} of {total['well_described']} ({_pct(total['false_alarm_rate'])}; target <= "
+         f"{MAX_FALSE_ALARMS:.0%}). Well-described groups flagged, the right flags included: "
+         f"{total['well_described_flagged']} ({_pct(total['well_described_flagged_share'])}).", "",
          "Coverage counts the groups reported reliable; a k that is not identifiable is covered when the truth "
          "lies under its bound.", SECTION_END]
     return "\n".join(L)

@@ -15,8 +15,9 @@ Definitions (docs/uncertainty_study.md repeats them):
 - **confident miss**: reliable, and k or rho beyond 3 stated sigma of the truth (for a bound:
   the truth above the bound by more than one stated sigma, the bound being k + 2 sigma);
 - **false alarm**: a well-described group (no misdescription, no forced level of detail)
-  that is flagged; a **needless** one had its k and rho within their stated errors anyway
-  (the others were flagged rightly: the data could not give the values).
+  that is flagged although its k and rho were within their stated errors: the flag had nothing
+  to find. A flagged well-described group whose values were off is flagged rightly (the data or
+  the model could not give the values); both are counted (``well_described_flagged``).
 """
 
 from __future__ import annotations
@@ -171,7 +172,8 @@ def _share(num: int, den: int) -> float | None:
 
 def summarize(records: Iterable[dict]) -> dict:
     """Counts and shares of a set of records: groups, reliable, flagged, k and rho covered among
-    the reliable, confident misses (among all), false alarms (among the well described)."""
+    the reliable, confident misses (among all), the well described that are flagged and the false
+    alarms among them."""
     records = list(records)
     js = [judge(r) for r in records]
     reliable = [j for j in js if j.reliable]
@@ -186,8 +188,8 @@ def summarize(records: Iterable[dict]) -> dict:
         "k_bounds": sum(not j.identifiable for j in reliable),
         "confident_misses": sum(j.confident_miss for j in js),
         "well_described": len(well),
-        "false_alarms": sum(j.flagged for j in well),
-        "needless_flags": sum(j.flagged and bool(j.values_covered) for j in well),
+        "well_described_flagged": sum(j.flagged for j in well),
+        "false_alarms": sum(j.flagged and bool(j.values_covered) for j in well),
     }
     out.update({
         "k_coverage": _share(out["k_covered"], out["reliable"]),
@@ -195,6 +197,7 @@ def summarize(records: Iterable[dict]) -> dict:
         "flagged_share": _share(out["flagged"], out["groups"]),
         "confident_miss_share": _share(out["confident_misses"], out["groups"]),
         "false_alarm_rate": _share(out["false_alarms"], out["well_described"]),
+        "well_described_flagged_share": _share(out["well_described_flagged"], out["well_described"]),
     })
     return out
 

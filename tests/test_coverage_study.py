@@ -208,10 +208,10 @@ def test_tables_from_hand_made_records():
     assert (s["groups"], s["reliable"], s["flagged"]) == (9, 6, 3)
     assert (s["k_covered"], s["rho_covered"], s["k_bounds"]) == (3, 5, 3)
     assert s["k_coverage"] == pytest.approx(0.5) and s["rho_coverage"] == pytest.approx(5 / 6, abs=1e-4)
-    assert (s["confident_misses"], s["well_described"], s["false_alarms"]) == (2, 8, 2)
-    assert s["needless_flags"] == 0  # neither flagged well-described group had its values right
+    assert (s["confident_misses"], s["well_described"], s["well_described_flagged"]) == (2, 8, 2)
+    assert s["false_alarms"] == 0  # neither flagged well-described group had its values right
     assert judge(_record(0.0050, 0.0005, 0.200, 0.002, reliable=False)).values_covered
-    assert summarize([_record(0.0050, 0.0005, 0.200, 0.002, reliable=False)])["needless_flags"] == 1
+    assert summarize([_record(0.0050, 0.0005, 0.200, 0.002, reliable=False)])["false_alarms"] == 1
     assert s["confident_miss_share"] == pytest.approx(2 / 9, abs=1e-4)
     mesh = {row["bin"]: row for row in bin_table(recs, "mesh")}
     assert list(mesh) == ["pillar", "ball", "knot", "dragon"]
@@ -219,7 +219,8 @@ def test_tables_from_hand_made_records():
     assert mesh["knot"]["k_coverage"] is None
     assert bin_table(recs, "misdescription")[1]["groups"] == 1
     c = criteria(recs)
-    assert not c["confident_misses_ok"] and not c["false_alarms_ok"] and not c["met"]
+    assert not c["confident_misses_ok"] and c["false_alarms_ok"] and not c["met"]
+    assert not criteria([_record(0.0050, 0.0005, 0.200, 0.002, reliable=False)])["false_alarms_ok"]
     assert c["coverage_ok"]  # no bin holds 20 reliable groups
     assert c["coverage_bins_judged"] == [] and not c["size_ok"]  # 9 groups, not the 300 asked for
     many = [_record(0.0051, 0.0005, 0.201, 0.002) for _ in range(19)] + [_record(0.0070, 0.0005, 0.2, 0.002)] * 3

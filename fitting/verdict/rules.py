@@ -85,11 +85,12 @@ PHOTO_MISFIT_MAX = 3.0
 #: frame, where half of the sheet's shadowed part was taken for ground (rho 0.389 for 0.30).
 UMBRA_RESIDUAL_RATIO = 3.0
 UMBRA_RESIDUAL_MIN = 0.03
-#: The photos' shadow deeper than the fitted one (the lit level minus the umbra's, relative to the lit
-#: level; the photos' median) by more than this: the model's umbra is lighter than the photos', the
-#: signature of a fitted penumbra too narrow whose umbra holds partly lit pixels that pull rho up and
-#: k down. In the calibration study's groups 0-101 the reliable groups read at most +0.032; the knot
-#: beside steps under a 15 deg sun read +0.057 with rho 5.1 stated errors high and k 6.4 low, where
+#: The photos' shadow deeper than the fitted one (``PhotoEvidence.depth_gap``: the median residual on
+#: the lit side minus the umbra's, relative to the lit level; the photos' median) by more than this:
+#: the model's umbra is lighter than the photos', the signature of a fitted penumbra too narrow whose
+#: umbra holds partly lit pixels that pull rho up and k down. In the calibration study the reliable
+#: groups read at most +0.033 (the 65 groups with a gap above +0.025 by the earlier difference of
+#: depths, refitted); a knot on steps read +0.052 with rho 4.8 stated errors high and k 5.1 low, where
 #: no other rule flagged it. Only this side: a shadow shallower than the fitted one is the light the
 #: relief sends into the umbra (steps read down to -0.051 with k and rho within their errors, groups
 #: 104 and 205), which rho, one level, does not follow.
