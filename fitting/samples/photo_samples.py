@@ -39,7 +39,9 @@ class PhotoSamples:
     uv (n, 2) pixel (col, row); ground (n, 3) receiver points; jac (n, 3, 2) d(point)/d(col, row),
     metres per pixel;
     observed (n,) linear gray; albedo_class (n,) 0 paper / 1 other; uv_norm (n, 2) in
-    [-0.5, 0.5]; profile_id (n,) nearest boundary sample; plan: the discrete choices.
+    [-0.5, 0.5]; profile_id (n,) nearest boundary sample; plan: the discrete choices;
+    normals (n, 3): the receiver's unit normals at the points (None: the ground plane, +z), which
+    the ``wedge`` rule's plan off the plane needs (``fitting.solve.rule_choice.wedge_plan``).
     """
 
     name: str
@@ -55,6 +57,7 @@ class PhotoSamples:
     band_px: int
     sky_hidden: np.ndarray | None = None  # (n,) sky fraction hidden from each point (``softshadow.sky``)
     sun_cos: np.ndarray | None = None  # (n,) sun incidence over the open ground's (None: 1, the ground)
+    normals: np.ndarray | None = None  # (n, 3) the receiver's unit normals (None: the ground plane)
 
 
 def paper_mask(gray: np.ndarray, exclude: np.ndarray) -> np.ndarray | None:

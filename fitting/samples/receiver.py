@@ -88,8 +88,8 @@ def select_receiver_samples(model: SoftShadowModel, pose: Pose, view: PhotoView,
                             sky_occlusion: bool = True):
     """Pixels in a band around the predicted shadow boundary on a depth or mesh receiver.
 
-    Returns a ``fitting.samples.photo_samples.PhotoSamples`` (points on the receiver, d(point)/d(pixel),
-    the sky hidden from each point and the sun's incidence on it). Raises NoShadowInView
+    Returns a ``fitting.samples.photo_samples.PhotoSamples`` (points on the receiver, their normals,
+    d(point)/d(pixel), the sky hidden from each point and the sun's incidence on it). Raises NoShadowInView
     when no usable boundary pixel is in the frame.
     """
 
@@ -170,4 +170,4 @@ def select_receiver_samples(model: SoftShadowModel, pose: Pose, view: PhotoView,
         albedo_class=(np.zeros(len(rows), int) if paper is None else (~paper[rows, cols]).astype(int)),
         uv_norm=np.column_stack([cols / w - 0.5, rows / h - 0.5]),
         profile_id=profile_id, plan=plan, n_profiles=int(len(np.unique(profile_id))), band_px=band_px,
-        sky_hidden=sky_hidden, sun_cos=sun_cos)
+        sky_hidden=sky_hidden, sun_cos=sun_cos, normals=n)

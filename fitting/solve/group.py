@@ -30,7 +30,7 @@ from .model import (K_SCALE, FitConfig, FitParams, GroupArrays, Prediction, angu
                     predict,
                     raw_from_k, raw_from_rho, residuals, residuals_of)
 from .options import FitOptions
-from .rule_choice import RuleChoice, choose_rule, sampling_rule, wedge_available, wedge_footprints, wedge_plan
+from .rule_choice import RuleChoice, choose_rule, sampling_rule, wedge_footprints, wedge_plan, wedge_unavailable
 from ..report.overlay import fitted_alpha_image
 from ..samples.receiver_light import shadow_factor
 from ..report.results import FitDiagnostics, GroupResult, OverlayPlotData, PlotData, ProfilePlotData, SunUsed
@@ -489,7 +489,9 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
     rule = sampling_rule(options.rule)
     plain, arrays, delta = plain_start(arrays, pose, base, options, fit_sun, rule)
     log = (lambda line: print(f"  {label}: {line}")) if options.verbose else None
-    wedge = options.rule in ("wedge", "auto") and wedge_available(used)
+    # A rule asked for that cannot be planned is said in a warning, not dropped silently.
+    unplanned = wedge_unavailable(samples, used) if options.rule in ("wedge", "auto") else None
+    wedge = options.rule in ("wedge", "auto") and unplanned is None
     fit_wedge = lambda: _wedge_fit(arrays, model, pose, samples, used, options, plain, fit_sun, delta, n_eff, log)
     if options.rule == "wedge" and wedge:
         best, cov, arrays = fit_wedge()
@@ -503,8 +505,8 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
             if choice.rule == "wedge":  # the same fit as the wedge rule asked for
                 best, cov, arrays = fit_wedge()
         else:
-            choice = RuleChoice(rule, reason="asked for" if rule == options.rule else
-                                "the wedge rule needs the ground plane as receiver")
+            choice = RuleChoice(rule, reason="asked for" if unplanned is None else
+                                f"the {options.rule} rule was not used: {unplanned}")
     if log:
         log(f"rule {choice.rule}: {choice.reason}")
     sol, cfg = best.solution, best.config
@@ -536,6 +538,9 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
         remaining_step_se=remaining_step_se(sol.params, sol.residuals, sol.jacobian, errors.range_stderr_stat,
                                             errors.rho_stderr_stat))
     estimate, verdict = judge_fit(evidence, GroupContext(photos_given=len(views)))
+    if unplanned is not None:
+        verdict = dataclasses.replace(verdict, warnings=tuple(verdict.warnings) + (
+            f"fitted with the {choice.rule} rule, not the {options.rule} rule asked for: {unplanned}",))
     plots = PlotData()
     if options.plots:
         plots = PlotData(

@@ -34,7 +34,7 @@ from ..samples.photo_samples import PhotoSamples
 COV_RCOND = 1e-6
 
 __all__ = ["WEDGE_THRESHOLD", "ALPHA_EDGE", "RuleChoice", "sampling_rule", "wedge_plan",
-           "choose_rule", "wedge_footprints", "wedge_available"]
+           "choose_rule", "wedge_footprints", "wedge_available", "wedge_unavailable"]
 
 #: The ``wedge`` rule is chosen when it moves k or rho by more than this many of the edge fit's
 #: standard errors (``choose_rule``; the values measured on the pillar and the dragon are in
@@ -81,15 +81,18 @@ def wedge_plan(model: SoftShadowModel, pose: Pose, samples: list[PhotoSamples], 
     """The ``wedge`` rule's plan at every photo's samples (each under its own sun) over the
     footprints axes (size, 2, 3) (``wedge_footprints``), one plan of ``size`` points as
     ``GroupArrays`` pads them; its pairs and crossings padded to power-of-two buckets (few
-    compiled shapes). None when a photo's receiver is not the ground plane: the plan then needs
-    the receiver's normals, which the samples do not carry."""
-    if not wedge_available(views):
+    compiled shapes). On the ground plane the plan is made on z = 0; on a range image or a mesh
+    at the receiver's points with their normals (``PhotoSamples.normals``: a face turned from the
+    sun is in attached shadow, and the layers in front of a point are found by ray casting).
+    None when ``wedge_unavailable`` gives a reason."""
+    if wedge_unavailable(samples, views) is not None:
         return None
     wedge_model = model.with_options(rule="wedge")
     counts = [len(s.observed) for s in samples]
     starts = np.cumsum([0] + counts)
     plans = [wedge_model.plan_points(Sun(float(v.sun_azimuth_deg), float(v.sun_elevation_deg)), pose, s.ground,
-                                     range_k_max=range_k_max * 1.5, pixel_axes=axes[a:a + len(s.observed)])
+                                     range_k_max=range_k_max * 1.5, pixel_axes=axes[a:a + len(s.observed)],
+                                     normals=s.normals)
              for s, v, a in zip(samples, views, starts)]
     pairs = sum(int(np.count_nonzero(np.asarray(p.wedge.pair_point) >= 0)) for p in plans if p.wedge is not None)
     cross = sum(int(np.asarray(p.wedge.cross).shape[0]) for p in plans if p.wedge is not None)
@@ -98,9 +101,24 @@ def wedge_plan(model: SoftShadowModel, pose: Pose, samples: list[PhotoSamples], 
                              pairs_to=bucket_size(pairs, 1024), cross_to=bucket_size(cross, 256))
 
 
-def wedge_available(views: list[PhotoView]) -> bool:
-    """Whether the wedge rule can be planned for these views (every receiver the ground plane)."""
-    return not any(v.receiver is not None and getattr(v.receiver, "kind", "plane") != "plane" for v in views)
+def _receiver_kind(view: PhotoView) -> str:
+    return "plane" if view.receiver is None else str(getattr(view.receiver, "kind", "plane"))
+
+
+def wedge_unavailable(samples: list[PhotoSamples], views: list[PhotoView]) -> str | None:
+    """Why the ``wedge`` rule cannot be planned at these samples (one line), or None when it can:
+    on the ground plane always; on a range image or a mesh when the samples carry the receiver's
+    normals (``fitting.samples.receiver`` gives them)."""
+    for s, v in zip(samples, views):
+        kind = _receiver_kind(v)
+        if kind != "plane" and (s.normals is None or len(s.normals) != len(s.observed)):
+            return f"{v.name}: the samples on its {kind} receiver carry no normals, which the wedge rule's plan needs"
+    return None
+
+
+def wedge_available(samples: list[PhotoSamples], views: list[PhotoView]) -> bool:
+    """Whether the ``wedge`` rule can be planned at these samples (``wedge_unavailable``)."""
+    return wedge_unavailable(samples, views) is None
 
 
 @eqx.filter_jit
