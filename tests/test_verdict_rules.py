@@ -163,10 +163,21 @@ def test_a_misfit_that_a_free_sun_does_not_follow_is_the_penumbras_shape(misfits
     shape = any("penumbra's shape does not match" in w for w in verdict.warnings)
     misdescribed = any(w.startswith("the fitted shadow does not match the photos") for w in verdict.warnings)
     assert (shape, misdescribed) == (reliable, not reliable)
-    # The wedge rule is named where the fitter has it: on the ground plane.
+    # The wedge rule is named unless the fit already used it.
     assert any("--rule wedge" in w for w in verdict.warnings) is reliable
     on_steps = rules.judge_fit(dataclasses.replace(fit, receiver="mesh"), GroupContext(3))[1]
-    assert not any("--rule wedge" in w for w in on_steps.warnings)
+    assert any("--rule wedge" in w for w in on_steps.warnings) is reliable
+    wedged = rules.judge_fit(dataclasses.replace(fit, rule="wedge", rule_asked="wedge"), GroupContext(3))[1]
+    assert wedged.reliable is reliable and not any("--rule wedge" in w for w in wedged.warnings)
+
+
+def test_a_rule_asked_for_and_not_used_is_said():
+    fit = _fit(rule="edge", rule_asked="auto", rule_unavailable="IMG_1.jpg: its samples carry no normals")
+    _, verdict = rules.judge_fit(fit, GroupContext(3))
+    assert verdict.reliable  # a note, not a flag: the edge fit stands on its own
+    assert ("fitted with the edge rule, not the auto rule asked for: IMG_1.jpg: its samples carry no normals"
+            in verdict.warnings)
+    assert not any("rule asked for" in w for w in rules.judge_fit(_fit(), GroupContext(3))[1].warnings)
 
 
 def test_the_cause_of_a_misfit_from_a_refit_with_the_sun_free():

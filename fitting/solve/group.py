@@ -536,11 +536,9 @@ def fit_group(model: SoftShadowModel, pose: Pose, views: list[PhotoView], label:
         photos_without_shadow=tuple(_split_reason(w) for w in no_shadow),
         receiver=getattr(used[0].receiver, "kind", "plane") if used[0].receiver is not None else "plane",
         remaining_step_se=remaining_step_se(sol.params, sol.residuals, sol.jacobian, errors.range_stderr_stat,
-                                            errors.rho_stderr_stat))
+                                            errors.rho_stderr_stat),
+        rule=choice.rule, rule_asked=options.rule, rule_unavailable=unplanned)
     estimate, verdict = judge_fit(evidence, GroupContext(photos_given=len(views)))
-    if unplanned is not None:
-        verdict = dataclasses.replace(verdict, warnings=tuple(verdict.warnings) + (
-            f"fitted with the {choice.rule} rule, not the {options.rule} rule asked for: {unplanned}",))
     plots = PlotData()
     if options.plots:
         plots = PlotData(

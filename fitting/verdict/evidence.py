@@ -116,6 +116,9 @@ class FitEvidence:
     rho, in units of their statistical errors (the larger of the two; NaN: not known). A solver
     that stopped on its step limit with this small has settled k and rho (a k that creeps towards
     0 under a penumbra narrower than a pixel, for example).
+    rule: the rule that drew the fit's penumbra ("edge", "paper" or "wedge"); rule_asked: the one
+    ``FitOptions.rule`` asked for ("auto" included); rule_unavailable: why the wedge rule asked for
+    (or by "auto") could not be planned for these photos (None: it could, or was not asked for).
     """
 
     k: float
@@ -138,6 +141,9 @@ class FitEvidence:
     sun_free: SunFree | None = None
     receiver: str = "plane"
     remaining_step_se: float = NAN
+    rule: str = "edge"
+    rule_asked: str = "edge"
+    rule_unavailable: str | None = None
     penumbra_px_per_k: float | None = None
 
 

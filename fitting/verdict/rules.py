@@ -578,7 +578,7 @@ def _shape_misfit(fit: FitEvidence) -> str | None:
         return None
     return (f"the fitted penumbra's shape does not match the photos' (residuals {misfit:.1f} times the noise on "
             f"the lit ground and in the umbra; with the sun free it moved {move:.2f} deg, so the scene is described "
-            "right): k is a bound" + ("; --rule wedge models crowded edges as sunlight does" if fit.receiver == "plane"
+            "right): k is a bound" + ("; --rule wedge models crowded edges as sunlight does" if fit.rule != "wedge"
                                       else ""))
 
 
@@ -739,6 +739,9 @@ def judge_fit(fit: FitEvidence, context: GroupContext | None = None) -> tuple[Es
                           _solver_warning(fit),
                           # Too little of the outline in view: one stretch of edge decides k and rho.
                           few_profiles_warning(fit.n_profiles), _photos_warning(fit, context)) if w]
+    if fit.rule_unavailable:
+        notes.append(f"fitted with the {fit.rule} rule, not the {fit.rule_asked} rule asked for: "
+                     f"{fit.rule_unavailable}")
     if context.left_out:
         notes.append("refitted without " + ", ".join(name for name, _ in context.left_out)
                      + ", which did not fit the other photos (see skipped)")
