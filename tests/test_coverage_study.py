@@ -290,7 +290,7 @@ def test_report_is_made_from_the_json_alone(tmp_path):
                  "--report", str(report)]) == 0
     text = report.read_text()
     assert "Confident misses <= 1% of all groups: **not met** (1 of 2" in text
-    assert (tmp_path / "docs" / "img" / "uncertainty_study_coverage.png").stat().st_size > 1000
+    assert (tmp_path / "docs" / "img" / "study_coverage.png").stat().st_size > 1000  # named after its page
     assert json.loads(out.read_text())["summary"]["confident_misses"] == 1
 
 
