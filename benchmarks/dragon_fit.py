@@ -42,7 +42,7 @@ SIZE = (2048, 1536)
 SEEDS = (0, 1, 2, 3)
 #: Samples per photo (``FitOptions.max_samples_per_photo``; the fitter's default is 1,300). At
 #: 2048 x 1536 the default's samples leave the camera blur unresolved: the fits drive it to 0 and
-#: widen k by about 5 % (the `wedge` rule +5.2 % on seeds 0-3, +1.1 % with 5,000 samples).
+#: widen k by several % (docs/level_of_detail.md).
 SAMPLES_PER_PHOTO = 5000
 QUICK_SIZE, QUICK_SEEDS, QUICK_LEVELS = (1024, 768), (0, 1), ("off",)
 

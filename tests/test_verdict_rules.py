@@ -454,7 +454,7 @@ def test_a_photos_shadow_deeper_than_the_fitted_one_flags_the_group(gap, reliabl
     photos = [_photo(f"{i}.jpg", depth_gap=gap) for i in range(3)]
     _, verdict = rules.judge_fit(_fit(photos), GroupContext(3))
     assert verdict.reliable is reliable and verdict.identifiable
-    assert any("the photos' shadow is 6 % of the lit level deeper than the fitted one" in w
+    assert any("the photos' shadow is 6.0 % of the lit level deeper than the fitted one" in w
                for w in verdict.warnings) is (not reliable)
     # The photos' median decides: one photo's gap alone does not.
     one = [photos[0], *[_photo(f"{i}.jpg") for i in (1, 2)]]

@@ -90,11 +90,13 @@ UMBRA_RESIDUAL_MIN = 0.03
 #: the model's umbra is lighter than the photos', the signature of a fitted penumbra too narrow whose
 #: umbra holds partly lit pixels that pull rho up and k down. In the calibration study the reliable
 #: groups read at most +0.033 (the 65 groups with a gap above +0.025 by the earlier difference of
-#: depths, refitted); a knot on steps read +0.052 with rho 4.8 stated errors high and k 5.1 low, where
-#: no other rule flagged it. Only this side: a shadow shallower than the fitted one is the light the
-#: relief sends into the umbra (steps read down to -0.051 with k and rho within their errors, groups
-#: 104 and 205), which rho, one level, does not follow.
-DEPTH_MISMATCH_MAX = 0.045
+#: depths, refitted); a knot on steps read +0.052 with the edge rule (rho 4.8 stated errors high, k
+#: 5.1 low) and +0.041 with the wedge rule (k right, rho 4.3 errors high), where no other rule
+#: flagged it. No verdict of the study or its held-out groups changes between 0.04 and 0.045. Only
+#: this side: a shadow shallower than the fitted one is the light the relief sends into the umbra
+#: (steps read down to -0.051 with k and rho within their errors, groups 104 and 205), which rho,
+#: one level, does not follow.
+DEPTH_MISMATCH_MAX = 0.04
 _MIN_SIDE_SAMPLES = 10  # samples in a region needed to judge it
 
 # -- 3./4. goodness of fit, agreement ----------------------------------------------------------------
@@ -504,7 +506,7 @@ def _depth_mismatch_warning(fit: FitEvidence) -> str | None:
     gaps = [p.depth_gap for p in fit.photos if _finite(p.depth_gap)]
     if not gaps or median(gaps) <= DEPTH_MISMATCH_MAX:
         return None
-    return (f"the photos' shadow is {_pct(median(gaps))} of the lit level deeper than the fitted one (more than "
+    return (f"the photos' shadow is {100 * median(gaps):.1f} % of the lit level deeper than the fitted one (more than "
             f"{100 * DEPTH_MISMATCH_MAX:.1f} %): the fitted umbra holds partly lit pixels, so rho reads high and k "
             "low; check the object's size and pose and the receiver's shape")
 
