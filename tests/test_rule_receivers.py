@@ -21,7 +21,7 @@ from fitting import FitOptions, PhotoView, fit_group
 from fitting.samples.photo_samples import PhotoSamples
 from fitting.samples.receiver_light import plane_sky_fraction, shadow_factor, sun_incidence
 from fitting.samples.receiver_points import ReceiverSurface
-from fitting.solve.rule_choice import WEDGE_THRESHOLD, wedge_available, wedge_plan, wedge_unavailable
+from fitting.solve.rule_choice import WEDGE_THRESHOLD, wedge_plan, wedge_unavailable
 from softshadow import Pose, ShadowParams, SoftShadowModel, Sun, look_at_camera
 
 SUN = Sun(200.0, 35.0)  # no face of the posts edge-on to the sun; the ramp faces it
@@ -137,7 +137,7 @@ def test_the_wedge_plan_takes_the_receivers_normals():
     view = PhotoView("wall.png", np.ones((4, 4), np.float32), np.zeros((4, 4), bool),
                      sun_azimuth_deg=float(SUN.azimuth_deg), sun_elevation_deg=float(SUN.elevation_deg),
                      receiver=ReceiverSurface("mesh", mesh=_ramp()))
-    assert wedge_available([samples], [view])
+    assert wedge_unavailable([samples], [view]) is None
     axes = np.broadcast_to(np.swapaxes(jac, 1, 2)[:1], (8, 2, 3)).copy()
     plan = wedge_plan(model, Pose(), [samples], [view], 0.03, axes)
     assert plan is not None

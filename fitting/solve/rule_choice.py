@@ -34,7 +34,7 @@ from ..samples.photo_samples import PhotoSamples
 COV_RCOND = 1e-6
 
 __all__ = ["WEDGE_THRESHOLD", "ALPHA_EDGE", "RuleChoice", "sampling_rule", "wedge_plan",
-           "choose_rule", "wedge_footprints", "wedge_available", "wedge_unavailable"]
+           "choose_rule", "wedge_footprints", "wedge_unavailable"]
 
 #: The ``wedge`` rule is chosen when it moves k or rho by more than this many of the edge fit's
 #: standard errors (``choose_rule``; the values measured on the pillar and the dragon are in
@@ -114,11 +114,6 @@ def wedge_unavailable(samples: list[PhotoSamples], views: list[PhotoView]) -> st
         if kind != "plane" and (s.normals is None or len(s.normals) != len(s.observed)):
             return f"{v.name}: the samples on its {kind} receiver carry no normals, which the wedge rule's plan needs"
     return None
-
-
-def wedge_available(samples: list[PhotoSamples], views: list[PhotoView]) -> bool:
-    """Whether the ``wedge`` rule can be planned at these samples (``wedge_unavailable``)."""
-    return wedge_unavailable(samples, views) is None
 
 
 @eqx.filter_jit
