@@ -104,14 +104,11 @@ def winding_count_fill(shape: tuple[int, int], start: np.ndarray, end: np.ndarra
     frac = (rows - y0[seg]) / (y1 - y0)[seg]
     cols = np.clip(np.ceil(x0[seg] + frac * dx[seg]), 0, w).astype(np.int64)
     signed = (np.where(y1 > y0, 1.0, -1.0) * weight)[seg]
-    # Running sums along rows, as differences of rows of OpenCV's integral image (several
-    # times faster than np.cumsum along rows). Integer weights keep the sums exact: in
-    # float32 while no sum can reach 2^24 (none exceeds the total weight), else in float64.
-    dtype = np.float32 if np.abs(signed).sum() < 2 ** 24 else np.float64
-    acc = np.zeros((h, w + 1), dtype)
-    np.add.at(acc.reshape(-1), rows * (w + 1) + cols, signed.astype(dtype))
-    integral = cv2.integral(acc, sdepth=cv2.CV_32F if dtype == np.float32 else cv2.CV_64F)
-    return (integral[1:, 1:w + 1] - integral[:-1, 1:w + 1]).astype(np.float32)
+    # The crossings added at their pixels, then running sums along each row, in one compiled
+    # pass. Integer weights keep the float64 sums exact.
+    out = np.empty((h, w), np.float32)
+    _row_sums_kernel()(rows, cols, np.asarray(signed, np.float64), out)
+    return out
 
 
 def draw_segment_labels(shape: tuple[int, int], start: np.ndarray, end: np.ndarray,
@@ -219,18 +216,17 @@ def rasterise_shadow(grid: GroundGrid, world_vertices: np.ndarray, light: np.nda
     boundary = cv2.dilate(dil - ero, kernel)
     # Seeds: outline edge pixels near the hard shadow's boundary; the distance transform
     # measures the distance to the zero pixels of src.
-    src = np.where((boundary > 0) & (label_img > 0), np.uint8(0), np.uint8(1))
-    seed_index = np.flatnonzero(src.reshape(-1) == 0)  # row-major, as OpenCV numbers them
-    if not len(seed_index):
+    # DT label l > 0 is the l-th seed (row-major, as OpenCV numbers them); the lookup table
+    # maps it to its edge index (lut[0] = -1).
+    src = np.empty((h, w), np.uint8)
+    lut = np.empty(h * w + 1, np.int32)
+    n_seeds = _seeds_kernel()(boundary, label_img, src, lut)
+    if not n_seeds:
         return ShadowRaster(grid, hard, -np.ones((h, w), np.int32),
                             np.full((h, w), np.inf, np.float32), depth_count=count)
     dist, nearest = cv2.distanceTransformWithLabels(src, cv2.DIST_L2, cv2.DIST_MASK_5,
                                                     labelType=cv2.DIST_LABEL_PIXEL)
-    # DT label l > 0 is the l-th seed; the lookup table maps it to its edge index.
-    lut = np.empty(len(seed_index) + 1, np.int32)
-    lut[0] = -1
-    lut[1:] = label_img.reshape(-1)[seed_index] - 1
-    edge_label = lut[nearest]
+    edge_label = np.take(lut[:n_seeds + 1], nearest)
     return ShadowRaster(grid, hard, edge_label, dist, _end_neighbours(ids, on_outline), outline_fraction, count)
 
 
@@ -383,5 +379,51 @@ def _winding_kernel():
                 crosses = (py >= seg[j, 0]) & (py < seg[j, 1]) & (seg[j, 2] + (py - seg[j, 3]) * seg[j, 4] <= px)
                 total += seg[j, 5] * crosses
             out[i] = total
+
+    return kernel
+
+
+@functools.cache
+def _row_sums_kernel():
+    """``winding_count_fill``'s sums (numba): the signed crossings added at (row, col) (col in
+    [0, w]; w falls off the row), then the running sum along each row, into out (h, w)."""
+    import numba
+
+    @numba.njit(cache=True, nogil=True)
+    def kernel(rows, cols, signed, out):
+        h, w = out.shape
+        acc = np.zeros((h, w + 1))
+        for i in range(rows.shape[0]):
+            acc[rows[i], cols[i]] += signed[i]
+        for r in range(h):
+            total = 0.0
+            for c in range(w):
+                total += acc[r, c]
+                out[r, c] = total
+
+    return kernel
+
+
+@functools.cache
+def _seeds_kernel():
+    """The distance transform's input (numba): src 0 at the seeds (pixels on the boundary band
+    with an outline edge's label), 1 elsewhere, and lut[1 + j] the j-th seed's edge (label - 1,
+    row-major), lut[0] = -1. Returns the seeds' count."""
+    import numba
+
+    @numba.njit(cache=True, nogil=True)
+    def kernel(boundary, label, src, lut):
+        h, w = src.shape
+        lut[0] = -1
+        n = 0
+        for r in range(h):
+            for c in range(w):
+                if boundary[r, c] > 0 and label[r, c] > 0:
+                    src[r, c] = 0
+                    n += 1
+                    lut[n] = label[r, c] - 1
+                else:
+                    src[r, c] = 1
+        return n
 
     return kernel
