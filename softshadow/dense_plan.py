@@ -195,60 +195,91 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
     # raster pixel is too coarse for the side: tested exactly.
     n_near = _lookup_kernel()(uv_p, grid.origin_m[0], grid.origin_m[1], pixel_m, raster.hard, raster.edge_label,
                               raster.boundary_dist_px, 2.0 * pixel_m, att, in_view, label, dist, index)
-    if n_near:
-        near = index[:n_near].copy()
-        in_view[near] = _shared_test(pool, lambda q: posed.hard_shadow_at(uv_p[q], projected=uv_v), near)
-    # The silhouette's edges for the penumbra, made on the second thread (if any) meanwhile (from
-    # this frame's raster and silhouette only: left running on an error, it touches no buffer).
-    edges = _submit(pool, _pack_edges, occ, sil, raster=raster)
-    lit_ids = np.flatnonzero(sil.lit) if occ.watertight else np.arange(len(occ.faces))
-    lit_faces = occ.faces[lit_ids]
-    # Farther from the sun than the whole occluder: behind it wherever it is in the way (most of a
-    # cast shadow). The others in its view go to the shadow map.
-    behind = scratch_array(scratch, "sun.behind", m, np.bool_)
-    box = np.empty(4)
-    n_test = _test_kernel()(in_view, att, d_p, uv_p, float(d_v[lit_faces].max(initial=-np.inf)) + 0.5 * map_pixel_m,
-                            behind, index, box)
-    if n_test:
-        test = index[:n_test]
-        m_lo = box[:2] - 3 * map_pixel_m
-        m_hi = box[2:] + 3 * map_pixel_m
-        map_grid = GroundGrid(map_pixel_m, (float(m_lo[0]), float(m_hi[1])),
-                              int(np.ceil((m_hi[0] - m_lo[0]) / map_pixel_m)) + 1,
-                              int(np.ceil((m_hi[1] - m_lo[1]) / map_pixel_m)) + 1)
-        shape = (map_grid.height, map_grid.width)
-        smap = shadow_map(map_grid, uv_v, d_v, lit_faces, out=(scratch_array(scratch, "sun.map_depth", shape),
-                                                               scratch_array(scratch, "sun.map_face", shape, np.int32)),
-                          threads=2, scratch=scratch, name="sun.map")
-        # ``ShadowMap.occluder_depth`` and ``depth_bias`` per point (their rules), the receiver's
-        # slope from its normal, in one pass.
-        scale = max(smap.scale, float(np.abs(world).max()))
-        g = map_grid
-        _depth_test_kernel()(cand, test, uv_p, d_p, points, np.zeros((0, 3)) if normals is None else normals,
-                             np.full(0, -1, np.int64) if faces is None else np.asarray(faces, np.int64),
-                             lit_ids, light, g.origin_m[0], g.origin_m[1], map_pixel_m, smap.face_id,
-                             np.ascontiguousarray(smap.triangle), smap.plane, smap.slope, scale, behind)
-    # The hard shadow of every point, and the band: its width from the wedge at the point's depth
-    # behind its edge (``light_band_widths``, linear in that depth).
+    # The band and its candidate edges need the raster and the points' depths only (not which
+    # points are behind the occluder): the second thread (if any) makes them while this one
+    # tests the points near the outline and in the occluder's view.
     frac = raster.edge_outline_fraction
-    frac = np.zeros(1) if frac is None else np.asarray(frac, np.float64)
-    near_b = scratch_array(scratch, "sun.near_boundary", m, np.bool_)
-    n_band = _band_kernel()(cand, d_p, label, dist, att, behind, edge_depth, float(light_band_widths(np.float64(1.0),
-                            range_k_max)), frac, raster.edge_outline_fraction is not None, BAND_FRACTION,
-                            margin_px * pixel_m, 1.5 * pixel_m, hard, index, near_b)
-    sel = index[:n_band].copy()
-    band = cand[sel]
-    edge_id = np.zeros((len(sel), N_CANDIDATES), np.int32)
-    if len(sel):
-        neighbours = raster.edge_neighbours
-        neighbours = np.full((0, 2), -1, np.int64) if neighbours is None else np.asarray(neighbours, np.int64)
-        _candidates_kernel()(uv_p, sel, grid.origin_m[0], grid.origin_m[1], pixel_m, raster.edge_label, neighbours,
-                             _CANDIDATE_OFFSETS, edge_id)
-    near_b = near_b[:n_band]
+    band_args = (cand, d_p, label, dist, att, uv_p, edge_depth, float(light_band_widths(np.float64(1.0), range_k_max)),
+                 np.zeros(1) if frac is None else np.asarray(frac, np.float64), frac is not None, margin_px * pixel_m,
+                 1.5 * pixel_m, grid.origin_m, pixel_m, raster, scratch)
+    banded: Future | tuple | None = None
+
+    def band_plan() -> None:  # queued after the second thread's half of the near-outline test
+        nonlocal banded
+        banded = _submit(pool, _band_plan, *band_args)
+
+    try:
+        if n_near:
+            near = index[:n_near].copy()
+            in_view[near] = _shared_test(pool, lambda q: posed.hard_shadow_at(uv_p[q], projected=uv_v), near,
+                                         then=band_plan)
+        else:
+            band_plan()
+        # The silhouette's edges for the penumbra, made on the second thread (if any) meanwhile (from
+        # this frame's raster and silhouette only: left running on an error, it touches no buffer).
+        edges = _submit(pool, _pack_edges, occ, sil, raster=raster)
+        lit_ids = np.flatnonzero(sil.lit) if occ.watertight else np.arange(len(occ.faces))
+        lit_faces = occ.faces[lit_ids]
+        # Farther from the sun than the whole occluder: behind it wherever it is in the way (most
+        # of a cast shadow), the others in its view go to the shadow map; the hard shadow of every
+        # point, final but at those.
+        behind = scratch_array(scratch, "sun.behind", m, np.bool_)
+        box = np.empty(4)
+        n_test = _test_kernel()(cand, in_view, att, d_p, uv_p,
+                                float(d_v[lit_faces].max(initial=-np.inf)) + 0.5 * map_pixel_m, behind, hard, index,
+                                box)
+        if n_test:
+            test = index[:n_test]
+            m_lo = box[:2] - 3 * map_pixel_m
+            m_hi = box[2:] + 3 * map_pixel_m
+            map_grid = GroundGrid(map_pixel_m, (float(m_lo[0]), float(m_hi[1])),
+                                  int(np.ceil((m_hi[0] - m_lo[0]) / map_pixel_m)) + 1,
+                                  int(np.ceil((m_hi[1] - m_lo[1]) / map_pixel_m)) + 1)
+            shape = (map_grid.height, map_grid.width)
+            smap = shadow_map(map_grid, uv_v, d_v, lit_faces,
+                              out=(scratch_array(scratch, "sun.map_depth", shape),
+                                   scratch_array(scratch, "sun.map_face", shape, np.int32)),
+                              threads=2, scratch=scratch, name="sun.map")
+            # ``ShadowMap.occluder_depth`` and ``depth_bias`` per point (their rules), the receiver's
+            # slope from its normal, in one pass; the hard shadow of those points.
+            scale = max(smap.scale, float(np.abs(world).max()))
+            g = map_grid
+            _depth_test_kernel()(cand, test, uv_p, d_p, points, np.zeros((0, 3)) if normals is None else normals,
+                                 np.full(0, -1, np.int64) if faces is None else np.asarray(faces, np.int64),
+                                 lit_ids, light, g.origin_m[0], g.origin_m[1], map_pixel_m, smap.face_id,
+                                 np.ascontiguousarray(smap.triangle), smap.plane, smap.slope, scale, behind, hard)
+        if isinstance(banded, Future):  # made here if the second thread has not started it
+            banded = _band_plan(*band_args) if banded.cancel() else banded.result()
+    finally:
+        if isinstance(banded, Future) and not banded.cancel():
+            banded.exception()  # its buffers are the next call's: never left running
+    assert isinstance(banded, tuple)
+    band, edge_id, near_b = banded
     if isinstance(edges, Future):  # made here if the second thread has not started them
         edges = _pack_edges(occ, sil, raster=raster) if edges.cancel() else edges.result()
-    return DensePlan(edges, hard, band, edge_id, near_b.astype(np.float64),
-                     len(sil.vertex_ids))
+    return DensePlan(edges, hard, band, edge_id, near_b, len(sil.vertex_ids))
+
+
+def _band_plan(cand: np.ndarray, d_p: np.ndarray, label: np.ndarray, dist: np.ndarray, att: np.ndarray,
+               uv_p: np.ndarray, edge_depth: np.ndarray, per_m: float, frac: np.ndarray, has_frac: bool,
+               margin_m: float, near_m: float, origin_m: tuple, pixel_m: float, raster,
+               scratch: Scratch | None):
+    """The band points (m,) int64 (ascending, into the points), their candidate edges (m, K) int32
+    and boundary flags (m,) float64: ``_band_kernel`` and ``_candidates_kernel`` over the
+    candidates (cand, their depth, raster label and distance, attached shadow, light-space
+    position; origin_m, pixel_m: the raster's top-left pixel centre and the pixel its lookups take)."""
+    index = scratch_array(scratch, "sun.band_index", len(cand), np.int64)
+    near_b = scratch_array(scratch, "sun.near_boundary", len(cand), np.bool_)
+    n_band = _band_kernel()(d_p, label, dist, att, edge_depth, per_m, frac, has_frac, BAND_FRACTION, margin_m,
+                            near_m, index, near_b)
+    sel = index[:n_band].copy()
+    edge_id = np.zeros((n_band, N_CANDIDATES), np.int32)
+    if n_band:
+        neighbours = raster.edge_neighbours
+        neighbours = np.full((0, 2), -1, np.int64) if neighbours is None else np.asarray(neighbours, np.int64)
+        _candidates_kernel()(uv_p, sel, origin_m[0], origin_m[1], pixel_m, raster.edge_label,
+                             neighbours, _CANDIDATE_OFFSETS, edge_id)
+    return cand[sel], edge_id, near_b[:n_band].astype(np.float64)
 
 
 def _submit(pool: ThreadPoolExecutor | None, fn, *args, **kwargs):
@@ -261,14 +292,19 @@ _SHARED_MIN = 1024
 
 
 def _shared_test(pool: ThreadPoolExecutor | None, test: Callable[[np.ndarray], np.ndarray],
-                 points: np.ndarray) -> np.ndarray:
+                 points: np.ndarray, then: Callable[[], None] | None = None) -> np.ndarray:
     """test(points), a test point by point, with the first half of the points tested on the
     pool's thread while this one tests the rest (the same values); this one tests both halves
-    when the pool has not started its half by then (busy with work given before)."""
+    when the pool has not started its half by then (busy with work given before). then(),
+    optional: called once that half is handed over (before this one tests), to queue more."""
     if pool is None or len(points) < _SHARED_MIN:
+        if then is not None:
+            then()
         return test(points)
     half = len(points) // 2
     first = pool.submit(test, points[:half])
+    if then is not None:
+        then()
     try:
         rest = test(points[half:])
     finally:
@@ -388,13 +424,14 @@ def _depth_test_kernel():
     ``ShadowMap.occluder_depth`` (the exact face among the point's map pixel
     and its 8 neighbours, else the nearest covered pixel's within 2, extrapolated) against
     the point's depth plus ``depth_bias`` (the receiver's slope from its normal), into
-    behind[test]. A point on the occluder whose own face is the nearest at its pixel is lit."""
+    behind[test], and the hard shadow into hard[cand[test]] (left as it is, 0, at a point on the
+    occluder whose own face is the nearest at its pixel: it is lit)."""
     numba = parallel_numba()
     depth_at = face_depth_at()
 
     @numba.njit(cache=True, nogil=True, parallel=True)
     def kernel(cand, test, uv, depth, points, normals, faces, lit_ids, light, ox, oy, pixel_m, face_id, triangle,
-               plane, face_slope, scale, behind):
+               plane, face_slope, scale, behind, hard):
         h, w = face_id.shape
         for j in numba.prange(test.shape[0]):
             p = cand[test[j]]
@@ -418,6 +455,7 @@ def _depth_test_kernel():
                     recv = np.sqrt(max(1.0 - cos * cos, 0.0)) / max(cos, 1e-12)
                 bias += SLOPE_PX * pixel_m * (min(fs, TAN_MAX) + min(recv, TAN_MAX))
             behind[q] = depth[q] > best + bias
+            hard[p] = 1.0 if behind[q] else 0.0
 
     return kernel
 
@@ -469,12 +507,13 @@ def _lookup_kernel():
 def _test_kernel():
     """The points in the occluder's view (and not in attached shadow): those deeper than
     ``d_far`` are behind it; the others listed in ``test``, their light-space bounding box in
-    box (lo u, lo v, hi u, hi v). Returns their count."""
+    box (lo u, lo v, hi u, hi v). The hard shadow of every point into hard[cand] (attached or
+    behind; 0 at the listed ones, which the depth test decides). Returns their count."""
     numba = parallel_numba()
 
     # Parallel over blocks of points; each block's list at its own place first, then moved together.
     @numba.njit(cache=True, nogil=True, parallel=True)
-    def kernel(in_view, att, d, uv, d_far, behind, test, box):
+    def kernel(cand, in_view, att, d, uv, d_far, behind, hard, test, box):
         n_pts = in_view.shape[0]
         n_blocks = (n_pts + _BLOCK - 1) // _BLOCK
         counts = np.zeros(n_blocks, np.int64)
@@ -484,10 +523,12 @@ def _test_kernel():
             lo_u, lo_v, hi_u, hi_v = np.inf, np.inf, -np.inf, -np.inf
             for i in range(b * _BLOCK, min((b + 1) * _BLOCK, n_pts)):
                 behind[i] = False
+                hard[cand[i]] = 1.0 if att[i] else 0.0
                 if in_view[i] == 0 or att[i]:
                     continue
                 if d[i] > d_far:
                     behind[i] = True
+                    hard[cand[i]] = 1.0
                     continue
                 test[n] = i  # n <= i
                 n += 1
@@ -509,24 +550,22 @@ def _test_kernel():
 
 @functools.cache
 def _band_kernel():
-    """Per point: its hard shadow into hard[cand] (behind the occluder or attached), and the band
-    and boundary flags of ``plan_points``' light back end from the width of its wedge (per_m
-    times its depth behind its edge): the band BAND_FRACTION of it plus the margin, near the
-    boundary within a quarter of it plus 1.5 pixels on a clean outline edge (all of its length
-    on the outline). The band's points listed in ``band``; returns their count."""
+    """The band and boundary flags of ``plan_points``' light back end per point, from the width
+    of its wedge (per_m times its depth behind its edge): the band BAND_FRACTION of it plus the
+    margin, near the boundary within a quarter of it plus 1.5 pixels on a clean outline edge
+    (all of its length on the outline). The band's points listed in ``band``; returns their
+    count."""
     numba = parallel_numba()
 
     # Parallel over blocks of points; each block's list at its own place first, then moved together.
     @numba.njit(cache=True, nogil=True, parallel=True)
-    def kernel(cand, d, label, dist, att, behind, edge_depth, per_m, frac, has_frac, fraction, margin_m, near_m,
-               hard, band, near_b):
+    def kernel(d, label, dist, att, edge_depth, per_m, frac, has_frac, fraction, margin_m, near_m, band, near_b):
         n_pts = d.shape[0]
         n_blocks = (n_pts + _BLOCK - 1) // _BLOCK
         counts = np.zeros(n_blocks, np.int64)
         for b in numba.prange(n_blocks):
             n = b * _BLOCK
             for i in range(b * _BLOCK, min((b + 1) * _BLOCK, n_pts)):
-                hard[cand[i]] = 1.0 if (behind[i] or att[i]) else 0.0
                 lab = label[i]
                 width = per_m * max(d[i] - edge_depth[max(lab, 0)], 0.0)
                 if lab >= 0 and dist[i] <= fraction * width + margin_m and not att[i]:

@@ -118,16 +118,18 @@ def test_dense_plan_block_passes_equal_their_one_pass_rules():
         for threads in (1, min(2, numba.config.NUMBA_NUM_THREADS)):
             numba.set_num_threads(threads)
             behind, test, box = np.ones(m, bool), np.empty(m, np.int64), np.empty(4)
-            n = _test_kernel()(in_view, att, d, uv, 1.5, behind, test, box)
+            hard = np.full(m + 50, 7.0)
+            n = _test_kernel()(cand, in_view, att, d, uv, 1.5, behind, hard, test, box)
             np.testing.assert_array_equal(test[:n], want_test)
             np.testing.assert_array_equal(behind, (in_view > 0) & ~att & (d > 1.5))
             np.testing.assert_array_equal(box, [*uv[want_test].min(0), *uv[want_test].max(0)])
-            hard, band, near_b = np.full(m + 50, 7.0), np.empty(m, np.int64), np.empty(m, bool)
-            n = _band_kernel()(cand, d, label, dist, att, behind, edge_depth, per_m, frac, True, fraction, margin,
-                               near_m, hard, band, near_b)
+            np.testing.assert_array_equal(hard[cand], (behind | att).astype(float))
+            assert (hard[np.setdiff1d(np.arange(m + 50), cand)] == 7.0).all()
+            band, near_b = np.empty(m, np.int64), np.empty(m, bool)
+            n = _band_kernel()(d, label, dist, att, edge_depth, per_m, frac, True, fraction, margin, near_m, band,
+                               near_b)
             np.testing.assert_array_equal(band[:n], np.flatnonzero(in_band))
             np.testing.assert_array_equal(near_b[:n], want_near[in_band])
-            np.testing.assert_array_equal(hard[cand], (behind | att).astype(float))
     finally:
         numba.set_num_threads(before)
     assert len(np.unique(want_test // _BLOCK)) == 4 and 0 < want_near[in_band].sum() < in_band.sum()
@@ -527,8 +529,9 @@ def test_shading_in_two_parts_is_the_shading_in_one():
 
 @pytest.mark.parametrize("busy", [False, True])
 def test_dense_plan_shares_its_work_with_a_second_thread(monkeypatch, busy):
-    """With a second thread packing the edges and testing half the points near the outline, the
-    plan is ``plan_points``'; with that thread busy throughout, this one does its share."""
+    """With a second thread packing the edges, testing half the points near the outline and
+    making the band, the plan is ``plan_points``'; with that thread busy throughout, this one
+    does its share."""
     import threading
     from concurrent.futures import ThreadPoolExecutor
 
@@ -542,8 +545,12 @@ def test_dense_plan_shares_its_work_with_a_second_thread(monkeypatch, busy):
     ref = model.plan_points(sun, pose, vis.points, 0.02, normals=vis.normals, backend="light")
     tested = []
     shared_test = dense_plan._shared_test
-    monkeypatch.setattr(dense_plan, "_shared_test", lambda pool, test, points: shared_test(
-        pool, lambda q: tested.append((len(q), threading.current_thread().name)) or test(q), points))
+    monkeypatch.setattr(dense_plan, "_shared_test", lambda pool, test, points, then=None: shared_test(
+        pool, lambda q: tested.append((len(q), threading.current_thread().name)) or test(q), points, then))
+    banded = []
+    band_plan = dense_plan._band_plan
+    monkeypatch.setattr(dense_plan, "_band_plan", lambda *a: banded.append(threading.current_thread().name)
+                        or band_plan(*a))
     free = threading.Event()
     with ThreadPoolExecutor(1, thread_name_prefix="second") as pool:
         if busy:
@@ -556,4 +563,5 @@ def test_dense_plan_shares_its_work_with_a_second_thread(monkeypatch, busy):
     assert len(tested) == 2 and min(n for n, _ in tested) >= 4, tested
     threads = {name.startswith("second") for _, name in tested}
     assert threads == ({False} if busy else {False, True}), tested
+    assert len(banded) == 1 and banded[0].startswith("second") != busy, banded
     _plans_equal(ref, dense.point_plan())
