@@ -23,7 +23,7 @@ from .camera import GroundGrid
 from .occluder import Occluder
 from .params import Pose, Sun
 from .posed import PosedOccluder
-from .raster import ShadowRaster, candidate_labels, rasterise_shadow, winding_count_fill
+from .raster import ShadowRaster, candidate_labels, layer_count_fill, rasterise_shadow
 from .shadowmap import LightFrame, depth_bias, faces_away, shadow_map
 from .wedge_plan import (REACH_MARGIN, WedgeArrays, WedgeEdges, arrangement, concatenate_wedge, gather_candidates,
                          wedge_edges)
@@ -840,10 +840,7 @@ def _plan_grid_wedge(occ: Occluder, pose: Pose, sun: Sun, grid: GroundGrid, rang
             window = GroundGrid(grid.pixel_m, (grid.origin_m[0] + c0 * grid.pixel_m,
                                                grid.origin_m[1] - r0 * grid.pixel_m), c1 - c0 + 1, r1 - r0 + 1)
             vpx = window.to_pixel(ground)
-            count = np.zeros((window.height, window.width), np.float32)
-            for edges_f, weights in sil.fill_edges:
-                count += np.abs(winding_count_fill((window.height, window.width), vpx[edges_f[:, 0]],
-                                                   vpx[edges_f[:, 1]], weights))
+            count = layer_count_fill((window.height, window.width), vpx, sil.fill_edges)
             hard[r0:r1 + 1, c0:c1 + 1] = count >= 0.5
             flat_count = count.reshape(-1)
             sel, arrays, on = _wedge_choices(posed, wedge, window, reach, range_k_max, reach_m,

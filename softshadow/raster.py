@@ -29,6 +29,7 @@ import numpy as np
 from .camera import GroundGrid
 
 __all__ = ["ShadowRaster", "project_to_ground", "rasterise_shadow", "winding_fill", "winding_count_fill",
+           "layer_count_fill",
            "winding_at_points", "winding_count_at_points", "draw_segment_labels", "candidate_labels"]
 
 
@@ -90,6 +91,28 @@ def winding_count_fill(shape: tuple[int, int], start: np.ndarray, end: np.ndarra
     weight (B,) how many times (an integer) each segment is traversed start -> end. A pixel
     centre is inside when the weighted count of crossings to its left is non-zero.
     """
+    out = np.zeros(shape, np.float32)
+    crossings = _row_crossings(shape, start, end, weight)
+    if crossings is not None:
+        _row_sums_kernel()(*crossings, out, False)
+    return out
+
+
+def layer_count_fill(shape: tuple[int, int], px: np.ndarray, layers) -> np.ndarray:
+    """How many layers (H, W) float32 cover each pixel centre: the sum over ``layers`` (pairs of
+    edges (B, 2) into px (V, 2), pixel coordinates, and their weights (B,)) of the absolute
+    ``winding_count_fill``."""
+    out = np.zeros(shape, np.float32)
+    for edges, weights in layers:
+        crossings = _row_crossings(shape, px[edges[:, 0]], px[edges[:, 1]], weights)
+        if crossings is not None:
+            _row_sums_kernel()(*crossings, out, True)
+    return out
+
+
+def _row_crossings(shape: tuple[int, int], start: np.ndarray, end: np.ndarray, weight: np.ndarray):
+    """Where the segments cross the pixel rows: rows, cols (the first pixel centre at or right
+    of the crossing, w past the row's end) and the signed weights, or None when none does."""
     h, w = shape
     y0, y1 = start[:, 1], end[:, 1]
     lo_row = np.clip(np.ceil(np.minimum(y0, y1)), 0, h).astype(np.int64)
@@ -97,18 +120,14 @@ def winding_count_fill(shape: tuple[int, int], start: np.ndarray, end: np.ndarra
     counts = np.maximum(hi_row - lo_row, 0)
     total = int(counts.sum())
     if not total:
-        return np.zeros((h, w), np.float32)
+        return None
     seg = np.repeat(np.arange(len(start)), counts)
     rows = lo_row[seg] + (np.arange(total) - np.repeat(np.cumsum(counts) - counts, counts))
     x0, dx = start[:, 0], end[:, 0] - start[:, 0]
     frac = (rows - y0[seg]) / (y1 - y0)[seg]
     cols = np.clip(np.ceil(x0[seg] + frac * dx[seg]), 0, w).astype(np.int64)
     signed = (np.where(y1 > y0, 1.0, -1.0) * weight)[seg]
-    # The crossings added at their pixels, then running sums along each row, in one compiled
-    # pass. Integer weights keep the float64 sums exact.
-    out = np.empty((h, w), np.float32)
-    _row_sums_kernel()(rows, cols, np.asarray(signed, np.float64), out)
-    return out
+    return rows, cols, np.asarray(signed, np.float64)
 
 
 def draw_segment_labels(shape: tuple[int, int], start: np.ndarray, end: np.ndarray,
@@ -196,9 +215,7 @@ def rasterise_shadow(grid: GroundGrid, world_vertices: np.ndarray, light: np.nda
     """
     h, w = grid.height, grid.width
     px = grid.to_pixel(project_to_ground(world_vertices, light) if ground is None else ground)
-    count = np.zeros((h, w), np.float32)
-    for edges, weights in silhouette.fill_edges:
-        count += np.abs(winding_count_fill((h, w), px[edges[:, 0]], px[edges[:, 1]], weights))
+    count = layer_count_fill((h, w), px, silhouette.fill_edges)
     hard = (count > 0.5).view(np.uint8)
 
     ids = silhouette.vertex_ids
@@ -219,14 +236,13 @@ def rasterise_shadow(grid: GroundGrid, world_vertices: np.ndarray, light: np.nda
     # DT label l > 0 is the l-th seed (row-major, as OpenCV numbers them); the lookup table
     # maps it to its edge index (lut[0] = -1).
     src = np.empty((h, w), np.uint8)
-    lut = np.empty(h * w + 1, np.int32)
-    n_seeds = _seeds_kernel()(boundary, label_img, src, lut)
-    if not n_seeds:
+    lut = _seeds_kernel()(boundary, label_img, src)
+    if len(lut) == 1:
         return ShadowRaster(grid, hard, -np.ones((h, w), np.int32),
                             np.full((h, w), np.inf, np.float32), depth_count=count)
     dist, nearest = cv2.distanceTransformWithLabels(src, cv2.DIST_L2, cv2.DIST_MASK_5,
                                                     labelType=cv2.DIST_LABEL_PIXEL)
-    edge_label = np.take(lut[:n_seeds + 1], nearest)
+    edge_label = np.take(lut, nearest)
     return ShadowRaster(grid, hard, edge_label, dist, _end_neighbours(ids, on_outline), outline_fraction, count)
 
 
@@ -385,21 +401,39 @@ def _winding_kernel():
 
 @functools.cache
 def _row_sums_kernel():
-    """``winding_count_fill``'s sums (numba): the signed crossings added at (row, col) (col in
-    [0, w]; w falls off the row), then the running sum along each row, into out (h, w)."""
+    """The winding fills' sums (numba): the signed crossings added at (row, col) (col in [0, w];
+    w falls off the row), then the running sum along each row, into out (h, w), or with
+    add_abs its absolute value added to out. Integer weights keep the float64 sums exact."""
     import numba
 
+    # The crossings grouped by row first (a counting sort), so that one row's worth of sums is
+    # all the memory the pass needs besides out: no (h, w) accumulator to fault in.
     @numba.njit(cache=True, nogil=True)
-    def kernel(rows, cols, signed, out):
+    def kernel(rows, cols, signed, out, add_abs):
         h, w = out.shape
-        acc = np.zeros((h, w + 1))
+        start = np.zeros(h + 1, np.int64)
         for i in range(rows.shape[0]):
-            acc[rows[i], cols[i]] += signed[i]
+            start[rows[i] + 1] += 1
         for r in range(h):
+            start[r + 1] += start[r]
+        order = np.empty(rows.shape[0], np.int64)
+        fill = start[:h].copy()
+        for i in range(rows.shape[0]):
+            order[fill[rows[i]]] = i
+            fill[rows[i]] += 1
+        acc = np.zeros(w + 1)
+        for r in range(h):
+            for j in range(start[r], start[r + 1]):
+                acc[cols[order[j]]] += signed[order[j]]
             total = 0.0
             for c in range(w):
-                total += acc[r, c]
-                out[r, c] = total
+                total += acc[c]
+                acc[c] = 0.0
+                if add_abs:
+                    out[r, c] += abs(total)
+                else:
+                    out[r, c] = total
+            acc[w] = 0.0
 
     return kernel
 
@@ -407,23 +441,27 @@ def _row_sums_kernel():
 @functools.cache
 def _seeds_kernel():
     """The distance transform's input (numba): src 0 at the seeds (pixels on the boundary band
-    with an outline edge's label), 1 elsewhere, and lut[1 + j] the j-th seed's edge (label - 1,
-    row-major), lut[0] = -1. Returns the seeds' count."""
+    with an outline edge's label), 1 elsewhere. Returns the lookup table (seeds + 1,) int32:
+    lut[1 + j] the j-th seed's edge (label - 1, row-major), lut[0] = -1."""
     import numba
 
     @numba.njit(cache=True, nogil=True)
-    def kernel(boundary, label, src, lut):
+    def kernel(boundary, label, src):
         h, w = src.shape
+        n = 0
+        for r in range(h):
+            for c in range(w):
+                seed = boundary[r, c] > 0 and label[r, c] > 0
+                src[r, c] = 0 if seed else 1
+                n += seed
+        lut = np.empty(n + 1, np.int32)  # sized to the seeds: a table for every pixel costs page faults
         lut[0] = -1
         n = 0
         for r in range(h):
             for c in range(w):
-                if boundary[r, c] > 0 and label[r, c] > 0:
-                    src[r, c] = 0
+                if src[r, c] == 0:
                     n += 1
                     lut[n] = label[r, c] - 1
-                else:
-                    src[r, c] = 1
-        return n
+        return lut
 
     return kernel
