@@ -13,6 +13,7 @@ it (tests/test_scene_frame.py).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 from collections.abc import Callable
@@ -225,9 +226,12 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
         # point, final but at those.
         behind = scratch_array(scratch, "sun.behind", m, np.bool_)
         box = np.empty(4)
-        n_test = _test_kernel()(cand, in_view, att, d_p, uv_p,
-                                float(d_v[lit_faces].max(initial=-np.inf)) + 0.5 * map_pixel_m, behind, hard, index,
-                                box)
+        # On this thread alone while the second makes the band: a loop split over both cores
+        # would wait for the busy one.
+        with _threads(1 if isinstance(banded, Future) and not banded.done() else None):
+            n_test = _test_kernel()(cand, in_view, att, d_p, uv_p,
+                                    float(d_v[lit_faces].max(initial=-np.inf)) + 0.5 * map_pixel_m, behind, hard,
+                                    index, box)
         if n_test:
             test = index[:n_test]
             m_lo = box[:2] - 3 * map_pixel_m
@@ -280,6 +284,21 @@ def _band_plan(cand: np.ndarray, d_p: np.ndarray, label: np.ndarray, dist: np.nd
         _candidates_kernel()(uv_p, sel, origin_m[0], origin_m[1], pixel_m, raster.edge_label,
                              neighbours, _CANDIDATE_OFFSETS, edge_id)
     return cand[sel], edge_id, near_b[:n_band].astype(np.float64)
+
+
+@contextlib.contextmanager
+def _threads(n: int | None):
+    """The compiled loops of this thread on n threads meanwhile (None: as they are)."""
+    if n is None:
+        yield
+        return
+    numba = parallel_numba()
+    before = numba.get_num_threads()
+    numba.set_num_threads(min(n, before))
+    try:
+        yield
+    finally:
+        numba.set_num_threads(before)
 
 
 def _submit(pool: ThreadPoolExecutor | None, fn, *args, **kwargs):
