@@ -563,5 +563,7 @@ def test_dense_plan_shares_its_work_with_a_second_thread(monkeypatch, busy):
     assert len(tested) == 2 and min(n for n, _ in tested) >= 4, tested
     threads = {name.startswith("second") for _, name in tested}
     assert threads == ({False} if busy else {False, True}), tested
-    assert len(banded) == 1 and banded[0].startswith("second") != busy, banded
+    # Made once; by this thread when the second is busy (when it is free, by whichever gets to it
+    # first: this one makes it when the second has not started it by then).
+    assert len(banded) == 1 and not (busy and banded[0].startswith("second")), banded
     _plans_equal(ref, dense.point_plan())
