@@ -57,15 +57,19 @@ class DensePlan:
     def band_plan(self, size: int | None = None) -> PointPlan:
         """A ``PointPlan`` of the band points only, padded to ``size`` (default: a power-of-two
         bucket, so that a jitted evaluation sees few shapes); padding rows are inactive."""
+        return PointPlan(self.edges, *self.band_rows(size or bucket_size(len(self.band))))
+
+    def band_rows(self, size: int, dtype=np.float64) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``band_plan(size)``'s per-point leaves: edge_id (size, K) int32, hard (size,), active
+        (size,) bool, near_boundary (size,), the floats in ``dtype``."""
         m = len(self.band)
-        size = size or bucket_size(m)
         edge_id = np.zeros((size, N_CANDIDATES), np.int32)
         edge_id[:m] = self.edge_id
-        hard = np.zeros(size)
+        hard = np.zeros(size, dtype)
         hard[:m] = self.hard[self.band]
-        near = np.zeros(size)
+        near = np.zeros(size, dtype)
         near[:m] = self.near_boundary
-        return PointPlan(self.edges, edge_id, hard, np.arange(size) < m, near)
+        return edge_id, hard, np.arange(size) < m, near
 
     def point_plan(self, pad_to: int | None = None) -> PointPlan:
         """The ``PointPlan`` of all n points, as ``plan_points`` returns it (padded to ``pad_to``,

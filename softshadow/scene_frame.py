@@ -46,7 +46,7 @@ from .dense_plan import DensePlan, plan_dense_points
 from .evaluate import plan_alpha_jit
 from .parallel_loops import parallel_numba
 from .params import Pose, Sun
-from .plan import EDGE_PADDING, EdgeSet, grid_bucket_size
+from .plan import EDGE_PADDING, EdgeSet, PointPlan, grid_bucket_size
 from .posed import PosedOccluder, posed_vertices
 from .projector import Projector, projector_shadow_map
 from .render import SoftShadowModel
@@ -395,14 +395,13 @@ def band_alpha(plan: DensePlan, points: np.ndarray, model: SoftShadowModel, pose
     edges = jax.tree_util.tree_map(lambda a: a.astype(dtype) if a.dtype == np.float64 else a,
                                    _padded_edges(plan.edges, s, n_edges))
     pts = scratch_array(scratch, "penumbra.points", (total, 3))
-    pts[:m] = points[plan.band]
+    np.take(points, plan.band, axis=0, out=pts[:m])
     pts[m:] = 0.0
     # The chunks' plans as the whole band's rows, made from the plan's leaves (as jit sees them):
     # a PointPlan's constructor, with its checks, costs a third of a millisecond.
-    whole = plan.band_plan(total)
-    treedef = jax.tree_util.tree_structure(whole)
+    rows = plan.band_rows(total, dtype)
+    treedef = _plan_treedef(edges, rows)
     edge_leaves = jax.tree_util.tree_leaves(edges)
-    rows = (whole.edge_id, whole.hard, whole.active, whole.near_boundary)
 
     def chunk(a: int, size: int):
         return jax.tree_util.tree_unflatten(treedef, [*edge_leaves, *(x[a:a + size] for x in rows)])
@@ -438,6 +437,19 @@ def band_alpha(plan: DensePlan, points: np.ndarray, model: SoftShadowModel, pose
     for (a, size), out in done:
         alpha[a:min(a + size, m)] = out[:min(size, m - a)]
     return alpha
+
+
+#: A band plan's tree structure per structure of its edges (``band_alpha``'s chunks).
+_plan_treedefs: dict = {}
+
+
+def _plan_treedef(edges: EdgeSet, rows: tuple):
+    """The tree structure of ``PointPlan(edges, *rows)``, made once per structure of the edges
+    (which leaves are None)."""
+    key = jax.tree_util.tree_structure(edges)
+    if key not in _plan_treedefs:
+        _plan_treedefs[key] = jax.tree_util.tree_structure(PointPlan(edges, *rows))
+    return _plan_treedefs[key]
 
 
 def _shared(chunks: list) -> tuple[list, list]:
