@@ -43,6 +43,32 @@ def test_winding_fill_equals_its_pointwise_twin(seed):
     np.testing.assert_array_equal(filled.ravel(), winding_at_points(centres, start, end, weight))
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_layer_count_fill_sums_the_layers_absolute_winding_counts(seed):
+    """Two layers of random weighted loops (winding counts of either sign, 2 and holes): the
+    compiled sum of their absolute counts is each layer's pointwise count, made absolute, summed."""
+    from softshadow.raster import layer_count_fill, winding_count_at_points
+    rng = np.random.default_rng(100 + seed)
+    px, layers, want = np.zeros((0, 2)), [], np.zeros(30 * 33)
+    rows, cols = np.mgrid[0:30, 0:33]
+    centres = np.stack([cols.ravel(), rows.ravel()], 1).astype(float)
+    for _ in range(2):
+        edges, weights = [], []
+        for _ in range(3):
+            n = int(rng.integers(3, 9))
+            first = len(px)
+            px = np.vstack([px, rng.uniform(-4.0, 36.0, (n, 2))])
+            edges.append(np.stack([np.arange(first, first + n), np.roll(np.arange(first, first + n), -1)], 1))
+            weights.append(np.full(n, rng.choice([1.0, -1.0, 2.0])))
+        e, w = np.concatenate(edges), np.concatenate(weights)
+        layers.append((e, w))
+        want += np.abs(winding_count_at_points(centres, px[e[:, 0]], px[e[:, 1]], w))
+    got = layer_count_fill((30, 33), px, layers)
+    assert got.dtype == np.float32 and got.shape == (30, 33)
+    assert (want > 1).any() and (want == 0).any()
+    np.testing.assert_array_equal(got.ravel(), want)
+
+
 def _general_path(occ: Occluder) -> Occluder:
     """The same occluder taking the general (open-mesh) branches of ``silhouette``."""
     twin = dataclasses.replace(occ, watertight=False)
