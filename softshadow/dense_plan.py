@@ -33,7 +33,7 @@ from .scratch import Scratch, scratch_array
 from .shadowmap import (BIAS_PX, FACING_TOL, PRECISION_ULPS, SLOPE_PX, TAN_MAX, LightFrame, face_depth_at, faces_away,
                         shadow_map)
 
-__all__ = ["DensePlan", "plan_dense_points"]
+__all__ = ["DensePlan", "PointBlocks", "plan_dense_points"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -87,6 +87,39 @@ class DensePlan:
         return PointPlan(self.edges, edge_id, hard, active, near)
 
 
+#: Points per run of ``PointBlocks``: a tenth of a 640-pixel image row, a short strip on the
+#: ground (in the masking scene's view, 52 % of these runs are skipped, 27 % of runs of 256).
+RUN_POINTS = 64
+
+
+@dataclasses.dataclass(frozen=True)
+class PointBlocks:
+    """Bounds of runs of ``RUN_POINTS`` consecutive points (the last may be shorter), so that the
+    sun's plan skips the runs out of the shadow's reach without reading their points: made once
+    for points that stay (a camera's) and given to ``plan_dense_points`` for every sun.
+
+    lo, hi (B, 3): each run's world bounds (m); normal (B, 3), uniform (B,) bool: the run's one
+    normal where all its normals are equal (a flat ground), else uniform is False.
+    """
+
+    lo: np.ndarray
+    hi: np.ndarray
+    normal: np.ndarray
+    uniform: np.ndarray
+
+    @classmethod
+    def of(cls, points: np.ndarray, normals: np.ndarray | None = None) -> "PointBlocks":
+        """The runs' bounds of points (N, 3) and their normals (N, 3) or None (then none is uniform)."""
+        points = np.ascontiguousarray(points, np.float64).reshape(-1, 3)
+        normals = np.zeros((0, 3)) if normals is None else np.ascontiguousarray(normals, np.float64).reshape(-1, 3)
+        if len(normals) and len(normals) != len(points):
+            raise ValueError(f"{len(normals)} normals for {len(points)} points")
+        b = -(-len(points) // RUN_POINTS)
+        out = cls(np.empty((b, 3)), np.empty((b, 3)), np.zeros((b, 3)), np.zeros(b, np.bool_))
+        _runs_kernel()(points, normals, out.lo, out.hi, out.normal, out.uniform)
+        return out
+
+
 def _empty(occ: Occluder, sil, hard: np.ndarray) -> DensePlan:
     """No point in a band: the silhouette's edges without a raster, and the hard shadow."""
     return DensePlan(_pack_edges(occ, sil), hard, np.zeros(0, np.int64), np.zeros((0, N_CANDIDATES), np.int32),
@@ -98,7 +131,7 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
                       posed: PosedOccluder | Future | None = None, world: np.ndarray | None = None,
                       faces: np.ndarray | None = None, scratch: Scratch | None = None,
                       reached: Callable[[np.ndarray, np.ndarray], None] | None = None,
-                      pool: ThreadPoolExecutor | None = None) -> DensePlan:
+                      pool: ThreadPoolExecutor | None = None, blocks: PointBlocks | None = None) -> DensePlan:
     """``plan_points(occ, pose, sun, points, range_k_max, rule, normals=normals, backend="light",
     margin_px=margin_px)``, compact (``DensePlan``) and faster for many points.
 
@@ -116,7 +149,9 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
     final already at every point not among them (written at those later): another thread may
     shade those points while this one goes on. pool: a second thread
     that packs the silhouette's edges and tests half the points near the outline (after what it
-    was given before) while this one goes on: the same plan.
+    was given before) while this one goes on: the same plan. blocks: ``PointBlocks.of(points,
+    normals)``, kept while the points stay (a camera's): the runs of points out of the shadow's
+    reach are then skipped (the same plan).
     """
     if posed is None:
         posed = PosedOccluder.make(occ, pose, sun)
@@ -132,6 +167,10 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
         normals = np.ascontiguousarray(normals, np.float64).reshape(-1, 3)
         if len(normals) != n:
             raise ValueError(f"{len(normals)} normals for {n} receiver points")
+    runs = (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.bool_)) if blocks is None else \
+        (blocks.lo, blocks.hi, blocks.normal, blocks.uniform)
+    if len(runs[0]) not in (0, -(-n // RUN_POINTS)):
+        raise ValueError(f"plan_dense_points: {len(runs[0])} runs of points for {n} points (PointBlocks.of(points))")
     # Per column: (V, 3).min(0) is several times slower.
     lo_w = np.array([world[:, j].min() for j in range(3)])
     hi_w = np.array([world[:, j].max() for j in range(3)])
@@ -140,7 +179,7 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
     # silhouette nor the light-space vertices: made while the posed occluder may still be made.
     hard = scratch_array(scratch, "sun.hard", n)
     basis = np.stack([frame.origin, frame.e1, frame.e2, frame.light])
-    d_max = _depth_max_kernel()(points, basis) if n else -np.inf
+    d_max = _depth_max_kernel()(points, basis, runs[0], runs[1]) if n else -np.inf
     if isinstance(posed, Future):
         posed = posed.result()
         if not ((posed.world is world or np.array_equal(posed.world, world)) and np.array_equal(posed.light, light)):
@@ -169,8 +208,8 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
     bounds = np.empty(5)
     count = _reach_kernel()(points, np.zeros((0, 3)) if normals is None else normals, basis, -FACING_TOL, hard,
                             lo_occ, hi_occ, float(edge_depth.min()),
-                            1.5 * float(light_band_widths(np.float64(1.0), range_k_max)), margin_m, cand, uv_p, d_p,
-                            att, bounds)
+                            1.5 * float(light_band_widths(np.float64(1.0), range_k_max)), margin_m, *runs, cand, uv_p,
+                            d_p, att, bounds)
     if not count:
         return _empty(occ, sil, hard)
     cand, uv_p, d_p, att = cand[:count], uv_p[:count], d_p[:count], att[:count]
@@ -373,19 +412,86 @@ _BLOCK = 8192
 
 
 @functools.cache
+def _runs_kernel():
+    """``PointBlocks.of``'s pass: each run's bounds, and its normal where all are equal."""
+    numba = parallel_numba()
+
+    @numba.njit(cache=True, nogil=True, parallel=True)
+    def kernel(points, normals, lo, hi, normal, uniform):
+        n = points.shape[0]
+        for b in numba.prange(lo.shape[0]):
+            start, end = b * RUN_POINTS, min((b + 1) * RUN_POINTS, n)
+            same = normals.shape[0] > 0
+            for j in range(3):
+                lo[b, j], hi[b, j] = np.inf, -np.inf
+                if same:
+                    normal[b, j] = normals[start, j]
+            for i in range(start, end):
+                for j in range(3):
+                    lo[b, j], hi[b, j] = min(lo[b, j], points[i, j]), max(hi[b, j], points[i, j])
+                    if same and normals[i, j] != normal[b, j]:
+                        same = False
+            uniform[b] = same
+
+    return kernel
+
+
+@functools.cache
+def _run_bounds():
+    """The bounds (lo, hi) of a linear map (x - origin) . axis over a run's box (lo, hi (B, 3)),
+    widened by rounding: they hold the value that ``_reach_kernel`` computes at any point of the
+    run (a box's extremes are at its corners)."""
+    numba = parallel_numba()
+
+    @numba.njit(inline="always")
+    def bounds(lo, hi, b, origin, axis):
+        low, high, size = 0.0, 0.0, 0.0
+        for j in range(3):
+            a0, a1 = (lo[b, j] - origin[j]) * axis[j], (hi[b, j] - origin[j]) * axis[j]
+            low += min(a0, a1)
+            high += max(a0, a1)
+            size += max(abs(a0), abs(a1))
+        slack = 1e-12 * (1.0 + size)  # far above the few ulps of a point's own sum
+        return low - slack, high + slack
+
+    return bounds
+
+
+@functools.cache
 def _depth_max_kernel():
     """The largest depth of the points in the light frame (basis: origin, e1, e2, light; the
-    depth as ``_reach_kernel`` computes it)."""
+    depth as ``_reach_kernel`` computes it). With the runs' bounds (``PointBlocks``; else lo, hi
+    empty) only the runs that can hold it are read: the same value."""
     numba = parallel_numba()
+    run_bounds = _run_bounds()
+
+    @numba.njit(inline="always")
+    def depth(points, basis, i):
+        x, y, z = points[i, 0] - basis[0, 0], points[i, 1] - basis[0, 1], points[i, 2] - basis[0, 2]
+        return x * basis[3, 0] + y * basis[3, 1] + z * basis[3, 2]
 
     # On one thread: it runs while the second thread poses the occluder (a parallel loop would
     # wait for a core).
     @numba.njit(cache=True, nogil=True)
-    def kernel(points, basis):
+    def kernel(points, basis, lo, hi):
+        n = points.shape[0]
+        n_runs = lo.shape[0]
         d_max = -np.inf
-        for i in range(points.shape[0]):
-            x, y, z = points[i, 0] - basis[0, 0], points[i, 1] - basis[0, 1], points[i, 2] - basis[0, 2]
-            d_max = max(d_max, x * basis[3, 0] + y * basis[3, 1] + z * basis[3, 2])
+        if n_runs == 0:
+            for i in range(n):
+                d_max = max(d_max, depth(points, basis, i))
+            return d_max
+        # A point of each run bounds the maximum from below; a run whose box is shallower
+        # than that cannot hold it.
+        upper = np.empty(n_runs)
+        for b in range(n_runs):
+            upper[b] = run_bounds(lo, hi, b, basis[0], basis[3])[1]
+            d_max = max(d_max, depth(points, basis, b * RUN_POINTS))
+        floor = d_max
+        for b in range(n_runs):
+            if upper[b] >= floor:
+                for i in range(b * RUN_POINTS, min((b + 1) * RUN_POINTS, n)):
+                    d_max = max(d_max, depth(points, basis, i))
         return d_max
 
     return kernel
@@ -397,35 +503,59 @@ def _reach_kernel():
     0.0), the light-space position and depth (``LightFrame.project``; basis: origin, e1, e2,
     light), and ``plan._within_reach``'s test (per_m: 1.5 wedge widths per metre behind the
     nearest edge): the points within reach gathered in order, their index, position, depth and
-    attached shadow, and their bounds (lo u, lo v, hi u, hi v, hi depth). Returns their count."""
+    attached shadow, and their bounds (lo u, lo v, hi u, hi v, hi depth). Returns their count.
+    With the runs' bounds (``PointBlocks``: run_lo, run_hi, run_normal, run_uniform; else empty),
+    a run wholly out of reach gets its attached shadow only (from its one normal if uniform)."""
     numba = parallel_numba()
+    run_bounds = _run_bounds()
 
     # Parallel over blocks of points: each block's points gathered at its own place first, then
     # moved together (one pass over the points, as one thread's loop).
     @numba.njit(cache=True, nogil=True, parallel=True)
-    def kernel(points, normals, basis, tol, hard, lo, hi, edge_depth, per_m, margin_m, cand, uv, d, att, bounds):
+    def kernel(points, normals, basis, tol, hard, lo, hi, edge_depth, per_m, margin_m, run_lo, run_hi, run_normal,
+               run_uniform, cand, uv, d, att, bounds):
         n = points.shape[0]
         light = basis[3]
+        has_normals = normals.shape[0] > 0
         n_blocks = (n + _BLOCK - 1) // _BLOCK
         counts = np.zeros(n_blocks, np.int64)
         box = np.empty((n_blocks, 5))
         for b in numba.prange(n_blocks):
             count = b * _BLOCK
             lo_u, lo_v, hi_u, hi_v, hi_d = np.inf, np.inf, -np.inf, -np.inf, -np.inf
-            for i in range(b * _BLOCK, min((b + 1) * _BLOCK, n)):
-                x, y, z = points[i, 0] - basis[0, 0], points[i, 1] - basis[0, 1], points[i, 2] - basis[0, 2]
-                u = x * basis[1, 0] + y * basis[1, 1] + z * basis[1, 2]
-                v = x * basis[2, 0] + y * basis[2, 1] + z * basis[2, 2]
-                di = x * basis[3, 0] + y * basis[3, 1] + z * basis[3, 2]
-                attached = normals.shape[0] > 0 and \
-                    normals[i, 0] * light[0] + normals[i, 1] * light[1] + normals[i, 2] * light[2] >= tol
-                hard[i] = 1.0 if attached else 0.0
-                pad = per_m * max(di - edge_depth, 0.0) + margin_m
-                if (u >= lo[0] - pad) & (u <= hi[0] + pad) & (v >= lo[1] - pad) & (v <= hi[1] + pad):
-                    # count <= i: never over a point not yet read
-                    cand[count], uv[count, 0], uv[count, 1], d[count], att[count] = i, u, v, di, attached
-                    lo_u, lo_v, hi_u, hi_v, hi_d = min(lo_u, u), min(lo_v, v), max(hi_u, u), max(hi_v, v), max(hi_d, di)
-                    count += 1
+            for start in range(b * _BLOCK, min((b + 1) * _BLOCK, n), RUN_POINTS):
+                end = min(start + RUN_POINTS, n)
+                if run_lo.shape[0]:
+                    r = start // RUN_POINTS
+                    u0, u1 = run_bounds(run_lo, run_hi, r, basis[0], basis[1])
+                    v0, v1 = run_bounds(run_lo, run_hi, r, basis[0], basis[2])
+                    pad = per_m * max(run_bounds(run_lo, run_hi, r, basis[0], light)[1] - edge_depth, 0.0) + margin_m
+                    if (u1 < lo[0] - pad) | (u0 > hi[0] + pad) | (v1 < lo[1] - pad) | (v0 > hi[1] + pad):
+                        if run_uniform[r]:
+                            one = 1.0 if has_normals and run_normal[r, 0] * light[0] + run_normal[r, 1] * light[1] \
+                                + run_normal[r, 2] * light[2] >= tol else 0.0
+                            for i in range(start, end):
+                                hard[i] = one
+                        else:
+                            for i in range(start, end):
+                                hard[i] = 1.0 if has_normals and normals[i, 0] * light[0] + normals[i, 1] * light[1] \
+                                    + normals[i, 2] * light[2] >= tol else 0.0
+                        continue
+                for i in range(start, end):
+                    x, y, z = points[i, 0] - basis[0, 0], points[i, 1] - basis[0, 1], points[i, 2] - basis[0, 2]
+                    u = x * basis[1, 0] + y * basis[1, 1] + z * basis[1, 2]
+                    v = x * basis[2, 0] + y * basis[2, 1] + z * basis[2, 2]
+                    di = x * basis[3, 0] + y * basis[3, 1] + z * basis[3, 2]
+                    attached = has_normals and \
+                        normals[i, 0] * light[0] + normals[i, 1] * light[1] + normals[i, 2] * light[2] >= tol
+                    hard[i] = 1.0 if attached else 0.0
+                    pad = per_m * max(di - edge_depth, 0.0) + margin_m
+                    if (u >= lo[0] - pad) & (u <= hi[0] + pad) & (v >= lo[1] - pad) & (v <= hi[1] + pad):
+                        # count <= i: never over a point not yet read
+                        cand[count], uv[count, 0], uv[count, 1], d[count], att[count] = i, u, v, di, attached
+                        lo_u, lo_v = min(lo_u, u), min(lo_v, v)
+                        hi_u, hi_v, hi_d = max(hi_u, u), max(hi_v, v), max(hi_d, di)
+                        count += 1
             counts[b] = count - b * _BLOCK
             box[b, 0], box[b, 1], box[b, 2], box[b, 3], box[b, 4] = lo_u, lo_v, hi_u, hi_v, hi_d
         count = 0

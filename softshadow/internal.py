@@ -9,7 +9,7 @@ import lazy_loader as _lazy
 
 __getattr__, __dir__, __all__ = _lazy.attach("softshadow", submod_attrs={
     "compilation_cache": ["SAVED_PROGRAMS_ENV", "default_cache_dir"],
-    "dense_plan": ["DensePlan", "plan_dense_points"],
+    "dense_plan": ["DensePlan", "PointBlocks", "plan_dense_points"],
     "evaluate": ["plan_alpha", "plan_alpha_jit", "plan_coordinate", "plan_coordinate_light"],
     "lod": ["decimate"],
     "masking": ["comparison_region", "render_level_image"],

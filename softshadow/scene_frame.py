@@ -42,7 +42,7 @@ import jax
 import numpy as np
 
 from .camera import GroundGrid, PinholeCamera
-from .dense_plan import DensePlan, plan_dense_points
+from .dense_plan import DensePlan, PointBlocks, plan_dense_points
 from .evaluate import plan_alpha_jit
 from .parallel_loops import parallel_numba
 from .params import Pose, Sun
@@ -129,8 +129,8 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
         # surfaces and the ground stay: a frame where only the sun or a projector changes keeps it.
         seen_key = (*_camera_key(camera), obj, casters, *[a for r in receivers for a in (r.vertices, r.faces, r.normals)],
                     *[r.closed for r in receivers], ground_albedo is None)
-        vis, surface, on_object, own = _memo(scratch, "frame.visible", seen_key,
-                                             lambda: _seen(camera, surfaces, ground_albedo, casters, scratch))
+        vis, surface, on_object, own, blocks = _memo(scratch, "frame.visible", seen_key,
+                                                     lambda: _seen(camera, surfaces, ground_albedo, casters, scratch))
         n = len(vis.pixel)
         albedos = np.vstack([_albedo_of(ground_albedo), *[s.albedo for s in surfaces]])
         t = _lap(ms, "visibility", t)
@@ -152,7 +152,7 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
             # The points go into the sun's view while the second thread still finds the silhouette.
             plan = plan_dense_points(model.occluder, pose, sun, vis.points, range_k_max, vis.normals,
                                      rule=model.rule, posed=posed, world=world, faces=on_object, scratch=scratch,
-                                     reached=reached, pool=pool)
+                                     reached=reached, pool=pool, blocks=blocks)
             t = _lap(ms, "sun_plan", t, add=pool is None)
         shading = (*unshadowed, plan.hard if plan is not None else np.zeros(0))
         band = plan.band if plan is not None else np.zeros(0, np.int64)
@@ -276,10 +276,11 @@ def _memo(scratch: Scratch | None, name: str, inputs: tuple, make):
 
 
 def _seen(camera: PinholeCamera | GroundGrid, surfaces: Sequence[Surface], ground_albedo, casters: _Casters,
-          scratch: Scratch | None) -> tuple[VisibleSurfaces, np.ndarray, np.ndarray, np.ndarray]:
+          scratch: Scratch | None) -> tuple[VisibleSurfaces, np.ndarray, np.ndarray, np.ndarray, PointBlocks]:
     """What each pixel sees (``visible_surfaces``), and each visible point's surface (GROUND -1,
     the object 0, receivers 1...), its face on the object (-1 elsewhere) and among the shadow
-    casters' faces (-1: none), each (N,), in one pass."""
+    casters' faces (-1: none), each (N,), in one pass; the runs of visible points' bounds (the sun's
+    plan skips those out of the shadow's reach)."""
     vis = visible_surfaces(camera, surfaces, ground_albedo, scratch=scratch, albedo=False, threads=2)
     n = len(vis.pixel)
     surface = scratch_array(scratch, "frame.surface", n, np.int64)
@@ -287,7 +288,7 @@ def _seen(camera: PinholeCamera | GroundGrid, surfaces: Sequence[Surface], groun
     own = scratch_array(scratch, "frame.caster_face", n, np.int64)
     _point_faces_kernel()(vis.pixel, vis.surface.reshape(-1), vis.face.reshape(-1), casters.offset, surface,
                           on_object, own)
-    return vis, surface, on_object, own
+    return vis, surface, on_object, own, PointBlocks.of(vis.points, vis.normals)
 
 
 def _camera_key(camera: PinholeCamera | GroundGrid) -> tuple:

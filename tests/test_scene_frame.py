@@ -25,7 +25,7 @@ import pytest
 import softshadow as ss
 from softshadow import (GroundGrid, Pose, Projector, SceneLights, SoftShadowModel, Sun, look_at_camera, render_frame,
                         render_scene, sine_slide)
-from softshadow.internal import FRAME_STEPS, Surface, plan_dense_points, visible_surfaces
+from softshadow.internal import FRAME_STEPS, PointBlocks, Surface, plan_dense_points, visible_surfaces
 from softshadow.scene_render import _object_surface
 
 
@@ -66,6 +66,50 @@ def test_dense_plan_equals_plan_points(mesh, sun, with_normals):
     on_object = np.where(vis.surface.ravel()[vis.pixel] == 0, vis.face.ravel()[vis.pixel], -1)
     _plans_equal(ref, plan_dense_points(model.occluder, pose, sun, vis.points, 0.02, normals,
                                         faces=on_object).point_plan())
+    # The runs of points out of reach skipped by their bounds: the same plan.
+    blocks = PointBlocks.of(vis.points, normals)
+    _plans_equal(ref, plan_dense_points(model.occluder, pose, sun, vis.points, 0.02, normals,
+                                        blocks=blocks).point_plan())
+
+
+def test_point_blocks_skip_runs_out_of_reach_for_the_same_plan():
+    """A wide view of the ground (most runs of points far from the shadow, their normals one
+    and the same) and the object: the bounds and uniform normals per run are NumPy's, the plan
+    with them is the plan without, for suns all around, and blocks made for other points are
+    refused."""
+    from softshadow.dense_plan import RUN_POINTS, _depth_max_kernel
+    model = model_of("pillar")
+    cam = look_at_camera((9.0, -11.0, 7.0), (0.0, 0.0, 0.0), 320, 240, 60.0)
+    vis = visible_surfaces(cam, [_object_surface(model, Pose(), 0.8)], 0.8)
+    n = len(vis.points)
+    blocks = PointBlocks.of(vis.points, vis.normals)
+    pad = -n % RUN_POINTS
+    runs = np.concatenate([vis.points, np.repeat(vis.points[-1:], pad, 0)]).reshape(-1, RUN_POINTS, 3)
+    np.testing.assert_array_equal(blocks.lo, runs.min(1))
+    np.testing.assert_array_equal(blocks.hi, runs.max(1))
+    normal_runs = np.concatenate([vis.normals, np.repeat(vis.normals[-1:], pad, 0)]).reshape(-1, RUN_POINTS, 3)
+    uniform = (normal_runs == normal_runs[:, :1]).all(axis=(1, 2))
+    np.testing.assert_array_equal(blocks.uniform, uniform)
+    assert 0.2 < uniform.mean() < 1.0, "the view must hold runs on the ground alone and runs on the object"
+    # Every seventh normal tilted at random: no run is uniform, those out of reach test each point.
+    tilted = vis.normals.copy()
+    tilted[::7] += np.random.default_rng(3).normal(0.0, 0.8, tilted[::7].shape)
+    tilted /= np.linalg.norm(tilted, axis=1, keepdims=True)
+    assert not PointBlocks.of(vis.points, tilted).uniform.any()
+    for azimuth, elevation in [(0.0, 20.0), (100.0, 45.0), (210.0, 70.0), (300.0, 30.0)]:
+        sun = Sun(azimuth, elevation)
+        for normals in (vis.normals, tilted, None):
+            ref = plan_dense_points(model.occluder, Pose(), sun, vis.points, 0.03, normals)
+            got = plan_dense_points(model.occluder, Pose(), sun, vis.points, 0.03, normals,
+                                    blocks=PointBlocks.of(vis.points, normals))
+            assert ref.band.size > 20
+            _plans_equal(ref.point_plan(), got.point_plan())
+        basis = np.stack([np.zeros(3), [1.0, 0, 0], [0, 1.0, 0], -np.asarray(sun.light_np)])
+        assert _depth_max_kernel()(vis.points, basis, blocks.lo, blocks.hi) == \
+            _depth_max_kernel()(vis.points, basis, np.zeros((0, 3)), np.zeros((0, 3)))
+    with pytest.raises(ValueError, match="runs of points"):
+        plan_dense_points(model.occluder, Pose(), Sun(0.0, 30.0), vis.points, 0.03, vis.normals,
+                          blocks=PointBlocks.of(vis.points[:-RUN_POINTS]))
 
 
 def test_dense_plan_on_one_and_two_threads_over_several_blocks():
