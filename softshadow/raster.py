@@ -91,10 +91,8 @@ def winding_count_fill(shape: tuple[int, int], start: np.ndarray, end: np.ndarra
     weight (B,) how many times (an integer) each segment is traversed start -> end. A pixel
     centre is inside when the weighted count of crossings to its left is non-zero.
     """
-    out = np.zeros(shape, np.float32)
-    crossings = _row_crossings(shape, start, end, weight)
-    if crossings is not None:
-        _row_sums_kernel()(*crossings, out, False)
+    out = np.empty(shape, np.float32)
+    _fill_kernel()(*_segments(start, end, weight), out, False)
     return out
 
 
@@ -104,30 +102,16 @@ def layer_count_fill(shape: tuple[int, int], px: np.ndarray, layers) -> np.ndarr
     ``winding_count_fill``."""
     out = np.zeros(shape, np.float32)
     for edges, weights in layers:
-        crossings = _row_crossings(shape, px[edges[:, 0]], px[edges[:, 1]], weights)
-        if crossings is not None:
-            _row_sums_kernel()(*crossings, out, True)
+        _fill_kernel()(*_segments(px[edges[:, 0]], px[edges[:, 1]], weights), out, True)
     return out
 
 
-def _row_crossings(shape: tuple[int, int], start: np.ndarray, end: np.ndarray, weight: np.ndarray):
-    """Where the segments cross the pixel rows: rows, cols (the first pixel centre at or right
-    of the crossing, w past the row's end) and the signed weights, or None when none does."""
-    h, w = shape
-    y0, y1 = start[:, 1], end[:, 1]
-    lo_row = np.clip(np.ceil(np.minimum(y0, y1)), 0, h).astype(np.int64)
-    hi_row = np.clip(np.ceil(np.maximum(y0, y1)), 0, h).astype(np.int64)
-    counts = np.maximum(hi_row - lo_row, 0)
-    total = int(counts.sum())
-    if not total:
-        return None
-    seg = np.repeat(np.arange(len(start)), counts)
-    rows = lo_row[seg] + (np.arange(total) - np.repeat(np.cumsum(counts) - counts, counts))
-    x0, dx = start[:, 0], end[:, 0] - start[:, 0]
-    frac = (rows - y0[seg]) / (y1 - y0)[seg]
-    cols = np.clip(np.ceil(x0[seg] + frac * dx[seg]), 0, w).astype(np.int64)
-    signed = (np.where(y1 > y0, 1.0, -1.0) * weight)[seg]
-    return rows, cols, np.asarray(signed, np.float64)
+def _segments(start: np.ndarray, end: np.ndarray, weight: np.ndarray) -> tuple:
+    """The fill kernel's segments: x0, y0, x1, y1 (B,) float64 and the weights (B,) float64."""
+    start = np.asarray(start, np.float64)
+    end = np.asarray(end, np.float64)
+    return (np.ascontiguousarray(start[:, 0]), np.ascontiguousarray(start[:, 1]), np.ascontiguousarray(end[:, 0]),
+            np.ascontiguousarray(end[:, 1]), np.ascontiguousarray(np.broadcast_to(weight, start[:, 0].shape), np.float64))
 
 
 def draw_segment_labels(shape: tuple[int, int], start: np.ndarray, end: np.ndarray,
@@ -400,31 +384,45 @@ def _winding_kernel():
 
 
 @functools.cache
-def _row_sums_kernel():
-    """The winding fills' sums (numba): the signed crossings added at (row, col) (col in [0, w];
-    w falls off the row), then the running sum along each row, into out (h, w), or with
-    add_abs its absolute value added to out. Integer weights keep the float64 sums exact."""
+def _fill_kernel():
+    """The winding fills (numba): where each directed segment crosses the pixel rows (the first
+    pixel centre at or right of the crossing, w past the row's end; a segment counts in the rows
+    ymin <= y < ymax) with its signed weight, then the running sum along each row, into out
+    (h, w), or with add_abs its absolute value added to out. Integer weights keep the float64
+    sums exact."""
     import numba
 
     # The crossings grouped by row first (a counting sort), so that one row's worth of sums is
     # all the memory the pass needs besides out: no (h, w) accumulator to fault in.
     @numba.njit(cache=True, nogil=True)
-    def kernel(rows, cols, signed, out, add_abs):
+    def kernel(x0, y0, x1, y1, weight, out, add_abs):
         h, w = out.shape
+        n_seg = x0.shape[0]
+        lo_row = np.empty(n_seg, np.int64)
+        hi_row = np.empty(n_seg, np.int64)
         start = np.zeros(h + 1, np.int64)
-        for i in range(rows.shape[0]):
-            start[rows[i] + 1] += 1
+        for s in range(n_seg):
+            lo_row[s] = int(min(max(np.ceil(min(y0[s], y1[s])), 0.0), h))
+            hi_row[s] = int(min(max(np.ceil(max(y0[s], y1[s])), 0.0), h))
+            for r in range(lo_row[s], hi_row[s]):
+                start[r + 1] += 1
         for r in range(h):
             start[r + 1] += start[r]
-        order = np.empty(rows.shape[0], np.int64)
+        col = np.empty(start[h], np.int64)
+        signed = np.empty(start[h])
         fill = start[:h].copy()
-        for i in range(rows.shape[0]):
-            order[fill[rows[i]]] = i
-            fill[rows[i]] += 1
+        for s in range(n_seg):
+            dx, dy = x1[s] - x0[s], y1[s] - y0[s]
+            sign = (1.0 if y1[s] > y0[s] else -1.0) * weight[s]
+            for r in range(lo_row[s], hi_row[s]):
+                c = np.ceil(x0[s] + (r - y0[s]) / dy * dx)
+                col[fill[r]] = int(min(max(c, 0.0), w))
+                signed[fill[r]] = sign
+                fill[r] += 1
         acc = np.zeros(w + 1)
         for r in range(h):
             for j in range(start[r], start[r + 1]):
-                acc[cols[order[j]]] += signed[order[j]]
+                acc[col[j]] += signed[j]
             total = 0.0
             for c in range(w):
                 total += acc[c]
