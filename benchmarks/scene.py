@@ -16,6 +16,12 @@ beside them. ``frame_ms`` is the median wall time per frame, with the steps' med
 with two threads (the renderer's default) and with one. The differentiable ``render_scene`` of
 the full dragon is timed once warm beside it.
 
+The levels' two-thread frames (``frame_ms``, the figure the levels are compared by) are timed
+interleaved: each level keeps its own renderer, and the levels take turns, ``BLOCK`` frames
+each, in the same order every round, so that all of them see the same state of a shared
+machine (timed one level after the other, the 2-core test machine's speed drifted by up to a
+fifth between levels). The other settings are timed level by level.
+
 Rows (key ``scene``): faces (the full mesh's), level (the face count drawn), width, height,
 frame_ms (median wall time per frame, two threads), frame_min_ms, frame_max_ms (the worst frame
 after warm-up), frame_cpu_ms (median CPU time of the process per frame, all threads), the same
@@ -37,6 +43,9 @@ __all__ = ["bench_scene", "scene_table", "SCENE_LEVELS"]
 #: The levels drawn: the full dragon, then halving to the paper's coarsest.
 SCENE_LEVELS = (20000, 10000, 5000, 2500, 1000, 300)
 
+#: Frames a level draws in its turn of the interleaved timing.
+BLOCK = 8
+
 
 def bench_scene(quick: bool = False, progress=None) -> dict:
     from softshadow import FrameRenderer, MaskingScene, Pose, SoftShadowModel, lod_series, one_blas_thread, \
@@ -44,55 +53,67 @@ def bench_scene(quick: bool = False, progress=None) -> dict:
 
     from .environment import load_average
     from .meshes import mit_dragon
-    frames, warmup = (9, 3) if quick else (31, 5)
+    frames, warmup = (8, 3) if quick else (32, 5)  # frames: a whole number of BLOCKs
     scene = MaskingScene()
     mesh = mit_dragon(full=True)
     levels = lod_series(mesh, (len(mesh.faces), *SCENE_LEVELS))
     proj = scene.projector(1.0, 15.0)
     lights = scene.lights(0.01)
     camera = scene.camera()
-    rows = []
+    models = [SoftShadowModel.from_mesh(level.mesh) for level in levels]
+
+    def draw(renderer, model, i: int, moving=None):
+        """Frame i (the sun 0.05 degrees further each frame): its wall and CPU ms and steps."""
+        sun = scene.sun_at(azimuth_offset_deg=0.05 * i)
+        projector = (dataclasses.replace(proj, position=proj.position + (0.001 * i, 0.0, 0.0))
+                     if moving == "projector" else proj)
+        view = dataclasses.replace(camera, t=camera.t + (0.001 * i, 0.0, 0.0)) if moving == "camera" else camera
+        t, c = time.perf_counter(), time.process_time()
+        frame = renderer.render(view, model, Pose(), lights, sun, [projector], object_albedo=scene.albedo,
+                                ground_albedo=scene.albedo)
+        return 1e3 * (time.perf_counter() - t), 1e3 * (time.process_time() - c), frame.milliseconds
+
+    rows = [{"faces": int(len(mesh.faces)), "level": int(level.faces), "width": camera.width,
+             "height": camera.height} for level in levels]
     with one_blas_thread():
-        for level in levels:
-            model = SoftShadowModel.from_mesh(level.mesh)
-            row = {"faces": int(len(mesh.faces)), "level": int(level.faces), "width": camera.width,
-                   "height": camera.height, "load_before": load_average()}
-            for threads, moving in ((2, None), (1, None), (2, "projector"), (2, "camera")):
+        # The two-thread frames of all levels, interleaved (see above).
+        if progress:
+            progress(f"bench scene: {len(levels)} levels interleaved, 2 threads")
+        renderers = [FrameRenderer(threads=2) for _ in levels]
+        timed = [[] for _ in levels]
+        load_before = load_average()
+        try:
+            for renderer, model in zip(renderers, models):
+                for i in range(warmup):
+                    draw(renderer, model, i)
+            rounds = -(-frames // BLOCK)
+            for r in range(rounds):
+                for j in range(len(levels)):
+                    for b in range(BLOCK):
+                        timed[j].append(draw(renderers[j], models[j], warmup + r * BLOCK + b))
+        finally:
+            for renderer in renderers:
+                renderer.close()
+        load_after = load_average()
+        for row, samples in zip(rows, timed):
+            row["load_before"], row["load_after_interleaved"] = load_before, load_after
+            _summarise(row, "frame_ms", samples)
+            row["steps_ms"] = _median_steps(samples)
+        for row, level, model in zip(rows, levels, models):
+            for threads, moving in ((1, None), (2, "projector"), (2, "camera")):
                 if progress:
                     progress(f"bench scene: {level.faces:,} faces, {threads} thread(s)"
                              + (f", the {moving} moving" if moving else ""))
                 renderer = FrameRenderer(threads=threads)
-                times, cpu, steps = [], [], []
                 try:
-                    for i in range(warmup + frames):
-                        sun = scene.sun_at(azimuth_offset_deg=0.05 * i)
-                        projector = (dataclasses.replace(proj, position=proj.position + (0.001 * i, 0.0, 0.0))
-                                     if moving == "projector" else proj)
-                        view = (dataclasses.replace(camera, t=camera.t + (0.001 * i, 0.0, 0.0))
-                                if moving == "camera" else camera)
-                        t, c = time.perf_counter(), time.process_time()
-                        frame = renderer.render(view, model, Pose(), lights, sun, [projector],
-                                                object_albedo=scene.albedo, ground_albedo=scene.albedo)
-                        if i >= warmup:
-                            times.append(1e3 * (time.perf_counter() - t))
-                            cpu.append(1e3 * (time.process_time() - c))
-                            steps.append(frame.milliseconds)
+                    samples = [draw(renderer, model, i, moving) for i in range(warmup + frames)][warmup:]
                 finally:
                     renderer.close()
-                key = (f"frame_ms_{moving}_moves" if moving else "frame_ms" if threads == 2
-                       else "frame_ms_one_thread")
-                row[key] = round(float(np.median(times)), 2)
-                row[key.replace("frame_ms", "frame_min_ms")] = round(float(np.min(times)), 2)
-                # The worst frame after warm-up: a compile (a new array shape) would show here.
-                row[key.replace("frame_ms", "frame_max_ms")] = round(float(np.max(times)), 2)
-                # The process's CPU time per frame (all its threads, XLA's included): what the frame
-                # costs the machine, less moved by the neighbours than the wall time.
-                row[key.replace("frame_ms", "frame_cpu_ms")] = round(float(np.median(cpu)), 2)
-                if threads == 2 and moving in (None, "camera"):
-                    row["steps_ms" if moving is None else "steps_ms_camera_moves"] = {
-                        k: round(float(np.median([s.get(k, 0.0) for s in steps])), 2) for k in steps[0]}
+                key = f"frame_ms_{moving}_moves" if moving else "frame_ms_one_thread"
+                _summarise(row, key, samples)
+                if moving == "camera":
+                    row["steps_ms_camera_moves"] = _median_steps(samples)
             row["load_after"] = load_average()
-            rows.append(row)
         # The differentiable path, warm, for comparison.
         model = SoftShadowModel.from_mesh(mesh)
         times = []
@@ -117,6 +138,24 @@ def bench_scene(quick: bool = False, progress=None) -> dict:
                         "coarsest_frame_ms_camera_moves": coarse["frame_ms_camera_moves"],
                         "coarsest_over_full_camera_moves": round(coarse["frame_ms_camera_moves"]
                                                                  / full["frame_ms_camera_moves"], 3)}}
+
+
+def _summarise(row: dict, key: str, samples: list) -> None:
+    """The median, fastest and slowest wall ms and the median CPU ms of samples (wall, CPU, steps)
+    into row under key and its variants."""
+    times = [w for w, _, _ in samples]
+    row[key] = round(float(np.median(times)), 2)
+    row[key.replace("frame_ms", "frame_min_ms")] = round(float(np.min(times)), 2)
+    # The worst frame after warm-up: a compile (a new array shape) would show here.
+    row[key.replace("frame_ms", "frame_max_ms")] = round(float(np.max(times)), 2)
+    # The process's CPU time per frame (all its threads, XLA's included): what the frame costs the
+    # machine, less moved by the neighbours than the wall time.
+    row[key.replace("frame_ms", "frame_cpu_ms")] = round(float(np.median([c for _, c, _ in samples])), 2)
+
+
+def _median_steps(samples: list) -> dict:
+    steps = [s for _, _, s in samples]
+    return {k: round(float(np.median([s.get(k, 0.0) for s in steps])), 2) for k in steps[0]}
 
 
 def scene_table(result: dict) -> str:
