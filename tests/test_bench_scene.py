@@ -1,0 +1,31 @@
+"""``softshadow bench --what scene --json F``: the file's rows (the full dragon and its levels at
+640 x 480, their frame times, the level drawn), with the levels cut to one and few frames.
+Timings are not checked (the machine is shared)."""
+
+from __future__ import annotations
+
+import json
+
+from softshadow_cli.main import main
+
+
+def test_scene_bench_writes_a_row_per_level(tmp_path, monkeypatch, capsys):
+    from benchmarks import scene
+
+    monkeypatch.setattr(scene, "SCENE_LEVELS", (300,))
+    out = tmp_path / "scene.json"
+    assert main(["bench", "--what", "scene", "--quick", "--json", str(out)]) == 0
+    result = json.loads(out.read_text())
+    rows = result["scene"]
+    assert [r["level"] for r in rows] == [41384, 300]
+    for row in rows:
+        assert row["faces"] == 41384 and (row["width"], row["height"]) == (640, 480)
+        for key in ("frame_ms", "frame_ms_one_thread", "frame_ms_projector_moves", "frame_ms_camera_moves"):
+            assert 0 < row[key.replace("frame_ms", "frame_min_ms")] <= row[key] <= \
+                row[key.replace("frame_ms", "frame_max_ms")], key
+        assert set(row["steps_ms"]) == {"visibility", "sun_plan", "sun_band", "shading"}
+    summary = result["summary"]
+    assert summary["full_frame_ms"] == rows[0]["frame_ms"] and summary["coarsest_level"] == 300
+    assert summary["coarsest_over_full"] == round(rows[1]["frame_ms"] / rows[0]["frame_ms"], 3)
+    assert result["render_scene_ms"] > 0
+    assert "scene" in capsys.readouterr().out  # the tables on stdout
