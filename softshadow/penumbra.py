@@ -242,6 +242,12 @@ def _choose(x, edge_ids, edge_vertices_world, outward_sign, light, k, inside, ru
     # gradients) go to the earlier candidate, so rounding cannot flip the choice: a fit's loss
     # jumped under 1e-12 steps and its LM solver stalled on rejected steps.
     abs_u = jnp.abs(u_all.reshape(n_pts, n_cand))
+    # A slot repeating an earlier one (plans fill missing slots with the first edge) is never
+    # chosen: without the first slot's boundary flag its side can differ (the paper rule's ramp
+    # is not symmetric), and the choice would depend on how many distinct edges were found.
+    repeated = [jnp.zeros(n_pts, bool)] + [jnp.any(edge_ids[:, :j] == edge_ids[:, j:j + 1], axis=1)
+                                           for j in range(1, n_cand)]
+    abs_u = jnp.where(jnp.stack(repeated, axis=1), jnp.inf, abs_u)
     tie = 8 * jnp.finfo(abs_u.dtype).eps  # a few ulps, in float32 and float64 alike
     return jnp.argmin(abs_u + tie * (1.0 + abs_u) * jnp.arange(n_cand), axis=1)
 
