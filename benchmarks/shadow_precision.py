@@ -72,7 +72,7 @@ def bench_shadow_precision(size: int = 512, offsets_m=(0.0, 100.0, 1000.0)) -> d
         d64, p64, exact, pixel_m = _depths(model, pose, sun, pts, np.float64)
         d32, p32, _, _ = _depths(model, pose, sun, pts.astype(np.float32), np.float32)
         both = np.isfinite(d64) & np.isfinite(d32) & exact
-        err = np.abs(d32.astype(np.float64) - d64)[both]
+        err = np.abs(d32[both].astype(np.float64) - d64[both])  # only where both depths exist
         perr = np.abs(p32.astype(np.float64) - p64)
         plan64 = model.plan_points(sun, pose, pts, 0.01, normals)
         plan32 = model.plan_points(sun, pose, pts, 0.01, normals, dtype=np.float32)
