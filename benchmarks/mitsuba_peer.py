@@ -16,14 +16,17 @@ sampler; the sun's share of the light samples; light and BSDF samples per camera
 mono. ``compare_setups`` measures them against each other and ``EFFICIENT`` is the one that
 reached a given noise fastest on the bench's scenes.
 
-``llvm_ad_rgb`` / ``llvm_ad_mono`` are used where their LLVM loads (it needs a newer system
-libLLVM than some distributions ship, such as Debian's ``libllvm19``); otherwise ``scalar_rgb``.
+``llvm_ad_rgb`` / ``llvm_ad_mono`` are used where their LLVM renders (it needs a newer system
+libLLVM than some distributions ship, such as Debian's ``libllvm19``; with Debian 12's libLLVM 15
+drjit's code generation aborts the process), checked in a child process; otherwise ``scalar_rgb``.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -53,22 +56,34 @@ def mitsuba_available() -> bool:
     return True
 
 
+#: A tiny render with the ``llvm_ad_rgb`` variant (``_llvm_renders``).
+_LLVM_PROBE = """
+import mitsuba as mi, numpy as np
+mi.set_variant("llvm_ad_rgb")
+scene = mi.load_dict({"type": "scene", "e": {"type": "constant"}, "i": {"type": "direct"},
+                      "s": {"type": "orthographic", "film": {"type": "hdrfilm", "width": 2, "height": 2}}})
+np.asarray(mi.render(scene, spp=1))
+"""
+
+
 def _llvm_renders() -> bool:
     """Whether the ``llvm_ad_*`` variants render here (checked once per process)."""
     if not _LLVM:
         import mitsuba as mi
-        ok = "llvm_ad_rgb" in mi.variants()
-        if ok:
-            try:
-                mi.set_variant("llvm_ad_rgb")
-                scene = mi.load_dict({"type": "scene", "e": {"type": "constant"}, "i": {"type": "direct"},
-                                      "s": {"type": "orthographic",
-                                            "film": {"type": "hdrfilm", "width": 2, "height": 2}}})
-                np.asarray(mi.render(scene, spp=1))
-            except Exception:  # its libLLVM is missing or too old
-                ok = False
-        _LLVM.append(ok)
+        _LLVM.append("llvm_ad_rgb" in mi.variants() and _runs_in_child(_LLVM_PROBE))
     return _LLVM[0]
+
+
+def _runs_in_child(code: str, timeout_s: float = 600.0) -> bool:
+    """Whether Python ``code`` runs to its end in a child process. An LLVM that drjit cannot use
+    aborts the process that renders (no exception reaches Python): the bench's own process, with
+    every result it holds, must not be the one."""
+    try:
+        done = subprocess.run([sys.executable, "-c", code], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                              timeout=timeout_s)
+    except (OSError, subprocess.TimeoutExpired):
+        return False
+    return done.returncode == 0
 
 
 def mitsuba_variant(mono: bool = False) -> str:

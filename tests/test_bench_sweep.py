@@ -194,6 +194,16 @@ def test_mitsuba_report_states_a_floor_and_a_lower_bound():
     assert "differ by 0.0040 (RMS, band)" in text  # sqrt(0.005^2 - 0.003^2)
 
 
+def test_a_probe_that_aborts_its_process_reads_false_in_a_child():
+    """Mitsuba's LLVM variant aborts the process that renders where the system's libLLVM is too
+    old (no exception reaches Python): the bench probes it in a child process and goes on."""
+    from benchmarks.mitsuba_peer import _runs_in_child
+    assert _runs_in_child("pass")
+    assert not _runs_in_child("import os; os.abort()")
+    assert not _runs_in_child("raise SystemExit(3)")
+    assert not _runs_in_child("import time; time.sleep(30)", timeout_s=0.5)
+
+
 def test_mitsuba_setup_checks_its_options_and_names_itself():
     from benchmarks.mitsuba_peer import EFFICIENT, PLAIN, MitsubaSetup
     with pytest.raises(ValueError, match="sun_share must be in"):
