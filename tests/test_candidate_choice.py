@@ -35,10 +35,9 @@ def test_a_repeated_slot_changes_nothing(rule, x, dy, tilt, inside, near):
                 normals)
         nb = jnp.array([near])
         one, padded = jnp.array([[0, 1]]), jnp.array([[0, 1, 0, 0, 1]])
-        for ids in (jnp.array([[0, 0, 0]]), padded):
-            ref = one if ids.shape[1] == 5 else jnp.array([[0]])
+        for ids, distinct in ((jnp.array([[0, 0, 0]]), jnp.array([[0]])), (padded, one)):
             np.testing.assert_allclose(edge_coordinate(point, ids, *args, near_boundary=nb),
-                                       edge_coordinate(point, ref, *args, near_boundary=nb), atol=1e-12)
+                                       edge_coordinate(point, distinct, *args, near_boundary=nb), atol=1e-12)
         np.testing.assert_allclose(edge_alpha(point, padded, *args[:6], "linear", normals, near_boundary=nb),
                                    edge_alpha(point, one, *args[:6], "linear", normals, near_boundary=nb),
                                    atol=1e-12)
