@@ -229,7 +229,11 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
         # Just before the raster (one thread's NumPy and OpenCV, the longest step): work handed to
         # another thread then takes no core from this one's parallel passes.
         reached(cand, hard)
-    raster = rasterise_shadow(grid, world, light, sil, uv_v)
+    # The distances that the band, the near-outline test and the candidates' rings read (a
+    # band's widest wedge and margin, the rings' diagonal chamfer steps, a pixel for rounding).
+    exact_px = (BAND_FRACTION * float(light_band_widths(bounds[4] - edge_depth.min(), range_k_max)) / pixel_m
+                + margin_px + 1.5 * CANDIDATE_REACH_PX + 1.0)
+    raster = rasterise_shadow(grid, world, light, sil, uv_v, exact_px=exact_px, pool=pool)
     m = len(cand)
     in_view = scratch_array(scratch, "sun.in_view", m, np.uint8)
     label = scratch_array(scratch, "sun.label", m, np.int32)

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from concurrent.futures import Executor
 
 import cv2
 import numpy as np
@@ -190,12 +191,17 @@ def _along_outline(hard: np.ndarray, start: np.ndarray, end: np.ndarray, offset_
 
 
 def rasterise_shadow(grid: GroundGrid, world_vertices: np.ndarray, light: np.ndarray,
-                     silhouette, ground: np.ndarray | None = None) -> ShadowRaster:
+                     silhouette, ground: np.ndarray | None = None, *, exact_px: float | None = None,
+                     pool: Executor | None = None) -> ShadowRaster:
     """Hard shadow, governing silhouette edge and boundary distance for every pixel of ``grid``.
 
     world_vertices (V, 3); light (3,) unit with light[2] < 0; silhouette: an
     ``occluder.Silhouette`` for this pose and light; ground: the vertices projected
-    along the light (V, 2), if already known.
+    along the light (V, 2), if already known. exact_px: the boundary distance (pixels) up to
+    which the caller reads the distance and the label (default: everywhere). Where the distance
+    is at most exact_px, both are then as without it; elsewhere the distance is only known to be
+    larger (+inf far from every seed) and the label is an edge's or -1: the distance transform
+    runs near the outline only, in two halves, one on pool's thread if given.
     """
     h, w = grid.height, grid.width
     px = grid.to_pixel(project_to_ground(world_vertices, light) if ground is None else ground)
@@ -220,14 +226,68 @@ def rasterise_shadow(grid: GroundGrid, world_vertices: np.ndarray, light: np.nda
     # DT label l > 0 is the l-th seed (row-major, as OpenCV numbers them); the lookup table
     # maps it to its edge index (lut[0] = -1).
     src = np.empty((h, w), np.uint8)
-    lut = _seeds_kernel()(boundary, label_img, src)
+    before = np.empty(h + 1, np.int64)
+    cols = np.empty(2, np.int64)
+    lut = _seeds_kernel()(boundary, label_img, src, before, cols)
     if len(lut) == 1:
         return ShadowRaster(grid, hard, -np.ones((h, w), np.int32),
                             np.full((h, w), np.inf, np.float32), depth_count=count)
-    dist, nearest = cv2.distanceTransformWithLabels(src, cv2.DIST_L2, cv2.DIST_MASK_5,
-                                                    labelType=cv2.DIST_LABEL_PIXEL)
-    edge_label = np.take(lut, nearest)
+    if exact_px is None:
+        dist, nearest = cv2.distanceTransformWithLabels(src, cv2.DIST_L2, cv2.DIST_MASK_5,
+                                                        labelType=cv2.DIST_LABEL_PIXEL)
+        edge_label = np.take(lut, nearest)
+    else:
+        dist, edge_label = _distance_near_seeds(src, lut, before, cols, exact_px, pool)
     return ShadowRaster(grid, hard, edge_label, dist, _end_neighbours(ids, on_outline), outline_fraction, count)
+
+
+#: The 5 x 5 mask's steps reach two pixels: a pixel's value depends on those within two of its paths.
+_MASK_REACH_PX = 2
+
+
+def _distance_near_seeds(src: np.ndarray, lut: np.ndarray, before: np.ndarray, cols: np.ndarray,
+                         exact_px: float, pool: Executor | None) -> tuple[np.ndarray, np.ndarray]:
+    """``rasterise_shadow``'s distance (H, W) float32 and label (H, W) int32 (``exact_px``: as the
+    whole raster's distance transform where its distance is at most exact_px).
+
+    A pixel at distance d <= exact_px from its seed gets the same value and label from any window
+    holding every pixel within d (plus the mask's reach) of it: the transform's shortest paths run
+    inside the box of the pixel and its seed, each step at most ``_MASK_REACH_PX`` long and none
+    shorter than a pixel, and a window only removes paths (its values are never smaller). So the
+    transform runs on the seeds' box widened by that margin, in two halves of rows that overlap
+    by it, each kept where it is exact; outside the box the distance exceeds the margin.
+    """
+    h, w = src.shape
+    margin = int(np.ceil(exact_px)) + _MASK_REACH_PX + 1
+    seeded = np.flatnonzero(np.diff(before))
+    r0, r1 = max(int(seeded[0]) - margin, 0), min(int(seeded[-1]) + 1 + margin, h)
+    c0, c1 = max(int(cols[0]) - margin, 0), min(int(cols[1]) + 1 + margin, w)
+    dist = np.full((h, w), np.inf, np.float32)
+    label = np.full((h, w), -1, np.int32)
+
+    def window(a: int, b: int, keep_a: int, keep_b: int) -> None:
+        # Rows a..b of the box; rows keep_a..keep_b of the result. The window's seeds, in its
+        # row-major order, are the lut's from the seeds above row a on (every seed is in c0..c1).
+        if before[b] == before[a]:
+            return
+        d, nearest = cv2.distanceTransformWithLabels(src[a:b, c0:c1], cv2.DIST_L2, cv2.DIST_MASK_5,
+                                                     labelType=cv2.DIST_LABEL_PIXEL)
+        dist[keep_a:keep_b, c0:c1] = d[keep_a - a:keep_b - a]
+        np.take(lut[before[a]:], nearest[keep_a - a:keep_b - a], out=label[keep_a:keep_b, c0:c1])
+
+    split = (r0 + r1) // 2
+    if pool is None or split - r0 < 2 * margin:
+        window(r0, r1, r0, r1)
+        return dist, label
+    upper = pool.submit(window, r0, min(split + margin, r1), r0, split)
+    try:
+        window(max(split - margin, r0), r1, split, r1)
+    finally:
+        if not upper.cancel():
+            upper.result()
+    if upper.cancelled():  # the pool's thread was busy: made here
+        window(r0, min(split + margin, r1), r0, split)
+    return dist, label
 
 
 def _end_neighbours(ids: np.ndarray, keep: np.ndarray) -> np.ndarray:
@@ -440,18 +500,24 @@ def _fill_kernel():
 def _seeds_kernel():
     """The distance transform's input (numba): src 0 at the seeds (pixels on the boundary band
     with an outline edge's label), 1 elsewhere. Returns the lookup table (seeds + 1,) int32:
-    lut[1 + j] the j-th seed's edge (label - 1, row-major), lut[0] = -1."""
+    lut[1 + j] the j-th seed's edge (label - 1, row-major), lut[0] = -1; before (h + 1,): the
+    seeds in the rows above each row (and in all), cols (2,): the seeds' first and last column."""
     import numba
 
     @numba.njit(cache=True, nogil=True)
-    def kernel(boundary, label, src):
+    def kernel(boundary, label, src, before, cols):
         h, w = src.shape
         n = 0
+        cols[0], cols[1] = w, -1
         for r in range(h):
+            before[r] = n
             for c in range(w):
                 seed = boundary[r, c] > 0 and label[r, c] > 0
                 src[r, c] = 0 if seed else 1
+                if seed:
+                    cols[0], cols[1] = min(cols[0], c), max(cols[1], c)
                 n += seed
+        before[h] = n
         lut = np.empty(n + 1, np.int32)  # sized to the seeds: a table for every pixel costs page faults
         lut[0] = -1
         n = 0
