@@ -243,6 +243,9 @@ def rasterise_shadow(grid: GroundGrid, world_vertices: np.ndarray, light: np.nda
 
 #: The 5 x 5 mask's steps reach two pixels: a pixel's value depends on those within two of its paths.
 _MASK_REACH_PX = 2
+#: Smaller boxes are not split (the transform takes about 8 ns a pixel; waking the second thread
+#: costs about a tenth of a millisecond).
+_SPLIT_MIN_PX = 65536
 
 
 def _distance_near_seeds(src: np.ndarray, lut: np.ndarray, before: np.ndarray, cols: np.ndarray,
@@ -276,7 +279,7 @@ def _distance_near_seeds(src: np.ndarray, lut: np.ndarray, before: np.ndarray, c
         np.take(lut[before[a]:], nearest[keep_a - a:keep_b - a], out=label[keep_a:keep_b, c0:c1])
 
     split = (r0 + r1) // 2
-    if pool is None or split - r0 < 2 * margin:
+    if pool is None or split - r0 < 2 * margin or (r1 - r0) * (c1 - c0) < _SPLIT_MIN_PX:
         window(r0, r1, r0, r1)
         return dist, label
     upper = pool.submit(window, r0, min(split + margin, r1), r0, split)

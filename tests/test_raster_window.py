@@ -22,6 +22,7 @@ from benchmarks.meshes import mit_dragon
 from softshadow import GroundGrid, Pose, SoftShadowModel, Sun, decimate
 from softshadow.meshes import builtin_mesh
 from softshadow.posed import PosedOccluder
+from softshadow import raster
 from softshadow.raster import rasterise_shadow
 
 
@@ -34,6 +35,15 @@ def occluder(name: str):
 @functools.cache
 def pool() -> ThreadPoolExecutor:
     return ThreadPoolExecutor(1, thread_name_prefix="test-raster")
+
+
+@pytest.fixture(autouse=True, scope="module")
+def split_any_window():
+    """Windows split in two however small (the scene's are large; these rasters are quick)."""
+    before = raster._SPLIT_MIN_PX
+    raster._SPLIT_MIN_PX = 0
+    yield
+    raster._SPLIT_MIN_PX = before
 
 
 def raster_args(name: str, rotation_deg, azimuth: float, elevation: float, side_px: int):
