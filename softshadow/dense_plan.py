@@ -147,9 +147,9 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
     optional: called before the light-space raster is made (not at all when no point is within
     the shadow's reach), with the points within it (ascending) and the plan's ``hard`` (n,),
     final already at every point not among them (written at those later): another thread may
-    shade those points while this one goes on. pool: a second thread
-    that packs the silhouette's edges and tests half the points near the outline (after what it
-    was given before) while this one goes on: the same plan. blocks: ``PointBlocks.of(points,
+    shade those points while this one goes on. pool: a second thread that makes half the
+    raster's distance transform, packs the silhouette's edges and tests half the points near the
+    outline (after what it was given before) while this one goes on: the same plan. blocks: ``PointBlocks.of(points,
     normals)``, kept while the points stay (a camera's): the runs of points out of the shadow's
     reach are then skipped (the same plan).
     """

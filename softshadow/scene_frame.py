@@ -91,9 +91,10 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
     with them; ``FrameRenderer`` does this); pool: a thread that poses the occluder and makes the
     projectors' shadow maps while this one finds what each pixel sees, then the projectors'
     light while this one makes the sun's plan, the shading of the points out of the shadow's
-    reach while this one makes the raster, half the near-outline test and the edges
-    (``plan_dense_points``), then the shading of the rest and part of the penumbra while this
-    one evaluates the other part (work it has not started when this one needs it is done here).
+    reach while this one makes the raster (and half its distance transform), half the
+    near-outline test and the edges (``plan_dense_points``), then the shading of the rest and
+    part of the penumbra while this one evaluates the other part (work it has not started when
+    this one needs it is done here).
     """
     pose = Pose() if pose is None else pose
     lights = SceneLights() if lights is None else lights
