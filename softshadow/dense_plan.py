@@ -32,6 +32,7 @@ from .raster import rasterise_shadow
 from .scratch import Scratch, scratch_array
 from .shadowmap import (BIAS_PX, FACING_TOL, PRECISION_ULPS, SLOPE_PX, TAN_MAX, LightFrame, face_depth_at, faces_away,
                         shadow_map)
+from .threads import share
 
 __all__ = ["DensePlan", "PointBlocks", "plan_dense_points"]
 
@@ -368,15 +369,7 @@ def _shared_test(pool: ThreadPoolExecutor | None, test: Callable[[np.ndarray], n
             then()
         return test(points)
     half = len(points) // 2
-    first = pool.submit(test, points[:half])
-    if then is not None:
-        then()
-    try:
-        rest = test(points[half:])
-    finally:
-        if not first.cancel():
-            first.exception()
-    return np.concatenate([test(points[:half]) if first.cancelled() else first.result(), rest])
+    return np.concatenate(share(pool, lambda: test(points[:half]), lambda: test(points[half:]), then))
 
 
 def _spacing(uv: np.ndarray, cell_m: float, lo: np.ndarray, hi: np.ndarray) -> float:

@@ -28,6 +28,7 @@ import cv2
 import numpy as np
 
 from .camera import GroundGrid
+from .threads import share
 
 __all__ = ["ShadowRaster", "project_to_ground", "rasterise_shadow", "winding_fill", "winding_count_fill",
            "layer_count_fill",
@@ -282,14 +283,8 @@ def _distance_near_seeds(src: np.ndarray, lut: np.ndarray, before: np.ndarray, c
     if pool is None or split - r0 < 2 * margin or (r1 - r0) * (c1 - c0) < _SPLIT_MIN_PX:
         window(r0, r1, r0, r1)
         return dist, label
-    upper = pool.submit(window, r0, min(split + margin, r1), r0, split)
-    try:
-        window(max(split - margin, r0), r1, split, r1)
-    finally:
-        if not upper.cancel():
-            upper.result()
-    if upper.cancelled():  # the pool's thread was busy: made here
-        window(r0, min(split + margin, r1), r0, split)
+    share(pool, lambda: window(r0, min(split + margin, r1), r0, split),
+          lambda: window(max(split - margin, r0), r1, split, r1))
     return dist, label
 
 

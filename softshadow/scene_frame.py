@@ -53,6 +53,7 @@ from .render import SoftShadowModel
 from .scene_render import SceneLights, _object_surface, caster_face_offsets
 from .scratch import Scratch, scratch_array
 from .sun import check_sun_above_horizon
+from .threads import share
 from .visibility import Surface, VisibleSurfaces, visible_surfaces
 
 __all__ = ["FRAME_STEPS", "PENUMBRA_CHUNKS", "FrameRenderer", "SceneFrame", "band_alpha", "render_frame"]
@@ -425,17 +426,13 @@ def band_alpha(plan: DensePlan, points: np.ndarray, model: SoftShadowModel, pose
 
     alpha = np.full(m, np.nan)  # a point no chunk wrote would show
     mine, theirs = _shared(chunks) if pool is not None else (chunks, [])
-    # The second thread's chunks (after what it was given before) beside this one's: XLA runs one
-    # call on one core. Not started when this one is done (the second thread still busy with
-    # earlier work), they are evaluated here.
-    other = pool.submit(evaluate, theirs) if pool is not None and theirs else None
-    try:
+    # The second thread's chunks (after what it was given before) dispatched beside this one's:
+    # XLA runs them one after the other, but neither thread waits to dispatch behind the other.
+    if theirs:
+        their_alpha, my_alpha = share(pool, lambda: evaluate(theirs), lambda: evaluate(mine))
+        done = [*zip(mine, my_alpha), *zip(theirs, their_alpha)]
+    else:
         done = list(zip(mine, evaluate(mine)))
-    finally:
-        if other is not None and not other.cancel():
-            other.exception()
-    if other is not None:
-        done += list(zip(theirs, evaluate(theirs) if other.cancelled() else other.result()))
     for (a, size), out in done:
         alpha[a:min(a + size, m)] = out[:min(size, m - a)]
     return alpha

@@ -1,10 +1,18 @@
-"""The process's BLAS threads, fixed once at each entry point (NumPy only, no JAX)."""
+"""Threads: the process's BLAS threads, fixed once at each entry point, and work shared with a
+second thread (NumPy only, no JAX)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from concurrent.futures import Executor
+from typing import TypeVar
+
 from threadpoolctl import threadpool_limits
 
-__all__ = ["one_blas_thread"]
+__all__ = ["one_blas_thread", "share"]
+
+T = TypeVar("T")
+U = TypeVar("U")
 
 
 def one_blas_thread():
@@ -25,3 +33,20 @@ def one_blas_thread():
     import numpy  # noqa: F401
     import scipy.linalg  # noqa: F401
     return threadpool_limits(limits=1, user_api="blas")
+
+
+def share(pool: Executor, theirs: Callable[[], T], mine: Callable[[], U],
+          then: Callable[[], None] | None = None) -> tuple[T, U]:
+    """(theirs(), mine()): theirs on the pool's thread while this one runs mine, or here after
+    mine when the pool has not started it by then (busy with work given before), so no caller
+    waits behind that work. then(), optional: called once theirs is handed over, before mine.
+    Neither is left running when this returns or raises."""
+    pending = pool.submit(theirs)
+    if then is not None:
+        then()
+    try:
+        out = mine()
+    finally:
+        if not pending.cancel():
+            pending.exception()  # waited for; its error is raised by result() below
+    return (theirs() if pending.cancelled() else pending.result()), out
