@@ -84,6 +84,18 @@ class Occluder:
         return self.edge_faces.shape[1] == 2 and bool(np.all(self.edge_faces >= 0))
 
     @functools.cached_property
+    def twin_edges(self) -> np.ndarray:
+        """(P, 2) pairs of distinct edges with the same two end points (vertices at equal
+        positions): where a pinched surface was split (``lod.split_pinched``). Usually empty."""
+        positions, position = np.unique(self.vertices, axis=0, return_inverse=True)
+        if len(positions) == len(self.vertices):
+            return np.zeros((0, 2), np.int64)  # no two vertices at one position
+        ends = np.sort(position.reshape(-1)[self.edges], axis=1)
+        order = np.lexsort((ends[:, 1], ends[:, 0]))
+        same = np.flatnonzero(np.all(ends[order[1:]] == ends[order[:-1]], axis=1))
+        return np.stack([order[same], order[same + 1]], 1).astype(np.int64)
+
+    @functools.cached_property
     def edge_tangent(self) -> np.ndarray:
         """(E, 3) unit direction of each edge, from its first to its second vertex (mesh frame)."""
         t = self.vertices[self.edges[:, 1]] - self.vertices[self.edges[:, 0]]
@@ -208,6 +220,22 @@ def silhouette(occ: Occluder, world_vertices: np.ndarray, rotation: np.ndarray,
     # The inner face's centroid minus the edge's midpoint.
     inward = occ.edge_inward.reshape(-1, 3)[idx * occ.edge_inward.shape[1] + inner_slot]
     sign = np.where(np.einsum("ij,ij->i", n, inward) > 0, -1.0, 1.0)
+    twins = occ.twin_edges
+    if len(twins):
+        # Two sheets of the surface meeting along one line (a pinch split into coincident edges),
+        # both on the silhouette and facing opposite ways: the shadow lies on both sides of the
+        # line, so neither edge bounds it (and the pixel arrangement would meet two coincident
+        # segments).
+        position = np.full(len(occ.edges), -1, np.int64)
+        position[idx] = np.arange(len(idx))
+        e1, e2 = position[twins[:, 0]], position[twins[:, 1]]
+        both = (e1 >= 0) & (e2 >= 0)
+        e1, e2 = e1[both], e2[both]
+        opposite = np.einsum("ij,ij->i", sign[e1, None] * n[e1], sign[e2, None] * n[e2]) < 0
+        drop = np.zeros(len(idx), bool)
+        drop[e1[opposite]] = drop[e2[opposite]] = True
+        if drop.any():
+            idx, t, n, sign, paper = idx[~drop], t[~drop], n[~drop], sign[~drop], paper[~drop]
     ids = occ.edges[idx]
     normal = sign[:, None] * n
     edge_index = idx

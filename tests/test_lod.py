@@ -7,7 +7,11 @@ import numpy as np
 import pytest
 import trimesh
 
-from softshadow import PAPER_FACE_COUNTS, decimate, lod_series
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from softshadow import PAPER_FACE_COUNTS, GroundGrid, Pose, ShadowParams, SoftShadowModel, Sun, decimate, lod_series
+from softshadow.lod import split_pinched
 
 
 @pytest.fixture(scope="module")
@@ -24,11 +28,107 @@ def test_series_follows_the_papers_counts_capped_at_the_mesh(dragon):
     assert [lv.target for lv in levels] == [41384, 5000, 1000, 300]
     for lv in levels[1:]:
         assert abs(lv.faces - lv.target) <= 10
-        assert lv.watertight == lv.mesh.is_watertight  # reported as it is, kept or not
+        assert lv.watertight == lv.mesh.is_watertight  # reported as it is
+        # The decimator pinches the 1,000- and 300-face levels at an edge; split, they stay closed.
+        assert lv.watertight and SoftShadowModel.from_mesh(lv.mesh).occluder.watertight
         # The decimated mesh stays where the dragon is (quadric error keeps the surface; the
         # 300-face level loses the tips of the tail and claws, a few percent of the length).
         assert np.allclose(lv.mesh.bounds, dragon.bounds, atol=0.05 * np.ptp(dragon.vertices[:, 0]))
     assert levels[0].watertight
+
+
+def _tetrahedron(a, b, c, d) -> np.ndarray:
+    """The faces of the tetrahedron (a, b, c, d), wound consistently."""
+    return np.array([[a, b, c], [a, d, b], [a, c, d], [b, d, c]])
+
+
+def _pinched_pair(apex: np.ndarray) -> trimesh.Trimesh:
+    """Two tetrahedra sharing the edge from (0, 0, 1) to (1, 0, 1) and nothing else: four faces
+    on that edge. apex (4, 3): the other vertices, two above the edge's plane z = 1 (y > 0),
+    two below (y < 0), so that the solids touch along the edge only."""
+    vertices = np.vstack([[[0.0, 0.0, 1.0], [1.0, 0.0, 1.0]], apex])
+    mesh = trimesh.Trimesh(vertices, np.vstack([_tetrahedron(0, 1, 2, 3), _tetrahedron(0, 1, 4, 5)]), process=False)
+    trimesh.repair.fix_normals(mesh, multibody=True)  # each tetrahedron wound outward
+    return mesh
+
+
+def _pinched_apexes(draw_x, draw_h):
+    return np.array([[draw_x[0], draw_h[0], 1.0 + draw_h[1]], [draw_x[1], draw_h[2], 1.0 - draw_h[3]],
+                     [draw_x[2], -draw_h[4], 1.0 + draw_h[5]], [draw_x[3], -draw_h[6], 1.0 - draw_h[7]]])
+
+
+@settings(max_examples=40, deadline=None)
+@given(x=st.lists(st.floats(-0.5, 1.5), min_size=4, max_size=4),
+       h=st.lists(st.floats(0.1, 1.0), min_size=8, max_size=8),
+       order=st.randoms(use_true_random=False))
+def test_split_pinched_closes_a_surface_pinched_at_an_edge(x, h, order):
+    mesh = _pinched_pair(_pinched_apexes(x, h))
+    # Any order of the faces and of each face's corners: the same closed surface.
+    faces = np.asarray(mesh.faces)[order.sample(range(8), 8)]
+    faces = np.array([np.roll(f, order.randrange(3)) for f in faces])
+    mesh = trimesh.Trimesh(mesh.vertices, faces, process=False)
+    uses = np.unique(np.sort(mesh.edges, axis=1), axis=0, return_counts=True)[1]
+    assert not mesh.is_watertight and uses.max() == 4
+    split = split_pinched(mesh)
+    assert split.is_watertight and split.is_winding_consistent
+    assert len(split.vertices) == len(mesh.vertices) + 2  # the shared edge's two vertices, once more
+    assert np.array_equal(split.vertices[split.faces], mesh.vertices[mesh.faces])  # the triangles stay
+    assert np.array_equal(split.vertices[:len(mesh.vertices)], mesh.vertices)  # the old indices too
+    assert split.volume == pytest.approx(mesh.volume, rel=1e-12)
+    assert SoftShadowModel.from_mesh(split).occluder.watertight
+
+
+def test_split_pinched_leaves_open_and_unpinched_meshes():
+    box = trimesh.creation.box()
+    assert split_pinched(box) is box  # one fan per vertex
+    open_box = trimesh.Trimesh(box.vertices, box.faces[1:], process=False)
+    assert split_pinched(open_box) is open_box  # no split closes it
+    # Two boxes touching at a corner (each edge has two faces): one vertex, two fans.
+    a = trimesh.creation.box(bounds=[[0, 0, 0], [1, 1, 1]])
+    b = trimesh.creation.box(bounds=[[1, 1, 1], [2, 2, 2]])
+    corner = trimesh.util.concatenate([a, b])
+    corner.merge_vertices()
+    assert len(corner.vertices) == 15
+    split = split_pinched(corner)
+    assert len(split.vertices) == 16 and split.is_watertight
+    assert np.array_equal(split.vertices[split.faces], corner.vertices[corner.faces])
+
+
+def test_a_split_level_casts_the_pinched_surfaces_shadow():
+    """The split mesh takes the closed path (lit faces only, silhouette where lit meets unlit)
+    and casts the surface's shadow: at pixel centres as a ray caster finds it (as does the
+    pinched mesh), and over each pixel's footprint as a 16 x 16 supersampled ray caster,
+    also along the line where the two sheets meet (whose two coincident edges bound nothing)."""
+    mesh = _pinched_pair(_pinched_apexes([0.2, 0.7, 0.4, 0.9], [0.6, 0.5, 0.3, 0.7, 0.5, 0.4, 0.8, 0.6]))
+    split = split_pinched(mesh)
+    assert SoftShadowModel.from_mesh(split).occluder.watertight
+    assert not SoftShadowModel.from_mesh(mesh).occluder.watertight
+    grid = GroundGrid(0.02, (-1.5, 2.5), 200, 200)
+    rows, cols = np.mgrid[0:200, 0:200]
+    n = 16
+    sub = (np.arange(n) + 0.5) / n - 0.5
+    for sun in (Sun(200.0, 40.0), Sun(120.0, 25.0), Sun(10.0, 70.0)):
+        towards_sun = -np.asarray(sun.light_np, np.float64)
+
+        def lit_fraction(r, c, offsets=((0.0, 0.0),)):
+            o = np.asarray(offsets)
+            x = grid.origin_m[0] + grid.pixel_m * (c[:, None] + o[None, :, 0])
+            y = grid.origin_m[1] - grid.pixel_m * (r[:, None] + o[None, :, 1])
+            points = np.stack([x, y, np.zeros_like(x)], -1).reshape(-1, 3)
+            hit = mesh.ray.intersects_any(points, np.broadcast_to(towards_sun, points.shape))
+            return 1.0 - hit.reshape(len(r), len(o)).mean(1)
+
+        centres = lit_fraction(rows.ravel(), cols.ravel()).reshape(200, 200)
+        assert 0.02 < 1.0 - centres.mean() < 0.5
+        for m in (mesh, split):
+            point = np.asarray(SoftShadowModel.from_mesh(m, footprint=False).ground_map(
+                ShadowParams(0.0, 0.0), sun, Pose(), grid))  # the light left: 1 where lit
+            assert np.array_equal(point, centres)
+        area = np.asarray(SoftShadowModel.from_mesh(split).ground_map(ShadowParams(0.0, 0.0), sun, Pose(), grid))
+        edge = np.argwhere((area > 0) & (area < 1) | (area != centres))
+        offsets = np.stack(np.meshgrid(sub, sub), -1).reshape(-1, 2)
+        truth = lit_fraction(edge[:, 0], edge[:, 1], offsets)
+        assert len(edge) > 50 and np.abs(area[edge[:, 0], edge[:, 1]] - truth).max() < 1.5 / n
 
 
 def test_series_drops_levels_the_mesh_cannot_fill():

@@ -460,9 +460,15 @@ def _levels_dir() -> Path | None:
     return None if cache is None else cache / "levels"
 
 
+#: Part of the stored levels' names: a new value when ``decimate``'s output changes, so that
+#: levels stored by an older version are not read.
+_LEVEL_FORMAT = 2
+
+
 def _level_path(mesh: trimesh.Trimesh, faces: int, kind: str) -> Path | None:
     directory = _levels_dir()
-    return None if directory is None else directory / f"{_mesh_key(mesh, 'mesh')[:40]}-{int(faces)}-{kind}.npz"
+    return None if directory is None else \
+        directory / f"{_mesh_key(mesh, 'mesh')[:40]}-{int(faces)}-{kind}-{_LEVEL_FORMAT}.npz"
 
 
 def _read(path: Path | None) -> dict | None:
