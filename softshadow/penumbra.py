@@ -222,7 +222,8 @@ def penumbra_coordinate(points: Float[Array, "n 3"], a: Float[Array, "n 3"], b: 
 
 
 def _choose(x, edge_ids, edge_vertices_world, outward_sign, light, k, inside, rule, paper, near_boundary):
-    """Index (n,) of each point's chosen candidate (smallest |u|), without gradients."""
+    """Index (n,) of each point's chosen candidate (smallest |u|), and that candidate's u and du/dT
+    (n,) each, without gradients."""
     n_pts, n_cand = edge_ids.shape
     sg = jax.lax.stop_gradient
     flat = edge_ids.reshape(-1)
@@ -237,7 +238,7 @@ def _choose(x, edge_ids, edge_vertices_world, outward_sign, light, k, inside, ru
     # Only the nearest boundary edge (the first candidate) may set the side from its plane.
     nb_c = None if near_boundary is None else (
         near_boundary[:, None] * (jnp.arange(n_cand) == 0)[None, :]).reshape(-1)
-    u_all = _coordinate(tuple(rep(sg(xi)) for xi in x), f_c, L_c, rep(inside), nb_c)[0]
+    u_all, slope_all = _coordinate(tuple(rep(sg(xi)) for xi in x), f_c, L_c, rep(sg(inside)), nb_c)[:2]
     # Ties (edges meeting at a vertex give the same u beyond it, with different slopes and
     # gradients) go to the earlier candidate, so rounding cannot flip the choice: a fit's loss
     # jumped under 1e-12 steps and its LM solver stalled on rejected steps.
@@ -249,7 +250,33 @@ def _choose(x, edge_ids, edge_vertices_world, outward_sign, light, k, inside, ru
                                            for j in range(1, n_cand)]
     abs_u = jnp.where(jnp.stack(repeated, axis=1), jnp.inf, abs_u)
     tie = 8 * jnp.finfo(abs_u.dtype).eps  # a few ulps, in float32 and float64 alike
-    return jnp.argmin(abs_u + tie * (1.0 + abs_u) * jnp.arange(n_cand), axis=1)
+    best = jnp.argmin(abs_u + tie * (1.0 + abs_u) * jnp.arange(n_cand), axis=1)
+    pick = lambda v: sg(jnp.take_along_axis(v.reshape(n_pts, n_cand), best[:, None], axis=1)[:, 0])
+    return best, (pick(u_all), pick(jnp.broadcast_to(slope_all, u_all.shape)))
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
+def _chosen_coordinate(rule, chosen, x, edge, light, k, inside, near_boundary):
+    """u and du/dT (n,) of points x (3-tuple) against their chosen edges: ``chosen``, the values
+    ``_choose`` computed for them (the same arithmetic), so that a forward pass evaluates each
+    point's edges once; edge: (a, b, outward_sign, paper normal or None), each edge's, per point.
+    The derivatives are this edge's alone (``_chosen_jvp``): autodiff costs one edge per point."""
+    return chosen
+
+
+def _chosen_from_edge(rule, x, edge, light, k, inside, near_boundary):
+    a, b, sign, paper = edge
+    return _coordinate(x, _edge_frame(a, b, sign, light, k, rule, paper), light, inside, near_boundary)[:2]
+
+
+@_chosen_coordinate.defjvp
+def _chosen_jvp(rule, primals, tangents):
+    chosen, *args = primals
+    _, *d_args = tangents  # the choice's own tangent is zero (made without gradients)
+    _, d_out = jax.jvp(functools.partial(_chosen_from_edge, rule), tuple(args), tuple(d_args))
+    # The value through this function again, so that a derivative of a derivative (u's slope
+    # across a pixel, differentiated by a fit) takes this rule too.
+    return _chosen_coordinate(rule, chosen, *args), d_out
 
 
 def _pixel_directions(pixel_axes, x, dtype):
@@ -267,9 +294,9 @@ def edge_coordinate(points, edge_ids: Int[Array, "n K"], edge_vertices_world: Fl
 
     light: (3,), or (n, 3) one per point. Each point takes the candidate nearest in
     penumbra units (smallest |u|): the silhouette that the sun disk sees first. The
-    choice is piecewise constant, so it is made without gradients over all candidates,
-    and u is then evaluated, differentiably, for the chosen edge alone: gradients cost
-    one edge per point.
+    choice is piecewise constant, so it is made without gradients over all candidates; its u
+    is the value, and u's derivatives are the chosen edge's alone (``_chosen_coordinate``):
+    gradients cost one edge per point, and a forward pass evaluates each candidate once.
 
     pixel_axes: (2, 3) or (n, 2, 3), the receiver's offsets (m) across a whole pixel along
     its two sides; with them, also returns u's change across the pixel along each side,
@@ -280,19 +307,18 @@ def edge_coordinate(points, edge_ids: Int[Array, "n K"], edge_vertices_world: Fl
     k = _range_k(range_k, points.dtype)
     x = _split(points)
     paper = paper_normal_world
-    best = _choose(x, edge_ids, edge_vertices_world, outward_sign, light, k, inside, rule, paper,
-                   near_boundary)
-    # -- the value and its gradient: the chosen edge only --
+    best, chosen = _choose(x, edge_ids, edge_vertices_world, outward_sign, light, k, inside, rule, paper,
+                           near_boundary)
+    # -- the gradient: the chosen edge only (its value is the choice's) --
     eid = jnp.take_along_axis(edge_ids, best[:, None], axis=1)[:, 0]
     ev = edge_vertices_world[eid]
+    edge = (_split(ev[:, 0]), _split(ev[:, 1]), outward_sign[eid], None if paper is None else _split(paper[eid]))
     L = _split(light)
-    f = _edge_frame(_split(ev[:, 0]), _split(ev[:, 1]), outward_sign[eid], L, k, rule,
-                    None if paper is None else _split(paper[eid]))
     nb = None if near_boundary is None else jnp.where(best == 0, near_boundary, 0.0)
     if pixel_axes is None:
-        u, slope = _coordinate(x, f, L, inside, nb)[:2]
+        u, slope = _chosen_coordinate(rule, chosen, x, edge, L, k, inside, nb)
         return (u, slope) if with_slope else u
-    u_of = lambda xx: _coordinate(xx, f, L, inside, nb)[:2]
+    u_of = lambda xx: _chosen_coordinate(rule, chosen, xx, edge, L, k, inside, nb)
     # One primal pass, its linearisation applied to both axes.
     (u, slope), lin = jax.linearize(u_of, x)
     dir_a, dir_b = _pixel_directions(pixel_axes, x, points.dtype)
@@ -556,7 +582,7 @@ def corner_alpha(points, edge_ids: Int[Array, "n K"], edge_vertices_world: Float
     sg = jax.lax.stop_gradient
     paper = paper_normal_world
     best = _choose(x, edge_ids, edge_vertices_world, outward_sign, light, k, inside, rule, paper,
-                   near_boundary)
+                   near_boundary)[0]
     eid = jnp.take_along_axis(edge_ids, best[:, None], axis=1)[:, 0]
     L = _split(light)
     frame = lambda e: _edge_frame(_split(edge_vertices_world[e][:, 0]), _split(edge_vertices_world[e][:, 1]),
