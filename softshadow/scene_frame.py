@@ -425,7 +425,7 @@ def band_alpha(plan: DensePlan, points: np.ndarray, model: SoftShadowModel, pose
         return [np.asarray(out) for out in pending]
 
     alpha = np.full(m, np.nan)  # a point no chunk wrote would show
-    mine, theirs = _shared(chunks) if pool is not None else (chunks, [])
+    mine, theirs = _shared(chunks, PENUMBRA_CHUNKS[0]) if pool is not None else (chunks, [])
     # The second thread's chunks (after what it was given before) dispatched beside this one's:
     # XLA runs them one after the other, but neither thread waits to dispatch behind the other.
     if theirs:
@@ -451,13 +451,17 @@ def _plan_treedef(edges: EdgeSet, rows: tuple):
     return _plan_treedefs[key]
 
 
-def _shared(chunks: list) -> tuple[list, list]:
+def _shared(chunks: list, smallest: int) -> tuple[list, list]:
     """The chunks (start, size) split between two threads, each to the one with fewer points so
-    far (this one first)."""
+    far (this one first); chunks of the smallest size (at most ``smallest`` points) stay with this
+    one. The second thread reaches its chunks after its shading: a small chunk handed to it is
+    dispatched that late, where this thread dispatches it with its own (measured in one process,
+    alternated, the 300-face scene frame took 0.8 ms less keeping its 1,024-point chunk here,
+    while the full dragon's 4,096-point chunk still gains from the second thread)."""
     parts: tuple[list, list] = ([], [])
     load = [0, 0]
     for a, size in chunks:
-        i = int(load[1] < load[0])
+        i = int(load[1] < load[0]) if size > smallest else 0
         parts[i].append((a, size))
         load[i] += size
     return parts

@@ -149,14 +149,15 @@ def rasterise_depth(xy: np.ndarray, depth: np.ndarray, faces: np.ndarray,
     (a closed mesh's faces turned away from the viewer are never the nearest: skipping them
     halves the work and changes no pixel); 0 draws the face either way. out: the (H, W) depth
     (float64, or float32 for float32 depths) and face_id (int32) arrays to fill and return;
-    threads: 2 lets many faces be drawn on two threads (below); scratch, name: keep the
+    threads: 2 lets the faces be drawn on two threads (below); scratch, name: keep the
     second thread's buffers under this name.
 
     Scanline: each face's rows, each row's span of columns from the face's edges, then the
     depth from the face's plane at those pixel centres; O(covered pixels + face rows). With
-    threads=2, two numba threads (``parallel_loops``) and many faces, the two halves of the faces are drawn
-    on two threads into two buffers, then merged, the first half's face kept on a tie: the
-    buffer the one thread would draw, bit for bit.
+    threads=2, two numba threads (``parallel_loops``) and many faces (``SPLIT_FACES``), the two
+    halves of the faces are drawn on two threads into two buffers, then merged, the first half's
+    face kept on a tie; with fewer faces on a large buffer (``SPLIT_ROWS_PX``), each thread draws
+    every face on its half of the rows. Either way the buffer is the one thread's, bit for bit.
     """
     h, w = shape
     dtype = np.result_type(depth.dtype, np.float32)
@@ -178,13 +179,18 @@ def rasterise_depth(xy: np.ndarray, depth: np.ndarray, faces: np.ndarray,
             _zbuffer_kernel()[1](*args, scratch_array(scratch, f"{name}.split_depth", h * w, dtype),
                                  scratch_array(scratch, f"{name}.split_face", h * w, np.int32), h, w,
                                  dtype == np.float32)
+        elif threads > 1 and h * w >= SPLIT_ROWS_PX and numba.get_num_threads() > 1:
+            _zbuffer_kernel()[2](*args, h, w, dtype == np.float32)
         else:
             _zbuffer_kernel()[0](*args, h, w, dtype == np.float32)
     return zbuf.reshape(h, w), fid.reshape(h, w)
 
 
-#: Meshes from this many faces are drawn on two threads (fewer: the merge costs more than it saves).
+#: Meshes from this many faces are drawn on two threads, half the faces each, merged after (fewer:
+#: the merge costs more than it saves); fewer faces on a buffer of at least SPLIT_ROWS_PX pixels
+#: are drawn on two threads by halves of the rows (each thread sets up every face).
 SPLIT_FACES = 2048
+SPLIT_ROWS_PX = 65536
 
 
 @functools.cache
@@ -198,13 +204,14 @@ def _zbuffer_kernel():
     its edges. A centre within 1e-9 pixel of an edge, or on it, is inside, so a centre on a
     shared edge belongs to both faces.
 
-    Returns (the kernel, the two-thread kernel): ``draw`` of all the faces, or of each half on
-    its own thread into its own buffer (the second's extra (H W,) depth and face buffers given),
-    merged after."""
+    Returns (the kernel, the two-thread kernels): ``draw`` of all the faces; of each half of the
+    faces on its own thread into its own buffer (the second's extra (H W,) depth and face
+    buffers given), merged after; or of all the faces on each half of the rows."""
     numba = parallel_numba()
 
     @numba.njit(cache=True, nogil=True)
-    def draw(lo, hi, xy, depth, faces, facing, zbuf, fid, h, w, single):
+    def draw(lo, hi, xy, depth, faces, facing, zbuf, fid, h, w, single, row_lo, row_hi):
+        # Faces lo..hi, on rows row_lo..row_hi only (a pixel's value does not depend on the others).
         for i in range(lo, hi):
             a, b, c = faces[i, 0], faces[i, 1], faces[i, 2]
             x0, y0, z0 = xy[a, 0], xy[a, 1], depth[a]
@@ -234,6 +241,10 @@ def _zbuffer_kernel():
             r1 = int(min(max(np.floor(ymax + 1e-9), -1.0), h - 1))
             if c0 > c1 or r0 > r1:  # no pixel centre in its box (a face smaller than a pixel)
                 continue
+            large = (c1 - c0 + 1) * (r1 - r0 + 1) > 64
+            r0, r1 = max(r0, row_lo), min(r1, row_hi)
+            if r0 > r1:
+                continue
             # Depth plane in pixel coordinates: z = z0 + gx (x - x0) + gy (y - y0).
             dz1, dz2 = z1 - z0, z2 - z0
             gx = (dz1 * e2y - dz2 * e1y) / area
@@ -250,7 +261,7 @@ def _zbuffer_kernel():
             tx = -1e-9 * (abs(ax) + abs(bx))
             ty = -1e-9 * (abs(ay) + abs(by))
             tz = -1e-9 * (abs(az) + abs(bz))
-            if (c1 - c0 + 1) * (r1 - r0 + 1) > 64:
+            if large:
                 # A large face: each row's span from where the row crosses its edges (no pixel
                 # of the box outside the face is visited).
                 for row in range(r0, r1 + 1):
@@ -302,25 +313,33 @@ def _zbuffer_kernel():
 
     @numba.njit(cache=True, nogil=True)
     def kernel(xy, depth, faces, facing, zbuf, fid, h, w, single):
-        draw(0, faces.shape[0], xy, depth, faces, facing, zbuf, fid, h, w, single)
+        draw(0, faces.shape[0], xy, depth, faces, facing, zbuf, fid, h, w, single, 0, h - 1)
+
+    # Few faces on two threads: each draws every face on its own half of the rows (disjoint
+    # pixels, each pixel's faces in the same order: the one thread's buffer, bit for bit).
+    @numba.njit(cache=True, nogil=True, parallel=True)
+    def rows_kernel(xy, depth, faces, facing, zbuf, fid, h, w, single):
+        for part in numba.prange(2):
+            lo, hi = (0, h // 2 - 1) if part == 0 else (h // 2, h - 1)
+            draw(0, faces.shape[0], xy, depth, faces, facing, zbuf, fid, h, w, single, lo, hi)
 
     @numba.njit(cache=True, nogil=True, parallel=True)
     def split_kernel(xy, depth, faces, facing, zbuf, fid, zbuf2, fid2, h, w, single):
         half = faces.shape[0] // 2
         for part in numba.prange(2):
             if part == 0:
-                draw(0, half, xy, depth, faces, facing, zbuf, fid, h, w, single)
+                draw(0, half, xy, depth, faces, facing, zbuf, fid, h, w, single, 0, h - 1)
             else:
                 zbuf2.fill(np.inf)
                 fid2.fill(-1)
-                draw(half, faces.shape[0], xy, depth, faces, facing, zbuf2, fid2, h, w, single)
+                draw(half, faces.shape[0], xy, depth, faces, facing, zbuf2, fid2, h, w, single, 0, h - 1)
         # Strictly nearer only: on a tie the first half's (lower) face stays, as one thread keeps it.
         for p in numba.prange(zbuf.shape[0]):
             if zbuf2[p] < zbuf[p]:
                 zbuf[p] = zbuf2[p]
                 fid[p] = fid2[p]
 
-    return kernel, split_kernel
+    return kernel, split_kernel, rows_kernel
 
 
 @dataclasses.dataclass(frozen=True)

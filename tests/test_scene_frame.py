@@ -402,6 +402,36 @@ def test_zbuffer_on_two_threads_equals_one(dtype):
     np.testing.assert_array_equal(one[1], two[1])
 
 
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+@pytest.mark.parametrize("height", [256, 257, 400])
+def test_few_faces_on_two_threads_by_rows_equal_one(dtype, height):
+    """Few faces on a large buffer are drawn by halves of the rows on two threads: the same
+    buffer bit for bit, faces spanning the rows' split and ties on shared edges included."""
+    import numba
+    import trimesh
+
+    from softshadow.shadowmap import SPLIT_FACES, SPLIT_ROWS_PX, rasterise_depth
+    sphere = trimesh.creation.icosphere(subdivisions=2)  # 320 faces
+    rng = np.random.default_rng(5)
+    faces = rng.permutation(np.vstack([sphere.faces, sphere.faces[:, ::-1]]))
+    assert len(faces) < SPLIT_FACES and height * 300 >= SPLIT_ROWS_PX
+    xy = sphere.vertices[:, :2] * [140.0, 0.45 * height] + [150.0, height / 2] \
+        + rng.normal(0, 0.01, (len(sphere.vertices), 2))
+    depth = (sphere.vertices[:, 2] + 2.0).astype(dtype)
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        one = rasterise_depth(xy, depth, faces, (height, 300))
+        numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
+        two = rasterise_depth(xy, depth, faces, (height, 300), threads=2)
+    finally:
+        numba.set_num_threads(before)
+    split = height // 2
+    assert (one[1][split - 1] >= 0).sum() > 100 and (one[1][split] >= 0).sum() > 100
+    np.testing.assert_array_equal(one[0], two[0])
+    np.testing.assert_array_equal(one[1], two[1])
+
+
 @pytest.mark.parametrize("m, two_threads", [(1, False), (8, False), (9, False), (32, False), (33, False), (72, False),
                                            (75, False), (33, True), (72, True), (75, True), (75, "busy")])
 def test_band_alpha_in_chunks_equals_one_evaluation(monkeypatch, m, two_threads):
@@ -440,7 +470,9 @@ def test_band_alpha_in_chunks_equals_one_evaluation(monkeypatch, m, two_threads)
         free.set()
         if pool is not None:
             pool.shutdown()
-    assert any(evaluated) == (two_threads is True), evaluated
+    # The second thread gets chunks of more than the smallest size only (m = 33: one chunk of
+    # 32, which this thread takes first, and one of 8).
+    assert any(evaluated) == (two_threads is True and m > 64), evaluated
     assert got.shape == (m,)
     np.testing.assert_allclose(got, ref[:m], rtol=0, atol=1e-12)
 
@@ -519,9 +551,12 @@ def test_dense_plan_while_the_posed_occluder_is_made_on_another_thread():
 
 def test_penumbra_chunks_shared_by_points():
     from softshadow.scene_frame import _shared
-    assert _shared([(0, 4096), (4096, 4096), (8192, 1024)]) == ([(0, 4096), (8192, 1024)], [(4096, 4096)])
-    assert _shared([(0, 1024)]) == ([(0, 1024)], [])
-    assert _shared([(0, 8), (8, 8), (16, 8), (24, 8), (32, 32)]) == ([(0, 8), (16, 8), (32, 32)], [(8, 8), (24, 8)])
+    assert _shared([(0, 4096), (4096, 4096), (8192, 1024)], 1024) == ([(0, 4096), (8192, 1024)], [(4096, 4096)])
+    assert _shared([(0, 1024)], 1024) == ([(0, 1024)], [])
+    assert _shared([(0, 8192), (8192, 1024)], 1024) == ([(0, 8192), (8192, 1024)], [])  # the small one stays
+    assert _shared([(0, 8192), (8192, 4096)], 1024) == ([(0, 8192)], [(8192, 4096)])
+    assert _shared([(0, 8), (8, 8), (16, 8), (24, 8), (32, 32)], 4) == ([(0, 8), (16, 8), (32, 32)], [(8, 8), (24, 8)])
+    assert _shared([(0, 8), (8, 8), (16, 8), (24, 8), (32, 32)], 8) == ([(0, 8), (8, 8), (16, 8), (24, 8)], [(32, 32)])
 
 
 def test_dense_plan_tells_which_points_the_shadow_can_reach():
