@@ -226,10 +226,7 @@ def silhouette(occ: Occluder, world_vertices: np.ndarray, rotation: np.ndarray,
         # both on the silhouette and facing opposite ways: the shadow lies on both sides of the
         # line, so neither edge bounds it (and the pixel arrangement would meet two coincident
         # segments).
-        position = np.full(len(occ.edges), -1, np.int64)
-        position[idx] = np.arange(len(idx))
-        e1, e2 = position[twins[:, 0]], position[twins[:, 1]]
-        both = (e1 >= 0) & (e2 >= 0)
+        e1, e2, both = _on_silhouette(idx, len(occ.edges), twins)
         e1, e2 = e1[both], e2[both]
         opposite = np.einsum("ij,ij->i", sign[e1, None] * n[e1], sign[e2, None] * n[e2]) < 0
         drop = np.zeros(len(idx), bool)
@@ -243,10 +240,7 @@ def silhouette(occ: Occluder, world_vertices: np.ndarray, rotation: np.ndarray,
     if len(pairs):
         # The mesh's collinear pairs with both edges on the silhouette, at a vertex no other
         # silhouette edge uses.
-        position = np.full(len(occ.edges), -1, np.int64)
-        position[idx] = np.arange(len(idx))
-        e1, e2 = position[pairs[:, 0]], position[pairs[:, 1]]
-        both = (e1 >= 0) & (e2 >= 0)
+        e1, e2, both = _on_silhouette(idx, len(occ.edges), pairs)
         if both.any():
             degree = np.bincount(ids.ravel(), minlength=len(occ.vertices))
             both &= degree[pairs[:, 2]] == 2
@@ -271,6 +265,15 @@ def silhouette(occ: Occluder, world_vertices: np.ndarray, rotation: np.ndarray,
         keep_e = np.flatnonzero(net)
         fill.append((occ.edges[keep_e], net[keep_e].astype(np.float64)))
     return Silhouette(ids, sign, paper, lit, tuple(fill), normal, edge_index)
+
+
+def _on_silhouette(idx: np.ndarray, n_edges: int, pairs: np.ndarray):
+    """For pairs (P, 2+) of mesh edges: each one's position among the silhouette's edges idx
+    (mesh edge indices; -1: not on it), (P,) twice, and whether both are on it (P,)."""
+    position = np.full(n_edges, -1, np.int64)
+    position[idx] = np.arange(len(idx))
+    e1, e2 = position[pairs[:, 0]], position[pairs[:, 1]]
+    return e1, e2, (e1 >= 0) & (e2 >= 0)
 
 
 def merge_collinear(ids: np.ndarray, world: np.ndarray, light: np.ndarray, sign: np.ndarray,
