@@ -269,14 +269,32 @@ def _chosen_from_edge(rule, x, edge, light, k, inside, near_boundary):
     return _coordinate(x, _edge_frame(a, b, sign, light, k, rule, paper), light, inside, near_boundary)[:2]
 
 
-@_chosen_coordinate.defjvp
 def _chosen_jvp(rule, primals, tangents):
     chosen, *args = primals
     _, *d_args = tangents  # the choice's own tangent is zero (made without gradients)
-    _, d_out = jax.jvp(functools.partial(_chosen_from_edge, rule), tuple(args), tuple(d_args))
+    # Only the inputs that carry a tangent are differentiated (the others, symbolic zeros, are
+    # constants here: a pixel's slope needs the points' alone, not the edges' and the light's).
+    leaves, tree = jax.tree_util.tree_flatten(tuple(args))
+    d_leaves = jax.tree_util.tree_leaves(tuple(d_args), is_leaf=lambda t: isinstance(t, _SymbolicZero))
+    live = [not isinstance(t, _SymbolicZero) for t in d_leaves]
+
+    def of_live(*values):
+        it = iter(values)
+        full = [next(it) if on else leaf for leaf, on in zip(leaves, live)]
+        return _chosen_from_edge(rule, *jax.tree_util.tree_unflatten(tree, full))
+
+    if any(live):
+        _, d_out = jax.jvp(of_live, tuple(x for x, on in zip(leaves, live) if on),
+                           tuple(t for t, on in zip(d_leaves, live) if on))
+    else:
+        d_out = jax.tree_util.tree_map(jnp.zeros_like, chosen)
     # The value through this function again, so that a derivative of a derivative (u's slope
     # across a pixel, differentiated by a fit) takes this rule too.
     return _chosen_coordinate(rule, chosen, *args), d_out
+
+
+_SymbolicZero = jax.custom_derivatives.SymbolicZero
+_chosen_coordinate.defjvp(_chosen_jvp, symbolic_zeros=True)
 
 
 def _pixel_directions(pixel_axes, x, dtype):
