@@ -252,7 +252,7 @@ def _choose(x, edge_ids, edge_vertices_world, outward_sign, light, k, inside, ru
     tie = 8 * jnp.finfo(abs_u.dtype).eps  # a few ulps, in float32 and float64 alike
     best = jnp.argmin(abs_u + tie * (1.0 + abs_u) * jnp.arange(n_cand), axis=1)
     pick = lambda v: sg(jnp.take_along_axis(v.reshape(n_pts, n_cand), best[:, None], axis=1)[:, 0])
-    return best, (pick(u_all), pick(jnp.broadcast_to(slope_all, u_all.shape)))
+    return best, (pick(u_all), pick(slope_all))
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(0,))

@@ -241,6 +241,8 @@ def _zbuffer_kernel():
             r1 = int(min(max(np.floor(ymax + 1e-9), -1.0), h - 1))
             if c0 > c1 or r0 > r1:  # no pixel centre in its box (a face smaller than a pixel)
                 continue
+            # The way a face is drawn is chosen on its whole box: each half of the rows draws it
+            # as one thread would.
             large = (c1 - c0 + 1) * (r1 - r0 + 1) > 64
             r0, r1 = max(r0, row_lo), min(r1, row_hi)
             if r0 > r1:
