@@ -16,6 +16,12 @@ __all__ = ["default_cache_dir", "use_compilation_cache", "SAVED_PROGRAMS_ENV"]
 SAVED_PROGRAMS_ENV = "SOFTSHADOW_SAVED_PROGRAMS"
 
 
+#: Programs that compile faster than this (seconds) are not kept: loading one costs about as much.
+#: A higher floor leaves out programs that every new process would compile again (``--lod
+#: auto``'s shading of the samples at every k compiles in about half a second).
+MIN_COMPILE_SECONDS = 0.1
+
+
 #: The environment variable that moves the caches (a folder) or turns them off (``off``).
 CACHE_ENV = "SOFTSHADOW_JAX_CACHE"
 
@@ -31,8 +37,9 @@ def default_cache_dir() -> Path | None:
 def use_compilation_cache(cache_dir=None) -> None:
     """Turn on JAX's persistent compilation cache in this process, in ``cache_dir``
     (``default_cache_dir()`` when None; nothing when that is off). The command line, Dask's
-    workers and the fitter's entry points (``fitting.fit_folder``, ``fitting.fit_photos``) call it. Programs that compile in under 0.5 s are not
-    kept. A folder that cannot be created leaves the cache off (never an error). Also turns on
+    workers and the fitter's entry points (``fitting.fit_folder``, ``fitting.fit_photos``) call it. Programs that compile
+    in under ``MIN_COMPILE_SECONDS`` are not kept. A folder that cannot be created leaves the
+    cache off (never an error). Also turns on
     saved traced programs (``SAVED_PROGRAMS_ENV``, in the folder ``programs`` inside it) unless
     that variable is already set: the compilation cache's key is the traced program, so without
     them every process still traces the solver.
@@ -49,7 +56,7 @@ def use_compilation_cache(cache_dir=None) -> None:
     except OSError:
         return
     os.environ.setdefault(SAVED_PROGRAMS_ENV, str(cache / "programs"))
-    settings = {"jax_compilation_cache_dir": str(cache), "jax_persistent_cache_min_compile_time_secs": 0.5}
+    settings = {"jax_compilation_cache_dir": str(cache), "jax_persistent_cache_min_compile_time_secs": MIN_COMPILE_SECONDS}
     jax = sys.modules.get("jax")
     for name, value in settings.items():
         if jax is not None:
