@@ -122,41 +122,51 @@ def draw_segment_labels(shape: tuple[int, int], start: np.ndarray, end: np.ndarr
 
     Segments are sampled every 0.5 px; later segments win where they overlap.
     """
-    h, w = shape
-    label = np.zeros((h, w), np.int32)
+    label = np.zeros(shape, np.int32)
     if not len(start):
         return label
-    if values is None:
-        values = np.arange(1, len(start) + 1)
-    x0, y0, x1, y1 = start[:, 0], start[:, 1], end[:, 0], end[:, 1]
-    # Clip each segment to the raster (parametric slab clipping) so off-frame edges cost nothing.
-    t0 = np.zeros(len(start))
-    t1 = np.ones(len(start))
-    for p0, d, hi in ((x0, x1 - x0, float(w)), (y0, y1 - y0, float(h))):
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ta = (-1.0 - p0) / d
-            tb = (hi - p0) / d
-        flat = d == 0
-        outside = flat & ((p0 < -1.0) | (p0 > hi))
-        t0 = np.where(flat, t0, np.maximum(t0, np.minimum(ta, tb)))
-        t1 = np.where(flat | outside, np.where(outside, -1.0, t1), np.minimum(t1, np.maximum(ta, tb)))
-    keep = (t1 >= t0) & np.isfinite(x0 + y0 + x1 + y1)
-    idx = np.flatnonzero(keep)
-    if not len(idx):
-        return label
-    dx, dy = (x1 - x0)[idx], (y1 - y0)[idx]
-    ax, ay = x0[idx] + t0[idx] * dx, y0[idx] + t0[idx] * dy
-    span = t1[idx] - t0[idx]
-    bx, by = dx * span, dy * span  # clipped segment, relative to its start
-    n = np.ceil(2.0 * np.hypot(bx, by)).astype(np.int64) + 1
-    seg = np.repeat(np.arange(len(idx)), n)
-    step = np.arange(len(seg)) - np.repeat(np.cumsum(n) - n, n)
-    frac = step / np.maximum(n - 1, 1)[seg]
-    col = np.rint(ax[seg] + frac * bx[seg]).astype(np.int64)
-    row = np.rint(ay[seg] + frac * by[seg]).astype(np.int64)
-    ok = (col >= 0) & (col < w) & (row >= 0) & (row < h)
-    label.reshape(-1)[row[ok] * w + col[ok]] = values[idx][seg[ok]]
+    values = np.arange(1, len(start) + 1) if values is None else values
+    start = np.asarray(start, np.float64)
+    end = np.asarray(end, np.float64)
+    _segment_labels_kernel()(start[:, 0], start[:, 1], end[:, 0], end[:, 1], np.asarray(values, np.int64), label)
     return label
+
+
+@functools.cache
+def _segment_labels_kernel():
+    """``draw_segment_labels``' loop (numba): each segment clipped to the raster (parametric slab
+    clipping, so off-frame edges cost nothing), then sampled at ceil(2 length) + 1 evenly spaced
+    points, each written to its nearest pixel, in the segments' order."""
+    import numba
+
+    @numba.njit(cache=True, nogil=True)
+    def kernel(x0, y0, x1, y1, values, label):
+        h, w = label.shape
+        for s in range(x0.shape[0]):
+            if not np.isfinite(x0[s] + y0[s] + x1[s] + y1[s]):
+                continue
+            dx, dy = x1[s] - x0[s], y1[s] - y0[s]
+            t0, t1 = 0.0, 1.0
+            for p0, d, hi in ((x0[s], dx, float(w)), (y0[s], dy, float(h))):
+                if d == 0.0:
+                    if p0 < -1.0 or p0 > hi:
+                        t1 = -1.0
+                else:
+                    ta, tb = (-1.0 - p0) / d, (hi - p0) / d
+                    t0, t1 = max(t0, min(ta, tb)), min(t1, max(ta, tb))
+            if not t1 >= t0:
+                continue
+            ax, ay = x0[s] + t0 * dx, y0[s] + t0 * dy
+            span = t1 - t0
+            bx, by = dx * span, dy * span  # the clipped segment, relative to its start
+            n = int(np.ceil(2.0 * np.hypot(bx, by))) + 1
+            for k in range(n):
+                frac = k / max(n - 1, 1)
+                col, row = np.rint(ax + frac * bx), np.rint(ay + frac * by)
+                if 0 <= col < w and 0 <= row < h:
+                    label[int(row), int(col)] = values[s]
+
+    return kernel
 
 
 def _along_outline(hard: np.ndarray, start: np.ndarray, end: np.ndarray, offset_px: float = 1.5,
@@ -296,23 +306,40 @@ def _end_neighbours(ids: np.ndarray, keep: np.ndarray) -> np.ndarray:
     the candidates brings them back.
     """
     out = -np.ones((len(ids), 2), np.int64)
-    kept = np.flatnonzero(keep)
-    if not len(kept):
-        return out
-    vert = ids[kept].ravel()
-    edge = np.repeat(kept, 2)
-    order = np.argsort(vert, kind="stable")  # within a vertex: ascending edge
-    vs, es = vert[order], edge[order]
-    run_start = np.flatnonzero(np.r_[True, vs[1:] != vs[:-1]])
-    run_of = np.cumsum(np.r_[True, vs[1:] != vs[:-1]]) - 1
-    run_len = np.diff(np.r_[run_start, len(vs)])
-    first = es[run_start]
-    second = np.where(run_len >= 2, es[np.minimum(run_start + 1, len(vs) - 1)], -1)
-    other = np.where(es != first[run_of], first[run_of], second[run_of])
-    result = np.empty_like(other)
-    result[order] = other
-    out[kept] = result.reshape(-1, 2)
+    if len(ids):
+        _end_neighbours_kernel()(np.ascontiguousarray(ids, np.int64), np.ascontiguousarray(keep, np.bool_), out)
     return out
+
+
+@functools.cache
+def _end_neighbours_kernel():
+    """``_end_neighbours``' loop (numba): the two lowest-numbered kept edges at each vertex, then
+    for each kept edge's ends the one that is not the edge itself."""
+    import numba
+
+    @numba.njit(cache=True, nogil=True)
+    def kernel(ids, keep, out):
+        n_vert = 0
+        for e in range(ids.shape[0]):
+            if keep[e]:
+                n_vert = max(n_vert, ids[e, 0] + 1, ids[e, 1] + 1)
+        first = np.full(n_vert, -1, np.int64)
+        second = np.full(n_vert, -1, np.int64)
+        for e in range(ids.shape[0]):
+            if keep[e]:
+                for j in range(2):
+                    v = ids[e, j]
+                    if first[v] < 0:
+                        first[v] = e
+                    elif second[v] < 0:
+                        second[v] = e
+        for e in range(ids.shape[0]):
+            if keep[e]:
+                for j in range(2):
+                    v = ids[e, j]
+                    out[e, j] = first[v] if first[v] != e else second[v]
+
+    return kernel
 
 
 def candidate_labels(edge_label: np.ndarray, rows: np.ndarray, cols: np.ndarray,

@@ -1,0 +1,89 @@
+"""The light-space raster's compiled loops against plain references.
+
+- ``draw_segment_labels`` against the NumPy array program it replaces (the same clipping, the
+  same samples, later segments winning), over random segments, off-frame and degenerate ones
+  included: the same image, bit for bit.
+- ``_end_neighbours`` against a direct reference: the same neighbours.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from softshadow.raster import _end_neighbours, draw_segment_labels
+
+
+def labels_reference(shape, start, end, values):
+    """The segments' label image as array operations."""
+    with np.errstate(all="ignore"):  # non-finite segments are dropped at the end, as in the loop
+        return _labels_reference(shape, start, end, values)
+
+
+def _labels_reference(shape, start, end, values):
+    h, w = shape
+    label = np.zeros((h, w), np.int32)
+    x0, y0, x1, y1 = start[:, 0], start[:, 1], end[:, 0], end[:, 1]
+    t0, t1 = np.zeros(len(start)), np.ones(len(start))
+    for p0, d, hi in ((x0, x1 - x0, float(w)), (y0, y1 - y0, float(h))):
+        ta, tb = (-1.0 - p0) / d, (hi - p0) / d
+        flat = d == 0
+        outside = flat & ((p0 < -1.0) | (p0 > hi))
+        t0 = np.where(flat, t0, np.maximum(t0, np.minimum(ta, tb)))
+        t1 = np.where(flat | outside, np.where(outside, -1.0, t1), np.minimum(t1, np.maximum(ta, tb)))
+    idx = np.flatnonzero((t1 >= t0) & np.isfinite(x0 + y0 + x1 + y1))
+    if not len(idx):
+        return label
+    dx, dy = (x1 - x0)[idx], (y1 - y0)[idx]
+    ax, ay = x0[idx] + t0[idx] * dx, y0[idx] + t0[idx] * dy
+    span = t1[idx] - t0[idx]
+    bx, by = dx * span, dy * span
+    n = np.ceil(2.0 * np.hypot(bx, by)).astype(np.int64) + 1
+    seg = np.repeat(np.arange(len(idx)), n)
+    step = np.arange(len(seg)) - np.repeat(np.cumsum(n) - n, n)
+    frac = step / np.maximum(n - 1, 1)[seg]
+    col = np.rint(ax[seg] + frac * bx[seg]).astype(np.int64)
+    row = np.rint(ay[seg] + frac * by[seg]).astype(np.int64)
+    ok = (col >= 0) & (col < w) & (row >= 0) & (row < h)
+    label.reshape(-1)[row[ok] * w + col[ok]] = values[idx][seg[ok]]
+    return label
+
+
+coordinate = st.one_of(st.floats(-30.0, 90.0), st.sampled_from([-1.0, -0.5, 0.0, 0.5, 59.5, 60.0, np.nan, np.inf]))
+
+
+@settings(deadline=None)
+@given(st.lists(st.tuples(coordinate, coordinate, coordinate, coordinate), max_size=40),
+       st.integers(1, 60), st.integers(1, 60), st.booleans())
+def test_segment_labels_are_the_array_programs(segments, h, w, repeat_ends):
+    seg = np.array(segments, np.float64).reshape(-1, 4)
+    if repeat_ends and len(seg):
+        seg[::3, 2:] = seg[::3, :2]  # points: zero-length segments
+    start, end = seg[:, :2], seg[:, 2:]
+    values = np.arange(7, 7 + len(seg))
+    np.testing.assert_array_equal(draw_segment_labels((h, w), start, end, values),
+                                  labels_reference((h, w), start, end, values))
+
+
+def neighbours_reference(ids, keep):
+    """For each kept edge's ends, the lowest-numbered other kept edge at that vertex."""
+    out = -np.ones((len(ids), 2), np.int64)
+    kept = np.flatnonzero(keep)
+    for e in kept:
+        for j in (0, 1):
+            others = [f for f in kept if f != e and ids[e, j] in ids[f]]
+            out[e, j] = others[0] if others else -1
+    return out
+
+
+edge = st.tuples(st.integers(0, 12), st.integers(0, 12), st.booleans()).filter(lambda e: e[0] != e[1])
+
+
+@settings(deadline=None)
+@given(st.lists(edge, max_size=30))
+def test_end_neighbours_are_the_lowest_other_kept_edge(edges):
+    """Edges between two vertices (a silhouette's)."""
+    ids = np.array([e[:2] for e in edges], np.int64).reshape(-1, 2)
+    keep = np.array([e[2] for e in edges], bool)
+    np.testing.assert_array_equal(_end_neighbours(ids, keep), neighbours_reference(ids, keep))
