@@ -239,7 +239,7 @@ def rasterise_shadow(grid: GroundGrid, world_vertices: np.ndarray, light: np.nda
     src = np.empty((h, w), np.uint8)
     before = np.empty(h + 1, np.int64)
     cols = np.empty(2, np.int64)
-    lut = _seeds_kernel()(boundary, label_img, src, before, cols)
+    lut, seed_rc = _seeds_kernel()(boundary, label_img, src, before, cols)
     if len(lut) == 1:
         return ShadowRaster(grid, hard, -np.ones((h, w), np.int32),
                             np.full((h, w), np.inf, np.float32), depth_count=count)
@@ -248,19 +248,22 @@ def rasterise_shadow(grid: GroundGrid, world_vertices: np.ndarray, light: np.nda
                                                         labelType=cv2.DIST_LABEL_PIXEL)
         edge_label = np.take(lut, nearest)
     else:
-        dist, edge_label = _distance_near_seeds(src, lut, before, cols, exact_px, pool)
+        dist, edge_label = _distance_near_seeds(src, label_img, seed_rc, before, cols, exact_px, pool)
     return ShadowRaster(grid, hard, edge_label, dist, _end_neighbours(ids, on_outline), outline_fraction, count)
 
 
 #: The 5 x 5 mask's steps reach two pixels: a pixel's value depends on those within two of its paths.
 _MASK_REACH_PX = 2
-#: Smaller boxes are not split (the transform takes about 8 ns a pixel; waking the second thread
+#: Smaller boxes are not split (the transform takes a few ns a pixel; waking the second thread
 #: costs about a tenth of a millisecond).
 _SPLIT_MIN_PX = 65536
+#: The side (pixels) of the tiles that the transform near the outline leaves out when no seed is
+#: near (of 4, 8 and 16, the fastest on the masking scene's raster).
+_TILE_PX = 8
 
 
-def _distance_near_seeds(src: np.ndarray, lut: np.ndarray, before: np.ndarray, cols: np.ndarray,
-                         exact_px: float, pool: Executor | None) -> tuple[np.ndarray, np.ndarray]:
+def _distance_near_seeds(src: np.ndarray, label_img: np.ndarray, seed_rc: np.ndarray, before: np.ndarray,
+                         cols: np.ndarray, exact_px: float, pool: Executor | None) -> tuple[np.ndarray, np.ndarray]:
     """``rasterise_shadow``'s distance (H, W) float32 and label (H, W) int32 (``exact_px``: as the
     whole raster's distance transform where its distance is at most exact_px).
 
@@ -269,7 +272,8 @@ def _distance_near_seeds(src: np.ndarray, lut: np.ndarray, before: np.ndarray, c
     inside the box of the pixel and its seed, each step at most ``_MASK_REACH_PX`` long and none
     shorter than a pixel, and a window only removes paths (its values are never smaller). So the
     transform runs on the seeds' box widened by that margin, in two halves of rows that overlap
-    by it, each kept where it is exact; outside the box the distance exceeds the margin.
+    by it, each kept where it is exact; outside the box the distance exceeds the margin. Within a
+    window, the tiles farther than exact_px from every seed are left out (``_chamfer_kernel``).
     """
     h, w = src.shape
     margin = int(np.ceil(exact_px)) + _MASK_REACH_PX + 1
@@ -278,16 +282,14 @@ def _distance_near_seeds(src: np.ndarray, lut: np.ndarray, before: np.ndarray, c
     c0, c1 = max(int(cols[0]) - margin, 0), min(int(cols[1]) + 1 + margin, w)
     dist = np.full((h, w), np.inf, np.float32)
     label = np.full((h, w), -1, np.int32)
+    reach = int(np.ceil(exact_px))
 
     def window(a: int, b: int, keep_a: int, keep_b: int) -> None:
-        # Rows a..b of the box; rows keep_a..keep_b of the result. The window's seeds, in its
-        # row-major order, are the lut's from the seeds above row a on (every seed is in c0..c1).
+        # Rows a..b of the box (its seeds: those of these rows); rows keep_a..keep_b of the result.
         if before[b] == before[a]:
             return
-        d, nearest = cv2.distanceTransformWithLabels(src[a:b, c0:c1], cv2.DIST_L2, cv2.DIST_MASK_5,
-                                                     labelType=cv2.DIST_LABEL_PIXEL)
-        dist[keep_a:keep_b, c0:c1] = d[keep_a - a:keep_b - a]
-        np.take(lut[before[a]:], nearest[keep_a - a:keep_b - a], out=label[keep_a:keep_b, c0:c1])
+        _chamfer_kernel()(src, label_img, seed_rc[before[a]:before[b]], a, b, c0, c1, keep_a, keep_b, reach,
+                          _TILE_PX, dist, label)
 
     split = (r0 + r1) // 2
     if pool is None or split - r0 < 2 * margin or (r1 - r0) * (c1 - c0) < _SPLIT_MIN_PX:
@@ -296,6 +298,112 @@ def _distance_near_seeds(src: np.ndarray, lut: np.ndarray, before: np.ndarray, c
     share(pool, lambda: window(r0, min(split + margin, r1), r0, split),
           lambda: window(max(split - margin, r0), r1, split, r1))
     return dist, label
+
+
+def _fixed_point(step: float) -> int:
+    """A mask step in OpenCV's fixed point (16 fractional bits), rounded from its float32 value."""
+    return int(np.rint(np.float64(np.float32(step)) * 65536))
+
+
+#: The steps of the L2 distance's 5 x 5 chamfer mask (horizontal or vertical, diagonal, knight's
+#: move) and the initial distance, in fixed point, as ``cv2.distanceTransform`` takes them.
+_STEP_HV, _STEP_DIAG, _STEP_KNIGHT = _fixed_point(1.0), _fixed_point(1.4), _fixed_point(2.1969)
+_FAR = (2 ** 31 - 1) >> 2
+
+
+@functools.cache
+def _chamfer_kernel():
+    """``cv2.distanceTransformWithLabels(window, DIST_L2, DIST_MASK_5, labelType=DIST_LABEL_PIXEL)``
+    on rows a..b and columns c0..c1 of src (0 at the seeds; beyond the window is far, as for
+    OpenCV given the window alone), with a tile mask OpenCV does not have (numba).
+
+    The same two passes with the same fixed-point steps and the same order of comparisons, hence
+    the same distances and, on a tie, the same nearest seed (tests/test_raster_kernels.py); the
+    label is that seed's edge (label_img - 1). Tiles (``tile`` pixels square) farther than
+    ``reach`` pixels from every seed in the window (seed_rc: the seeds' rows and columns) are
+    left out, as if far: a pixel within reach of its seed keeps its value and label, as every
+    pixel on its shortest paths is within reach of that seed too (no step is shorter than a
+    pixel in both axes), and the others can only move away. Writes rows keep_a..keep_b of dist
+    and label where a tile was computed and a seed reached (+inf and -1 stay elsewhere)."""
+    import numba
+    hv, diag, knight, far = _STEP_HV, _STEP_DIAG, _STEP_KNIGHT, _FAR
+    scale = np.float32(1.0 / 65536)
+
+    @numba.njit(inline="always")
+    def step(tmp, lab, q, length, t0, l0):
+        t = tmp[q] + length
+        if t0 > t:
+            return t, lab[q]
+        return t0, l0
+
+    # Flat buffers and unsigned offsets: no negative-index wraparound in the inner loops (with it,
+    # the passes were slower than OpenCV's).
+    @numba.njit(cache=True, nogil=True)
+    def kernel(src, label_img, seed_rc, a, b, c0, c1, keep_a, keep_b, reach, tile, dist, label):
+        nr, nc = b - a, c1 - c0
+        th, tw = (nr + tile - 1) // tile, (nc + tile - 1) // tile
+        # The tiles within reach of a seed: within k tiles of a seeded one (summed-area table).
+        k = reach // tile + 1
+        count = np.zeros((th + 1, tw + 1), np.int32)
+        for s in range(seed_rc.shape[0]):
+            count[(seed_rc[s, 0] - a) // tile + 1, (seed_rc[s, 1] - c0) // tile + 1] = 1
+        for i in range(th):
+            for j in range(tw):
+                count[i + 1, j + 1] += count[i, j + 1] + count[i + 1, j] - count[i, j]
+        active = np.zeros((th, tw), np.bool_)
+        for i in range(th):
+            for j in range(tw):
+                i0, i1, j0, j1 = max(i - k, 0), min(i + k + 1, th), max(j - k, 0), min(j + k + 1, tw)
+                active[i, j] = count[i1, j1] - count[i0, j1] - count[i1, j0] + count[i0, j0] > 0
+        ws = nc + 4  # two far pixels around the window
+        tmp = np.full((nr + 4) * ws, far, np.int32)
+        lab = np.full((nr + 4) * ws, -1, np.int32)
+        up2, up1, one, two = np.uint64(2 * ws), np.uint64(ws), np.uint64(1), np.uint64(2)
+        for i in range(nr):
+            row = np.uint64((i + 2) * ws + 2)
+            for tj in range(tw):
+                if not active[i // tile, tj]:
+                    continue
+                for j in range(tj * tile, min(tj * tile + tile, nc)):
+                    q = row + np.uint64(j)
+                    if src[a + i, c0 + j] == 0:
+                        tmp[q] = 0
+                        lab[q] = label_img[a + i, c0 + j] - 1
+                        continue
+                    t0, l0 = far, -1
+                    t0, l0 = step(tmp, lab, q - up2 - one, knight, t0, l0)
+                    t0, l0 = step(tmp, lab, q - up2 + one, knight, t0, l0)
+                    t0, l0 = step(tmp, lab, q - up1 - two, knight, t0, l0)
+                    t0, l0 = step(tmp, lab, q - up1 - one, diag, t0, l0)
+                    t0, l0 = step(tmp, lab, q - up1, hv, t0, l0)
+                    t0, l0 = step(tmp, lab, q - up1 + one, diag, t0, l0)
+                    t0, l0 = step(tmp, lab, q - up1 + two, knight, t0, l0)
+                    t0, l0 = step(tmp, lab, q - one, hv, t0, l0)
+                    tmp[q], lab[q] = t0, l0
+        for i in range(nr - 1, -1, -1):
+            row = np.uint64((i + 2) * ws + 2)
+            keep = keep_a <= a + i < keep_b
+            for tj in range(tw - 1, -1, -1):
+                if not active[i // tile, tj]:
+                    continue
+                for j in range(min(tj * tile + tile, nc) - 1, tj * tile - 1, -1):
+                    q = row + np.uint64(j)
+                    t0, l0 = tmp[q], lab[q]
+                    if t0 > hv:
+                        t0, l0 = step(tmp, lab, q + up2 + one, knight, t0, l0)
+                        t0, l0 = step(tmp, lab, q + up2 - one, knight, t0, l0)
+                        t0, l0 = step(tmp, lab, q + up1 + two, knight, t0, l0)
+                        t0, l0 = step(tmp, lab, q + up1 + one, diag, t0, l0)
+                        t0, l0 = step(tmp, lab, q + up1, hv, t0, l0)
+                        t0, l0 = step(tmp, lab, q + up1 - one, diag, t0, l0)
+                        t0, l0 = step(tmp, lab, q + up1 - two, knight, t0, l0)
+                        t0, l0 = step(tmp, lab, q + one, hv, t0, l0)
+                        tmp[q], lab[q] = t0, l0
+                    if keep and t0 < far:
+                        dist[a + i, c0 + j] = np.float32(t0) * scale
+                        label[a + i, c0 + j] = l0
+
+    return kernel
 
 
 def _end_neighbours(ids: np.ndarray, keep: np.ndarray) -> np.ndarray:
@@ -525,8 +633,9 @@ def _fill_kernel():
 def _seeds_kernel():
     """The distance transform's input (numba): src 0 at the seeds (pixels on the boundary band
     with an outline edge's label), 1 elsewhere. Returns the lookup table (seeds + 1,) int32:
-    lut[1 + j] the j-th seed's edge (label - 1, row-major), lut[0] = -1; before (h + 1,): the
-    seeds in the rows above each row (and in all), cols (2,): the seeds' first and last column."""
+    lut[1 + j] the j-th seed's edge (label - 1, row-major), lut[0] = -1, and the seeds' rows and
+    columns (seeds, 2) int64 (row-major); fills before (h + 1,): the seeds in the rows above each
+    row (and in all), cols (2,): the seeds' first and last column."""
     import numba
 
     @numba.njit(cache=True, nogil=True)
@@ -545,12 +654,14 @@ def _seeds_kernel():
         before[h] = n
         lut = np.empty(n + 1, np.int32)  # sized to the seeds: a table for every pixel costs page faults
         lut[0] = -1
+        rc = np.empty((n, 2), np.int64)
         n = 0
         for r in range(h):
             for c in range(w):
                 if src[r, c] == 0:
+                    rc[n, 0], rc[n, 1] = r, c
                     n += 1
                     lut[n] = label[r, c] - 1
-        return lut
+        return lut, rc
 
     return kernel

@@ -4,15 +4,21 @@
   same samples, later segments winning), over random segments, off-frame and degenerate ones
   included: the same image, bit for bit.
 - ``_end_neighbours`` against a direct reference: the same neighbours.
+- ``_chamfer_kernel`` (the distance transform near the outline) against OpenCV's
+  ``distanceTransformWithLabels`` (L2, 5 x 5 mask, a label per seed pixel) on random images,
+  over the whole window, and windows of them: the same distances and the same nearest seed, ties
+  included. Its tiles left out far from the seeds are tested on real rasters
+  (tests/test_raster_window.py).
 """
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from softshadow.raster import _end_neighbours, draw_segment_labels
+from softshadow.raster import _chamfer_kernel, _end_neighbours, draw_segment_labels
 
 
 def labels_reference(shape, start, end, values):
@@ -87,3 +93,34 @@ def test_end_neighbours_are_the_lowest_other_kept_edge(edges):
     ids = np.array([e[:2] for e in edges], np.int64).reshape(-1, 2)
     keep = np.array([e[2] for e in edges], bool)
     np.testing.assert_array_equal(_end_neighbours(ids, keep), neighbours_reference(ids, keep))
+
+
+@settings(deadline=None)
+@given(st.integers(1, 70), st.integers(1, 70), st.floats(0.0005, 0.3), st.integers(0, 2 ** 32 - 1),
+       st.integers(1, 12), st.integers(0, 150))
+def test_chamfer_transform_is_opencvs(h, w, seed_fraction, seed, tile, reach):
+    """Within ``reach`` of a seed, OpenCV's distance and nearest seed; beyond it, farther."""
+    rng = np.random.default_rng(seed)
+    src = (rng.random((h, w)) >= seed_fraction).astype(np.uint8)
+    src[rng.integers(h), rng.integers(w)] = 0  # at least one seed
+    edge_of_seed = rng.integers(0, 5, int(np.count_nonzero(src == 0)))
+    label_img = np.zeros((h, w), np.int32)
+    label_img[src == 0] = edge_of_seed + 1
+    seed_rc = np.stack(np.nonzero(src == 0), 1).astype(np.int64)
+    # A window of rows and columns, its seeds those of its rows (all of them in its columns here).
+    a, b = sorted(rng.integers(0, h + 1, 2))
+    b = max(b, a + 1)
+    rows_in = (seed_rc[:, 0] >= a) & (seed_rc[:, 0] < b)
+    if not rows_in.any():
+        a, b = 0, h
+        rows_in[:] = True
+    dist = np.full((h, w), np.inf, np.float32)
+    label = np.full((h, w), -1, np.int32)
+    _chamfer_kernel()(src, label_img, seed_rc[rows_in], a, b, 0, w, a, b, reach, tile, dist, label)
+    want, nearest = cv2.distanceTransformWithLabels(src[a:b], cv2.DIST_L2, cv2.DIST_MASK_5,
+                                                    labelType=cv2.DIST_LABEL_PIXEL)
+    within = want <= reach
+    np.testing.assert_array_equal(dist[a:b][within], want[within])
+    np.testing.assert_array_equal(label[a:b][within], np.concatenate([[-1], edge_of_seed[rows_in]])[nearest][within])
+    assert np.all(dist[a:b][~within] > reach)
+    assert np.all(np.isinf(dist[:a])) and np.all(np.isinf(dist[b:]))
