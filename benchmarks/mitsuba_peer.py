@@ -18,7 +18,10 @@ reached a given noise fastest on the bench's scenes.
 
 ``llvm_ad_rgb`` / ``llvm_ad_mono`` are used where their LLVM renders (it needs a newer system
 libLLVM than some distributions ship, such as Debian's ``libllvm19``; with Debian 12's libLLVM 15
-drjit's code generation aborts the process), checked in a child process; otherwise ``scalar_rgb``.
+drjit's code generation aborts the process), checked in a child process; otherwise ``scalar_rgb``,
+several times slower. drjit reads the library's path from ``DRJIT_LIBLLVM_PATH``: a newer
+libLLVM, such as the one a Rust toolchain ships (``~/.rustup/toolchains/*/lib/libLLVM*.so*``,
+LLVM 22), makes the LLVM variants render on such a system.
 """
 
 from __future__ import annotations

@@ -244,6 +244,10 @@ def _mitsuba_section(mitsuba: dict) -> list[str]:
     if "skipped" in mitsuba:
         return L + [f"Skipped: {mitsuba['skipped']} (`pip install 'softshadow[peers]'`)."]
     runs = list(mitsuba.values())
+    if runs[0]["variant"].startswith("scalar"):
+        L += ["drjit's LLVM backend did not render on this machine, so Mitsuba ran its scalar variant, several "
+              "times slower than its LLVM one: set `DRJIT_LIBLLVM_PATH` to a libLLVM that works with it "
+              "(`benchmarks.mitsuba_peer`).", ""]
     L += [f"Mitsuba 3 (`{runs[0]['variant']}` variant) path-traces the same scene in the set-up that reached "
           f"a given noise fastest above ({runs[0].get('setup_label', 'disk sun')}): the mesh on a Lambertian "
           "ground, the sun's disk and the uniform sky, direct light only (`direct` integrator), an "
