@@ -37,12 +37,12 @@ def default_cache_dir() -> Path | None:
 def use_compilation_cache(cache_dir=None) -> None:
     """Turn on JAX's persistent compilation cache in this process, in ``cache_dir``
     (``default_cache_dir()`` when None; nothing when that is off). The command line, Dask's
-    workers and the fitter's entry points (``fitting.fit_folder``, ``fitting.fit_photos``) call it. Programs that compile
-    in under ``MIN_COMPILE_SECONDS`` are not kept. A folder that cannot be created leaves the
-    cache off (never an error). Also turns on
-    saved traced programs (``SAVED_PROGRAMS_ENV``, in the folder ``programs`` inside it) unless
-    that variable is already set: the compilation cache's key is the traced program, so without
-    them every process still traces the solver.
+    workers and the fitter's entry points (``fitting.fit_folder``, ``fitting.fit_photos``) call
+    it. Programs that compile in under ``MIN_COMPILE_SECONDS`` are not kept. A folder that cannot
+    be created leaves the cache off (never an error). Also turns on saved traced programs
+    (``SAVED_PROGRAMS_ENV``, in the folder ``programs`` inside it) unless that variable is
+    already set: the compilation cache's key is the traced program, so without them every
+    process still traces the solver.
 
     JAX is not imported here: importing it takes seconds, and a process that never needs it (a
     photo without geometry) should not pay for it. If JAX is not loaded yet, the settings go
