@@ -210,7 +210,7 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
     count = _reach_kernel()(points, np.zeros((0, 3)) if normals is None else normals, basis, -FACING_TOL, hard,
                             lo_occ, hi_occ, float(edge_depth.min()),
                             1.5 * float(light_band_widths(np.float64(1.0), range_k_max)), margin_m, *runs, cand, uv_p,
-                            d_p, att, bounds)
+                            d_p, att, bounds, parallel_numba().get_num_threads())
     if not count:
         return _empty(occ, sil, hard)
     cand, uv_p, d_p, att = cand[:count], uv_p[:count], d_p[:count], att[:count]
@@ -507,54 +507,59 @@ def _reach_kernel():
     run_bounds = _run_bounds()
 
     # Parallel over blocks of points: each block's points gathered at its own place first, then
-    # moved together (one pass over the points, as one thread's loop).
+    # moved together (one pass over the points, as one thread's loop). The blocks are dealt to
+    # the threads in turn (threads: how many): the points within reach fill part of a camera's
+    # image (a cast shadow on the ground), and split in halves one thread had twice the other's.
     @numba.njit(cache=True, nogil=True, parallel=True)
     def kernel(points, normals, basis, tol, hard, lo, hi, edge_depth, per_m, margin_m, run_lo, run_hi, run_normal,
-               run_uniform, cand, uv, d, att, bounds):
+               run_uniform, cand, uv, d, att, bounds, threads):
         n = points.shape[0]
         light = basis[3]
         has_normals = normals.shape[0] > 0
         n_blocks = (n + _BLOCK - 1) // _BLOCK
         counts = np.zeros(n_blocks, np.int64)
         box = np.empty((n_blocks, 5))
-        for b in numba.prange(n_blocks):
-            count = b * _BLOCK
-            lo_u, lo_v, hi_u, hi_v, hi_d = np.inf, np.inf, -np.inf, -np.inf, -np.inf
-            for start in range(b * _BLOCK, min((b + 1) * _BLOCK, n), RUN_POINTS):
-                end = min(start + RUN_POINTS, n)
-                if run_lo.shape[0]:
-                    r = start // RUN_POINTS
-                    u0, u1 = run_bounds(run_lo, run_hi, r, basis[0], basis[1])
-                    v0, v1 = run_bounds(run_lo, run_hi, r, basis[0], basis[2])
-                    pad = per_m * max(run_bounds(run_lo, run_hi, r, basis[0], light)[1] - edge_depth, 0.0) + margin_m
-                    if (u1 < lo[0] - pad) | (u0 > hi[0] + pad) | (v1 < lo[1] - pad) | (v0 > hi[1] + pad):
-                        if run_uniform[r]:
-                            one = 1.0 if has_normals and run_normal[r, 0] * light[0] + run_normal[r, 1] * light[1] \
-                                + run_normal[r, 2] * light[2] >= tol else 0.0
-                            for i in range(start, end):
-                                hard[i] = one
-                        else:
-                            for i in range(start, end):
-                                hard[i] = 1.0 if has_normals and normals[i, 0] * light[0] + normals[i, 1] * light[1] \
-                                    + normals[i, 2] * light[2] >= tol else 0.0
-                        continue
-                for i in range(start, end):
-                    x, y, z = points[i, 0] - basis[0, 0], points[i, 1] - basis[0, 1], points[i, 2] - basis[0, 2]
-                    u = x * basis[1, 0] + y * basis[1, 1] + z * basis[1, 2]
-                    v = x * basis[2, 0] + y * basis[2, 1] + z * basis[2, 2]
-                    di = x * basis[3, 0] + y * basis[3, 1] + z * basis[3, 2]
-                    attached = has_normals and \
-                        normals[i, 0] * light[0] + normals[i, 1] * light[1] + normals[i, 2] * light[2] >= tol
-                    hard[i] = 1.0 if attached else 0.0
-                    pad = per_m * max(di - edge_depth, 0.0) + margin_m
-                    if (u >= lo[0] - pad) & (u <= hi[0] + pad) & (v >= lo[1] - pad) & (v <= hi[1] + pad):
-                        # count <= i: never over a point not yet read
-                        cand[count], uv[count, 0], uv[count, 1], d[count], att[count] = i, u, v, di, attached
-                        lo_u, lo_v = min(lo_u, u), min(lo_v, v)
-                        hi_u, hi_v, hi_d = max(hi_u, u), max(hi_v, v), max(hi_d, di)
-                        count += 1
-            counts[b] = count - b * _BLOCK
-            box[b, 0], box[b, 1], box[b, 2], box[b, 3], box[b, 4] = lo_u, lo_v, hi_u, hi_v, hi_d
+        threads = max(min(threads, n_blocks), 1)
+        for t in numba.prange(threads):
+            for b in range(t, n_blocks, threads):
+                count = b * _BLOCK
+                lo_u, lo_v, hi_u, hi_v, hi_d = np.inf, np.inf, -np.inf, -np.inf, -np.inf
+                for start in range(b * _BLOCK, min((b + 1) * _BLOCK, n), RUN_POINTS):
+                    end = min(start + RUN_POINTS, n)
+                    if run_lo.shape[0]:
+                        r = start // RUN_POINTS
+                        u0, u1 = run_bounds(run_lo, run_hi, r, basis[0], basis[1])
+                        v0, v1 = run_bounds(run_lo, run_hi, r, basis[0], basis[2])
+                        deepest = run_bounds(run_lo, run_hi, r, basis[0], light)[1]
+                        pad = per_m * max(deepest - edge_depth, 0.0) + margin_m
+                        if (u1 < lo[0] - pad) | (u0 > hi[0] + pad) | (v1 < lo[1] - pad) | (v0 > hi[1] + pad):
+                            if run_uniform[r]:
+                                one = 1.0 if has_normals and run_normal[r, 0] * light[0] + run_normal[r, 1] * light[1] \
+                                    + run_normal[r, 2] * light[2] >= tol else 0.0
+                                for i in range(start, end):
+                                    hard[i] = one
+                            else:
+                                for i in range(start, end):
+                                    hard[i] = 1.0 if has_normals and normals[i, 0] * light[0] \
+                                        + normals[i, 1] * light[1] + normals[i, 2] * light[2] >= tol else 0.0
+                            continue
+                    for i in range(start, end):
+                        x, y, z = points[i, 0] - basis[0, 0], points[i, 1] - basis[0, 1], points[i, 2] - basis[0, 2]
+                        u = x * basis[1, 0] + y * basis[1, 1] + z * basis[1, 2]
+                        v = x * basis[2, 0] + y * basis[2, 1] + z * basis[2, 2]
+                        di = x * basis[3, 0] + y * basis[3, 1] + z * basis[3, 2]
+                        attached = has_normals and \
+                            normals[i, 0] * light[0] + normals[i, 1] * light[1] + normals[i, 2] * light[2] >= tol
+                        hard[i] = 1.0 if attached else 0.0
+                        pad = per_m * max(di - edge_depth, 0.0) + margin_m
+                        if (u >= lo[0] - pad) & (u <= hi[0] + pad) & (v >= lo[1] - pad) & (v <= hi[1] + pad):
+                            # count <= i: never over a point not yet read
+                            cand[count], uv[count, 0], uv[count, 1], d[count], att[count] = i, u, v, di, attached
+                            lo_u, lo_v = min(lo_u, u), min(lo_v, v)
+                            hi_u, hi_v, hi_d = max(hi_u, u), max(hi_v, v), max(hi_d, di)
+                            count += 1
+                counts[b] = count - b * _BLOCK
+                box[b, 0], box[b, 1], box[b, 2], box[b, 3], box[b, 4] = lo_u, lo_v, hi_u, hi_v, hi_d
         count = 0
         bounds[0], bounds[1], bounds[2], bounds[3], bounds[4] = np.inf, np.inf, -np.inf, -np.inf, -np.inf
         for b in range(n_blocks):  # in order: a block's list moves down, never over one not yet moved
