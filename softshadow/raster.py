@@ -233,22 +233,19 @@ def rasterise_shadow(grid: GroundGrid, world_vertices: np.ndarray, light: np.nda
     ero = cv2.erode(hard, kernel, borderType=cv2.BORDER_REPLICATE)
     boundary = cv2.dilate(dil - ero, kernel)
     # Seeds: outline edge pixels near the hard shadow's boundary; the distance transform
-    # measures the distance to the zero pixels of src.
-    # DT label l > 0 is the l-th seed (row-major, as OpenCV numbers them); the lookup table
-    # maps it to its edge index (lut[0] = -1).
+    # measures the distance to the zero pixels of src, and labels each pixel with its nearest
+    # seed's edge.
     src = np.empty((h, w), np.uint8)
     before = np.empty(h + 1, np.int64)
     cols = np.empty(2, np.int64)
-    lut, seed_rc = _seeds_kernel()(boundary, label_img, src, before, cols)
-    if len(lut) == 1:
+    seed_rc = _seeds_kernel()(boundary, label_img, src, before, cols)
+    if not len(seed_rc):
         return ShadowRaster(grid, hard, -np.ones((h, w), np.int32),
                             np.full((h, w), np.inf, np.float32), depth_count=count)
-    if exact_px is None:
-        dist, nearest = cv2.distanceTransformWithLabels(src, cv2.DIST_L2, cv2.DIST_MASK_5,
-                                                        labelType=cv2.DIST_LABEL_PIXEL)
-        edge_label = np.take(lut, nearest)
-    else:
-        dist, edge_label = _distance_near_seeds(src, label_img, seed_rc, before, cols, exact_px, pool)
+    # The whole raster: every pixel is within h + w of a seed (a step costs at most the rows plus
+    # the columns it moves).
+    reach_px = float(h + w) if exact_px is None else exact_px
+    dist, edge_label = _distance_near_seeds(src, label_img, seed_rc, before, cols, reach_px, pool)
     return ShadowRaster(grid, hard, edge_label, dist, _end_neighbours(ids, on_outline), outline_fraction, count)
 
 
@@ -632,10 +629,9 @@ def _fill_kernel():
 @functools.cache
 def _seeds_kernel():
     """The distance transform's input (numba): src 0 at the seeds (pixels on the boundary band
-    with an outline edge's label), 1 elsewhere. Returns the lookup table (seeds + 1,) int32:
-    lut[1 + j] the j-th seed's edge (label - 1, row-major), lut[0] = -1, and the seeds' rows and
-    columns (seeds, 2) int64 (row-major); fills before (h + 1,): the seeds in the rows above each
-    row (and in all), cols (2,): the seeds' first and last column."""
+    with an outline edge's label), 1 elsewhere. Returns the seeds' rows and columns (seeds, 2)
+    int64 (row-major); fills before (h + 1,): the seeds in the rows above each row (and in all),
+    cols (2,): the seeds' first and last column."""
     import numba
 
     @numba.njit(cache=True, nogil=True)
@@ -652,8 +648,6 @@ def _seeds_kernel():
                     cols[0], cols[1] = min(cols[0], c), max(cols[1], c)
                 n += seed
         before[h] = n
-        lut = np.empty(n + 1, np.int32)  # sized to the seeds: a table for every pixel costs page faults
-        lut[0] = -1
         rc = np.empty((n, 2), np.int64)
         n = 0
         for r in range(h):
@@ -661,7 +655,6 @@ def _seeds_kernel():
                 if src[r, c] == 0:
                     rc[n, 0], rc[n, 1] = r, c
                     n += 1
-                    lut[n] = label[r, c] - 1
-        return lut, rc
+        return rc
 
     return kernel

@@ -5,7 +5,8 @@ Where the whole raster's boundary distance is at most ``exact_px``, the distance
 governing edge are the whole raster's, bit for bit; elsewhere the distance is larger (what the
 plan needs to skip those pixels). Over meshes, poses, suns, pixel sizes and exact_px
 (hypothesis), in one window and in two halves, one on a second thread; and the scene's plan is
-``plan_points``' (tests/test_scene_frame.py).
+``plan_points``' (tests/test_scene_frame.py). The whole raster's transform (the same compiled
+passes with no window) is OpenCV's ``distanceTransformWithLabels`` from the same seeds.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from __future__ import annotations
 import functools
 from concurrent.futures import ThreadPoolExecutor
 
+import cv2
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -74,6 +76,27 @@ def check_window(args, exact_px: float, threaded: bool) -> None:
 def test_distance_near_the_outline_is_the_whole_rasters(name, rotation, azimuth, elevation, side_px, exact_px,
                                                           threaded):
     check_window(raster_args(name, rotation, azimuth, elevation, side_px), exact_px, threaded)
+
+
+def check_whole_raster(args) -> None:
+    """The whole raster's distance and edge against OpenCV's transform from its seeds (the
+    pixels at distance 0, numbered row-major as OpenCV numbers them)."""
+    whole = rasterise_shadow(*args)
+    seeds = whole.boundary_dist_px == 0
+    assert seeds.any()
+    dist, nearest = cv2.distanceTransformWithLabels(np.where(seeds, 0, 1).astype(np.uint8), cv2.DIST_L2,
+                                                    cv2.DIST_MASK_5, labelType=cv2.DIST_LABEL_PIXEL)
+    seed_edge = np.concatenate([[-1], whole.edge_label[seeds]]).astype(np.int32)
+    np.testing.assert_array_equal(whole.boundary_dist_px, dist)
+    np.testing.assert_array_equal(whole.edge_label, seed_edge[nearest])
+
+
+@settings(max_examples=15, deadline=None)
+@given(name=st.sampled_from(["pillar", "ball", "dragon", "dragon-300"]),
+       rotation=st.tuples(*[st.floats(-40.0, 40.0)] * 2, st.floats(0.0, 360.0)),
+       azimuth=st.floats(0.0, 360.0), elevation=st.floats(15.0, 80.0), side_px=st.integers(60, 700))
+def test_whole_raster_is_opencvs_distance_transform(name, rotation, azimuth, elevation, side_px):
+    check_whole_raster(raster_args(name, rotation, azimuth, elevation, side_px))
 
 
 @pytest.mark.parametrize("exact_px", [0.5, 2.0, 1e4])
