@@ -18,9 +18,11 @@ the full dragon is timed warm beside it (the median of its third to sixth calls)
 
 The levels' two-thread frames (``frame_ms``, the figure the levels are compared by) are timed
 interleaved: each level keeps its own renderer, and the levels take turns, ``BLOCK`` frames
-each, in the same order every round, so that all of them see the same state of a shared
-machine (timed one level after the other, the 2-core test machine's speed drifted by up to a
-fifth between levels). The other settings are timed level by level.
+each, in one order and then the reverse, round after round, so that all of them see the same
+state of a shared machine (timed one level after the other, the 2-core test machine's speed
+drifted by up to a fifth between levels; in the same order every round, the first level and the
+last, a round apart, still read it at different times). The other settings are timed level by
+level.
 
 Rows (key ``scene``): faces (the full mesh's), level (the face count drawn), width, height,
 frame_ms (median wall time per frame, two threads), frame_min_ms, frame_max_ms (the worst frame
@@ -53,7 +55,7 @@ def bench_scene(quick: bool = False, progress=None) -> dict:
 
     from .environment import load_average
     from .meshes import mit_dragon
-    frames, warmup = (8, 3) if quick else (32, 5)  # frames: a whole number of BLOCKs
+    frames, warmup = (8, 3) if quick else (48, 5)  # frames: an even number of BLOCKs (rounds both ways)
     scene = MaskingScene()
     mesh = mit_dragon(full=True)
     levels = lod_series(mesh, (len(mesh.faces), *SCENE_LEVELS))
@@ -88,7 +90,7 @@ def bench_scene(quick: bool = False, progress=None) -> dict:
                     draw(renderer, model, i)
             rounds = -(-frames // BLOCK)
             for r in range(rounds):
-                for j in range(len(levels)):
+                for j in (range(len(levels)) if r % 2 == 0 else reversed(range(len(levels)))):
                     for b in range(BLOCK):
                         timed[j].append(draw(renderers[j], models[j], warmup + r * BLOCK + b))
         finally:
