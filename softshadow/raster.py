@@ -261,8 +261,9 @@ _TILE_PX = 8
 
 def _distance_near_seeds(src: np.ndarray, label_img: np.ndarray, seed_rc: np.ndarray, before: np.ndarray,
                          cols: np.ndarray, exact_px: float, pool: Executor | None) -> tuple[np.ndarray, np.ndarray]:
-    """``rasterise_shadow``'s distance (H, W) float32 and label (H, W) int32 (``exact_px``: as the
-    whole raster's distance transform where its distance is at most exact_px).
+    """``rasterise_shadow``'s distance (H, W) float32 and label (H, W) int32: the whole raster's
+    distance transform (``_chamfer_kernel``, OpenCV's) where its distance is at most exact_px
+    (everywhere for exact_px >= H + W: one window, the whole raster).
 
     A pixel at distance d <= exact_px from its seed gets the same value and label from any window
     holding every pixel within d (plus the mask's reach) of it: the transform's shortest paths run
