@@ -23,7 +23,7 @@ import numpy as np
 
 from .camera import GroundGrid
 from .occluder import Occluder
-from .parallel_loops import parallel_numba
+from .parallel_loops import loop_helper, parallel_numba
 from .params import Pose, Sun
 from .plan import (BAND_FRACTION, CANDIDATE_RADII_PX, CANDIDATE_REACH_PX, N_CANDIDATES, EdgeSet,
                    PointPlan, _pack_edges, bucket_size, light_band_widths, raster_grid)
@@ -437,10 +437,10 @@ def _runs_kernel():
 def _run_bounds():
     """The bounds (lo, hi) of a linear map (x - origin) . axis over a run's box (lo, hi (B, 3)),
     widened by rounding: they hold the value that ``_reach_kernel`` computes at any point of the
-    run (a box's extremes are at its corners)."""
-    numba = parallel_numba()
+    run (a box's extremes are at its corners). Not inlined: numba's inlining of its loop into a
+    parallel loop failed one of its own checks (a warning)."""
 
-    @numba.njit(inline="always")
+    @loop_helper
     def bounds(lo, hi, b, origin, axis):
         low, high, size = 0.0, 0.0, 0.0
         for j in range(3):
@@ -462,7 +462,7 @@ def _depth_max_kernel():
     numba = parallel_numba()
     run_bounds = _run_bounds()
 
-    @numba.njit(inline="always")
+    @loop_helper(inline=True)
     def depth(points, basis, i):
         x, y, z = points[i, 0] - basis[0, 0], points[i, 1] - basis[0, 1], points[i, 2] - basis[0, 2]
         return x * basis[3, 0] + y * basis[3, 1] + z * basis[3, 2]

@@ -28,6 +28,7 @@ import cv2
 import numpy as np
 
 from .camera import GroundGrid
+from .parallel_loops import loop_helper
 from .threads import share
 
 __all__ = ["ShadowRaster", "project_to_ground", "rasterise_shadow", "winding_fill", "winding_count_fill",
@@ -327,7 +328,7 @@ def _chamfer_kernel():
     hv, diag, knight, far = _STEP_HV, _STEP_DIAG, _STEP_KNIGHT, _FAR
     scale = np.float32(1.0 / 65536)
 
-    @numba.njit(inline="always")
+    @loop_helper(inline=True)
     def step(tmp, lab, q, length, t0, l0):
         t = tmp[q] + length
         if t0 > t:

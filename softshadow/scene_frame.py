@@ -44,7 +44,7 @@ import numpy as np
 from .camera import GroundGrid, PinholeCamera
 from .dense_plan import DensePlan, PointBlocks, plan_dense_points
 from .evaluate import plan_alpha_jit
-from .parallel_loops import parallel_numba
+from .parallel_loops import loop_helper, parallel_numba
 from .params import Pose, Sun
 from .plan import EDGE_PADDING, EdgeSet, PointPlan, grid_bucket_size
 from .posed import PosedOccluder, posed_vertices
@@ -536,7 +536,7 @@ def _shade_kernel():
     ``shade`` skipping them: every point shaded once)."""
     numba = parallel_numba()
 
-    @numba.njit(inline="always")
+    @loop_helper(inline=True)
     def point(i, alpha, pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, image):
         cos = normals[i, 0] * sun_dir[0] + normals[i, 1] * sun_dir[1] + normals[i, 2] * sun_dir[2]
         sun = sun_irradiance * max(cos, 0.0) * (1.0 - alpha)

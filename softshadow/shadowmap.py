@@ -41,7 +41,7 @@ import functools
 import numpy as np
 
 from .camera import GroundGrid
-from .parallel_loops import parallel_numba
+from .parallel_loops import loop_helper, parallel_numba
 from .scratch import Scratch, scratch_array
 
 __all__ = ["LightFrame", "ShadowMap", "rasterise_depth", "shadow_map", "depth_bias", "faces_away",
@@ -209,7 +209,7 @@ def _zbuffer_kernel():
     buffers given), merged after; or of all the faces on each half of the rows."""
     numba = parallel_numba()
 
-    @numba.njit(cache=True, nogil=True)
+    @loop_helper
     def draw(lo, hi, xy, depth, faces, facing, zbuf, fid, h, w, single, row_lo, row_hi):
         # Faces lo..hi, on rows row_lo..row_hi only (a pixel's value does not depend on the others).
         for i in range(lo, hi):
@@ -408,9 +408,8 @@ def face_depth_at():
     contains the point (barycentric coordinates >= tol, summing to <= upper): its plane at the
     point, exact, slope 0. Else the face of the nearest covered pixel within 2: its plane
     extrapolated, with its slope. Else +inf. Arithmetic in the map's float type (``one``: 1 in it)."""
-    import numba
 
-    @numba.njit(cache=True, nogil=True)
+    @loop_helper
     def depth_at(u, v, row, col, face_id, triangle, plane, face_slope, tol, upper, one):
         h, w = face_id.shape
         for k in range(_LOOKUP_OFFSETS.shape[0]):

@@ -29,6 +29,8 @@ import equinox as eqx
 import numpy as np
 from jaxtyping import Float, Int
 
+from .parallel_loops import loop_helper
+
 __all__ = ["K_MAX", "REACH_MARGIN", "WEDGE_FIELDS", "WedgeArrays", "WedgeCandidates", "WedgeEdges", "arrangement",
            "bucket", "concatenate_wedge", "edge_jumps", "gather_candidates", "wedge_edges"]
 
@@ -450,7 +452,7 @@ def _kernels():
                         members[fill[k]] = e
                     fill[k] += 1
 
-    @numba.njit(cache=True, nogil=True)
+    @loop_helper
     def cone_gap(px, py, pd, e, ends, kappa, r):
         """min over edge e of |p_perp| - kappa max(d, 0) - r (<= 0: a candidate), over its part in
         front of the point (px, py) (across the light), pd (along s), or behind it by at most
@@ -685,7 +687,7 @@ def _arrangement_kernel():
             t_hi = min(t_hi, tb)
         return t_lo, t_hi
 
-    @numba.njit(cache=True, nogil=True)
+    @loop_helper
     def point_range(first, last, chunk, points, ids, a, b, faces, centre, jump, frame, radius, reach, axes,
                     with_pixel, offset, pixel_offset, pair_edge, p_st, p_en, p_pst, p_pen, p_flip, p_pflip, n_pairs, cross,
                     cross_change, n_cross, pcross, pcross_change, n_pcross, boundary, overflow):

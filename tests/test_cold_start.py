@@ -150,3 +150,65 @@ def test_numba_caches_go_to_the_users_cache_folder_not_beside_the_modules(tmp_pa
     env["NUMBA_CACHE_DIR"] = str(tmp_path / "mine")
     run = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120, env=env)
     assert run.stdout.strip() == str(tmp_path / "mine")
+
+
+def _compiled_loops():
+    """Every compiled loop the packages make ((where, dispatcher)): what their loop factories
+    (``functools.cache``d functions of no arguments) return."""
+    import functools
+    import importlib
+    import inspect
+    import pkgutil
+
+    from numba.core.registry import CPUDispatcher
+
+    import data_synth
+    import fitting
+    import softshadow
+
+    loops = []
+    for package in (softshadow, fitting, data_synth):
+        for info in pkgutil.walk_packages(package.__path__, package.__name__ + "."):
+            if info.name.endswith("__main__"):
+                continue
+            module = importlib.import_module(info.name)
+            for name, factory in vars(module).items():
+                if not (isinstance(factory, functools._lru_cache_wrapper) and factory.__module__ == module.__name__
+                        and not inspect.signature(factory).parameters):
+                    continue
+                made = factory()
+                for loop in made if isinstance(made, tuple) else (made,):
+                    if isinstance(loop, CPUDispatcher):
+                        loops.append((f"{module.__name__}.{name}: {loop.py_func.__name__}", loop))
+    return loops
+
+
+def test_no_compiled_loop_closes_over_a_dispatcher():
+    """numba keys a cached loop by its closure's contents, pickled, and a dispatcher pickles with an
+    identifier drawn anew in each process: such a loop would be compiled again in every process
+    (helpers are ``parallel_loops.loop_helper``s, plain functions)."""
+    from numba.core.registry import CPUDispatcher
+
+    loops = _compiled_loops()
+    assert len(loops) > 30  # the walk found the packages' loops
+    closing = [where for where, loop in loops
+               if any(isinstance(cell.cell_contents, CPUDispatcher) for cell in loop.py_func.__closure__ or ())]
+    assert closing == []
+
+
+def test_a_second_process_loads_a_loop_with_helpers_from_the_cache(tmp_path):
+    """The distance transform's loop (with an inlined helper) compiled once, then loaded."""
+    code = ("import numpy as np\nfrom softshadow.raster import _chamfer_kernel\n"
+            "src = np.ones((9, 9), np.uint8); src[4, 4] = 0; label = np.zeros((9, 9), np.int32); label[4, 4] = 1\n"
+            "dist = np.full((9, 9), np.inf, np.float32); near = np.full((9, 9), -1, np.int32)\n"
+            "_chamfer_kernel()(src, label, np.array([[4, 4]]), 0, 9, 0, 9, 0, 9, 18, 8, dist, near)\n"
+            "assert dist[4, 6] == 2.0 and near[4, 6] == 0\n")
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path), "NUMBA_DEBUG_CACHE": "1", "PYTHONPATH": str(ROOT)}
+    logs = []
+    for _ in range(2):
+        run = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300,
+                             env=env)
+        assert run.returncode == 0, run.stderr[-2000:]
+        logs.append(run.stdout + run.stderr)
+    assert "data saved" in logs[0] and "_chamfer_kernel" in logs[0]
+    assert "data loaded" in logs[1] and "data saved" not in logs[1]
