@@ -155,7 +155,6 @@ def test_numba_caches_go_to_the_users_cache_folder_not_beside_the_modules(tmp_pa
 def _compiled_loops():
     """Every compiled loop the packages make ((where, dispatcher)): what their loop factories
     (``functools.cache``d functions of no arguments) return."""
-    import functools
     import importlib
     import inspect
     import pkgutil
@@ -173,7 +172,8 @@ def _compiled_loops():
                 continue
             module = importlib.import_module(info.name)
             for name, factory in vars(module).items():
-                if not (isinstance(factory, functools._lru_cache_wrapper) and factory.__module__ == module.__name__
+                if not (callable(factory) and hasattr(factory, "cache_info")
+                        and getattr(factory, "__module__", None) == module.__name__
                         and not inspect.signature(factory).parameters):
                     continue
                 made = factory()
