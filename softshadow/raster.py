@@ -24,7 +24,6 @@ import dataclasses
 import functools
 from concurrent.futures import Executor
 
-import cv2
 import numpy as np
 
 from .camera import GroundGrid
@@ -229,17 +228,13 @@ def rasterise_shadow(grid: GroundGrid, world_vertices: np.ndarray, light: np.nda
     on_outline = outline_fraction > 0
     outline = np.flatnonzero(on_outline)
     label_img = draw_segment_labels((h, w), start[outline], end[outline], outline + 1)
-    kernel = np.ones((3, 3), np.uint8)
-    dil = cv2.dilate(hard, kernel, borderType=cv2.BORDER_REPLICATE)
-    ero = cv2.erode(hard, kernel, borderType=cv2.BORDER_REPLICATE)
-    boundary = cv2.dilate(dil - ero, kernel)
-    # Seeds: outline edge pixels near the hard shadow's boundary; the distance transform
-    # measures the distance to the zero pixels of src, and labels each pixel with its nearest
-    # seed's edge.
+    # Seeds: outline edge pixels near the hard shadow's boundary (within two pixels of a pixel
+    # of the other side); the distance transform measures the distance to the zero pixels of src,
+    # and labels each pixel with its nearest seed's edge.
     src = np.empty((h, w), np.uint8)
     before = np.empty(h + 1, np.int64)
     cols = np.empty(2, np.int64)
-    seed_rc = _seeds_kernel()(boundary, label_img, src, before, cols)
+    seed_rc = _seeds_kernel()(hard, label_img, src, before, cols)
     if not len(seed_rc):
         return ShadowRaster(grid, hard, -np.ones((h, w), np.int32),
                             np.full((h, w), np.inf, np.float32), depth_count=count)
@@ -630,33 +625,64 @@ def _fill_kernel():
 
 @functools.cache
 def _seeds_kernel():
-    """The distance transform's input (numba): src 0 at the seeds (pixels on the boundary band
-    with an outline edge's label), 1 elsewhere. Returns the seeds' rows and columns (seeds, 2)
-    int64 (row-major); fills before (h + 1,): the seeds in the rows above each row (and in all),
-    cols (2,): the seeds' first and last column."""
+    """The distance transform's input (numba): src 0 at the seeds (pixels with an outline edge's
+    label on the hard shadow's boundary band: their 5 x 5 window, clipped to the raster, holds
+    both values of hard), 1 elsewhere. Returns the seeds' rows and columns (seeds, 2) int64
+    (row-major); fills before (h + 1,): the seeds in the rows above each row (and in all), cols
+    (2,): the seeds' first and last column.
+
+    The band is OpenCV's 3 x 3 dilation (its default border) of the 3 x 3 dilation minus erosion
+    (replicated border) of hard (tests/test_raster_kernels.py): a 3 x 3 window's clipped
+    neighbourhoods, each holding its centre pixel, cover the clipped 5 x 5 window."""
     import numba
 
-    @numba.njit(cache=True, nogil=True)
-    def kernel(boundary, label, src, before, cols):
+    @loop_helper(inline=True)
+    def visit(hard, label, k, src, before, cols, rc, n, row):
+        """The labelled pixel k (flat) a seed or not; returns the seeds' count and the row reached."""
         h, w = src.shape
-        n = 0
+        r, c = k // w, k % w
+        if label[r, c] <= 0:
+            return n, row
+        value = hard[r, c]
+        seed = False
+        for rr in range(max(r - 2, 0), min(r + 3, h)):
+            for cc in range(max(c - 2, 0), min(c + 3, w)):
+                if hard[rr, cc] != value:
+                    seed = True
+                    break
+            if seed:
+                break
+        if not seed:
+            return n, row
+        while row < r:
+            row += 1
+            before[row] = n
+        src[r, c] = 0
+        rc[n, 0], rc[n, 1] = r, c
+        cols[0], cols[1] = min(cols[0], c), max(cols[1], c)
+        return n + 1, row
+
+    @numba.njit(cache=True, nogil=True)
+    def kernel(hard, label, src, before, cols):
+        h, w = src.shape
+        src[:] = 1
+        rc = np.empty((h * w, 2), np.int64)  # its pages touched up to the seeds' count only
+        n, row = 0, 0
+        before[0] = 0
         cols[0], cols[1] = w, -1
-        for r in range(h):
-            before[r] = n
-            for c in range(w):
-                seed = boundary[r, c] > 0 and label[r, c] > 0
-                src[r, c] = 0 if seed else 1
-                if seed:
-                    cols[0], cols[1] = min(cols[0], c), max(cols[1], c)
-                n += seed
-        before[h] = n
-        rc = np.empty((n, 2), np.int64)
-        n = 0
-        for r in range(h):
-            for c in range(w):
-                if src[r, c] == 0:
-                    rc[n, 0], rc[n, 1] = r, c
-                    n += 1
-        return rc
+        # The label is 0 but along the outline: read two pixels at a time.
+        flat = label.reshape(-1)
+        even = flat.shape[0] - flat.shape[0] % 2
+        pairs = flat[:even].view(np.int64)
+        for p in range(pairs.shape[0]):
+            if pairs[p] != 0:
+                n, row = visit(hard, label, 2 * p, src, before, cols, rc, n, row)
+                n, row = visit(hard, label, 2 * p + 1, src, before, cols, rc, n, row)
+        if even < flat.shape[0]:
+            n, row = visit(hard, label, even, src, before, cols, rc, n, row)
+        while row < h:
+            row += 1
+            before[row] = n
+        return rc[:n].copy()
 
     return kernel

@@ -9,6 +9,9 @@
   over the whole window, and windows of them: the same distances and the same nearest seed, ties
   included. Its tiles left out far from the seeds are tested on real rasters
   (tests/test_raster_window.py).
+- ``_seeds_kernel`` against the OpenCV morphology it replaces (the 3 x 3 dilation of the
+  dilation minus the erosion of the hard shadow) on random rasters, thin and all-one included:
+  the same seeds.
 """
 
 from __future__ import annotations
@@ -18,7 +21,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from softshadow.raster import _chamfer_kernel, _end_neighbours, draw_segment_labels
+from softshadow.raster import _chamfer_kernel, _end_neighbours, _seeds_kernel, draw_segment_labels
 
 
 def labels_reference(shape, start, end, values):
@@ -124,3 +127,31 @@ def test_chamfer_transform_is_opencvs(h, w, seed_fraction, seed, tile, reach):
     np.testing.assert_array_equal(label[a:b][within], np.concatenate([[-1], edge_of_seed[rows_in]])[nearest][within])
     assert np.all(dist[a:b][~within] > reach)
     assert np.all(np.isinf(dist[:a])) and np.all(np.isinf(dist[b:]))
+
+
+@settings(deadline=None)
+@given(st.integers(1, 40), st.integers(1, 40), st.floats(0.0, 1.0), st.floats(0.0, 1.0), st.integers(0, 2 ** 32 - 1))
+def test_seeds_are_the_labelled_pixels_of_opencvs_boundary_band(h, w, shadow_fraction, label_fraction, seed):
+    """The seeds: labelled pixels where cv2.dilate(dilate(hard) - erode(hard)) (3 x 3, replicated
+    border inside) is set, in row-major order, with the rows' counts and the columns' span."""
+    rng = np.random.default_rng(seed)
+    # Blobs (a coarse random image scaled up) and single pixels: runs and isolated values both.
+    coarse = rng.random(((h + 3) // 4, (w + 3) // 4)) < shadow_fraction
+    hard = np.kron(coarse, np.ones((4, 4), bool))[:h, :w].copy()
+    hard ^= rng.random((h, w)) < 0.02
+    hard = hard.view(np.uint8)
+    label = np.where(rng.random((h, w)) < label_fraction, rng.integers(1, 9, (h, w)), 0).astype(np.int32)
+    src = np.empty((h, w), np.uint8)
+    before = np.empty(h + 1, np.int64)
+    cols = np.empty(2, np.int64)
+    seed_rc = _seeds_kernel()(hard, label, src, before, cols)
+
+    kernel = np.ones((3, 3), np.uint8)
+    band = cv2.dilate(cv2.dilate(hard, kernel, borderType=cv2.BORDER_REPLICATE)
+                      - cv2.erode(hard, kernel, borderType=cv2.BORDER_REPLICATE), kernel)
+    want = (band > 0) & (label > 0)
+    np.testing.assert_array_equal(src, np.where(want, 0, 1))
+    np.testing.assert_array_equal(seed_rc, np.argwhere(want))
+    np.testing.assert_array_equal(before, np.concatenate([[0], np.cumsum(want.sum(1))]))
+    if want.any():
+        assert (cols[0], cols[1]) == (np.flatnonzero(want.any(0))[0], np.flatnonzero(want.any(0))[-1])
