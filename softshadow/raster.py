@@ -636,7 +636,8 @@ def _seeds_kernel():
     neighbourhoods, each holding its centre pixel, cover the clipped 5 x 5 window."""
     import numba
 
-    @loop_helper(inline=True)
+    # Not inlined: numba's inlining of its loops into the kernel's failed one of its own checks (a warning).
+    @loop_helper
     def visit(hard, label, k, src, before, cols, rc, n, row):
         """The labelled pixel k (flat) a seed or not; returns the seeds' count and the row reached."""
         h, w = src.shape
