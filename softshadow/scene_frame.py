@@ -42,7 +42,7 @@ import jax
 import numpy as np
 
 from .camera import GroundGrid, PinholeCamera
-from .dense_plan import DensePlan, PointBlocks, plan_dense_points
+from .dense_plan import RUN_POINTS, DensePlan, PointBlocks, plan_dense_points
 from .evaluate import plan_alpha_jit
 from .parallel_loops import loop_helper, parallel_numba
 from .params import Pose, Sun
@@ -131,8 +131,9 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
         # surfaces and the ground stay: a frame where only the sun or a projector changes keeps it.
         seen_key = (*_camera_key(camera), obj, casters, *[a for r in receivers for a in (r.vertices, r.faces, r.normals)],
                     *[r.closed for r in receivers], ground_albedo is None)
-        vis, surface, on_object, own, blocks = _memo(scratch, "frame.visible", seen_key,
-                                                     lambda: _seen(camera, surfaces, ground_albedo, casters, scratch))
+        vis, surface, on_object, own, blocks, flat = _memo(scratch, "frame.visible", seen_key,
+                                                           lambda: _seen(camera, surfaces, ground_albedo, casters,
+                                                                         scratch))
         n = len(vis.pixel)
         albedos = np.vstack([_albedo_of(ground_albedo), *[s.albedo for s in surfaces]])
         t = _lap(ms, "visibility", t)
@@ -150,7 +151,8 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
                 def reached(cand: np.ndarray, hard: np.ndarray) -> None:
                     # The points out of the shadow's reach have their final (attached) shadow:
                     # the second thread shades them while this one makes the raster and the rest.
-                    early.append((cand, pool.submit(_shade_others, (*unshadowed, hard), light, background, image, cand)))
+                    early.append((cand, pool.submit(_shade_others, (*unshadowed, hard), light, background, image, cand,
+                                                                    flat)))
             # The points go into the sun's view while the second thread still finds the silhouette.
             plan = plan_dense_points(model.occluder, pose, sun, vis.points, range_k_max, vis.normals,
                                      rule=model.rule, posed=posed, world=world, faces=on_object, scratch=scratch,
@@ -163,9 +165,9 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
             # others it shaded while this one made the plan), then evaluates part of the penumbra
             # (JAX) while this one evaluates the rest; the band's pixels are shaded again with it.
             if early:
-                shaded = pool.submit(_shade_listed, shading, light, image, early[0][0])
+                shaded = pool.submit(_shade_listed, shading, light, image, early[0][0], flat)
             else:
-                shaded = pool.submit(_shade, shading, light, background, image, band[:0], np.zeros(0))
+                shaded = pool.submit(_shade, shading, light, background, image, band[:0], np.zeros(0), flat)
             alpha_band = band_alpha(plan, vis.points, model, pose, sun, k, scratch=scratch, pool=pool)
             t = _lap(ms, "sun_band", t)
             shaded.result()
@@ -176,7 +178,7 @@ def render_frame(camera: PinholeCamera | GroundGrid, model: SoftShadowModel, pos
             if plan is not None:
                 alpha_band = band_alpha(plan, vis.points, model, pose, sun, k, scratch=scratch)
                 t = _lap(ms, "sun_band", t)
-            _shade(shading, light, background, image, band, alpha_band)
+            _shade(shading, light, background, image, band, alpha_band, flat)
     finally:
         # The second thread's work finished before anything else uses the buffers (also on an
         # error: the next frame would share them).
@@ -278,11 +280,13 @@ def _memo(scratch: Scratch | None, name: str, inputs: tuple, make):
 
 
 def _seen(camera: PinholeCamera | GroundGrid, surfaces: Sequence[Surface], ground_albedo, casters: _Casters,
-          scratch: Scratch | None) -> tuple[VisibleSurfaces, np.ndarray, np.ndarray, np.ndarray, PointBlocks]:
+          scratch: Scratch | None) -> tuple[VisibleSurfaces, np.ndarray, np.ndarray, np.ndarray, PointBlocks,
+                                            np.ndarray]:
     """What each pixel sees (``visible_surfaces``), and each visible point's surface (GROUND -1,
     the object 0, receivers 1...), its face on the object (-1 elsewhere) and among the shadow
     casters' faces (-1: none), each (N,), in one pass; the runs of visible points' bounds (the sun's
-    plan skips those out of the shadow's reach)."""
+    plan skips those out of the shadow's reach); which runs are flat (B,) bool: one normal, one
+    surface and consecutive pixels (the shading reads their normal, surface and pixel once)."""
     vis = visible_surfaces(camera, surfaces, ground_albedo, scratch=scratch, albedo=False, threads=2)
     n = len(vis.pixel)
     surface = scratch_array(scratch, "frame.surface", n, np.int64)
@@ -290,7 +294,28 @@ def _seen(camera: PinholeCamera | GroundGrid, surfaces: Sequence[Surface], groun
     own = scratch_array(scratch, "frame.caster_face", n, np.int64)
     _point_faces_kernel()(vis.pixel, vis.surface.reshape(-1), vis.face.reshape(-1), casters.offset, surface,
                           on_object, own)
-    return vis, surface, on_object, own, PointBlocks.of(vis.points, vis.normals)
+    blocks = PointBlocks.of(vis.points, vis.normals)
+    flat = blocks.uniform.copy()
+    _flat_runs_kernel()(vis.pixel, surface, flat)
+    return vis, surface, on_object, own, blocks, flat
+
+
+@functools.cache
+def _flat_runs_kernel():
+    """Clears flat[r] (runs of ``RUN_POINTS`` points, as ``PointBlocks``) where the run's points
+    lie on more than one surface or on pixels that do not follow one another (numba)."""
+    numba = parallel_numba()
+
+    @numba.njit(cache=True, nogil=True, parallel=True)
+    def kernel(pixel, surface, flat):
+        n = pixel.shape[0]
+        for r in numba.prange(flat.shape[0]):
+            start, end = r * RUN_POINTS, min((r + 1) * RUN_POINTS, n)
+            for i in range(start + 1, end):
+                if surface[i] != surface[start] or pixel[i] != pixel[start] + (i - start):
+                    flat[r] = False
+
+    return kernel
 
 
 def _camera_key(camera: PinholeCamera | GroundGrid) -> tuple:
@@ -490,32 +515,39 @@ def _padded_edges(edges: EdgeSet, count: int, size: int) -> EdgeSet:
 
 
 
-def _shade(shading: tuple, light, background, image: np.ndarray, band: np.ndarray, alpha_band: np.ndarray) -> None:
+_NO_RUNS = np.zeros(0, np.bool_)
+
+
+def _shade(shading: tuple, light, background, image: np.ndarray, band: np.ndarray, alpha_band: np.ndarray,
+           flat: np.ndarray = _NO_RUNS) -> None:
     """The shading pass (``_shade_kernel``) into the flat image (H W, 3), the background first
-    where no point is seen; light: the projectors' (N, 3) or the Future of it."""
+    where no point is seen; light: the projectors' (N, 3) or the Future of it; flat: the flat runs
+    (``_seen``), if known."""
     pixel, normals, surface, albedos, ambient, sun_irradiance, sun_dir, hard = shading
     if len(pixel) < len(image):  # the shading writes every pixel that sees something; the rest is background
         image[:] = np.broadcast_to(np.asarray(background, np.float64), (3,))
     _shade_kernel()[0](pixel, normals, surface, albedos, _result(light), ambient, sun_irradiance, sun_dir, hard, band,
-                       alpha_band, False, image)
+                       alpha_band, False, flat, image)
 
 
-def _shade_others(shading: tuple, light, background, image: np.ndarray, listed: np.ndarray) -> None:
+def _shade_others(shading: tuple, light, background, image: np.ndarray, listed: np.ndarray,
+                  flat: np.ndarray = _NO_RUNS) -> None:
     """The shading pass (``_shade_kernel``) of the points not in ``listed`` (ascending), each with
     its hard shadow, into the flat image (H W, 3), the background first where no point is seen."""
     pixel, normals, surface, albedos, ambient, sun_irradiance, sun_dir, hard = shading
     if len(pixel) < len(image):
         image[:] = np.broadcast_to(np.asarray(background, np.float64), (3,))
     _shade_kernel()[0](pixel, normals, surface, albedos, _result(light), ambient, sun_irradiance, sun_dir, hard, listed,
-                       np.zeros(0), True, image)
+                       np.zeros(0), True, flat, image)
 
 
-def _shade_listed(shading: tuple, light, image: np.ndarray, listed: np.ndarray) -> None:
+def _shade_listed(shading: tuple, light, image: np.ndarray, listed: np.ndarray,
+                  flat: np.ndarray = _NO_RUNS) -> None:
     """The shading pass of the points ``listed``, each with its hard shadow (after ``_shade_others``
     with the same list: every point shaded once)."""
     pixel, normals, surface, albedos, ambient, sun_irradiance, sun_dir, hard = shading
     _shade_kernel()[2](pixel, normals, surface, albedos, _result(light), ambient, sun_irradiance, sun_dir, hard, listed,
-                       image)
+                       flat, image)
 
 
 def _lap(ms: dict, step: str, start: float, add: bool = False) -> float:
@@ -533,7 +565,8 @@ def _shade_kernel():
     or with skip_listed the points not in the list only; patch only the band's points, with the
     penumbra formula's alpha (after a shading with an empty band: the same image as one shading
     with it); shade_listed the points in an ascending list with their hard shadow (after
-    ``shade`` skipping them: every point shaded once)."""
+    ``shade`` skipping them: every point shaded once). shade and shade_listed take the flat runs
+    (``_seen``; empty: none), whose normal, surface and pixel they read once a run."""
     numba = parallel_numba()
 
     @loop_helper(inline=True)
@@ -545,24 +578,50 @@ def _shade_kernel():
         for c in range(3):
             image[p, c] = albedos[s, c] * (ambient + light[i, c] + sun)
 
-    # Parallel over blocks of points, each starting at its first listed point.
+    @loop_helper(inline=True)
+    def run_values(start, pixel, normals, surface, albedos, sun_irradiance, sun_dir):
+        """A flat run's (first point start) sun term before its shadow, albedo and pixel offset."""
+        cos = normals[start, 0] * sun_dir[0] + normals[start, 1] * sun_dir[1] + normals[start, 2] * sun_dir[2]
+        s = surface[start] + 1
+        return sun_irradiance * max(cos, 0.0), albedos[s, 0], albedos[s, 1], albedos[s, 2], pixel[start] - start
+
+    @loop_helper(inline=True)
+    def flat_point(i, alpha, lit, a0, a1, a2, p0, ambient, light, image):
+        """``point`` at a point of a flat run, from ``run_values`` (the same arithmetic)."""
+        sun = lit * (1.0 - alpha)
+        image[p0 + i, 0] = a0 * (ambient + light[i, 0] + sun)
+        image[p0 + i, 1] = a1 * (ambient + light[i, 1] + sun)
+        image[p0 + i, 2] = a2 * (ambient + light[i, 2] + sun)
+
+    # Parallel over blocks of points, each starting at its first listed point; a flat run's normal,
+    # surface and pixel read once.
     @numba.njit(cache=True, nogil=True, parallel=True)
     def shade(pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, hard, listed, alpha_listed,
-              skip_listed, image):
+              skip_listed, flat, image):
         has_sun = hard.shape[0] > 0
         n = pixel.shape[0]
-        block = 4096
+        block = 64 * RUN_POINTS  # whole runs
         for b in numba.prange((n + block - 1) // block):
             lo, hi = b * block, min((b + 1) * block, n)
             j = np.searchsorted(listed, lo)
-            for i in range(lo, hi):
-                alpha = hard[i] if has_sun else 1.0  # no sun: E is 0
-                if j < listed.shape[0] and listed[j] == i:
-                    j += 1
-                    if skip_listed:
-                        continue
-                    alpha = alpha_listed[j - 1]
-                point(i, alpha, pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, image)
+            for start in range(lo, hi, RUN_POINTS):
+                end = min(start + RUN_POINTS, hi)
+                run_flat = flat.shape[0] > 0 and flat[start // RUN_POINTS]
+                lit, a0, a1, a2, p0 = 0.0, 0.0, 0.0, 0.0, 0
+                if run_flat:
+                    lit, a0, a1, a2, p0 = run_values(start, pixel, normals, surface, albedos, sun_irradiance, sun_dir)
+                for i in range(start, end):
+                    alpha = hard[i] if has_sun else 1.0  # no sun: E is 0
+                    if j < listed.shape[0] and listed[j] == i:
+                        j += 1
+                        if skip_listed:
+                            continue
+                        alpha = alpha_listed[j - 1]
+                    if run_flat:
+                        flat_point(i, alpha, lit, a0, a1, a2, p0, ambient, light, image)
+                    else:
+                        point(i, alpha, pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir,
+                              image)
 
     @numba.njit(cache=True, nogil=True, parallel=True)
     def patch(pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, band, alpha_band, image):
@@ -571,10 +630,25 @@ def _shade_kernel():
                   image)
 
     @numba.njit(cache=True, nogil=True, parallel=True)
-    def shade_listed(pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, hard, listed, image):
-        for j in numba.prange(listed.shape[0]):
-            i = listed[j]
-            point(i, hard[i], pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, image)
+    def shade_listed(pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, hard, listed, flat,
+                     image):
+        block = 4096
+        for b in numba.prange((listed.shape[0] + block - 1) // block):
+            run = -1
+            run_flat = False
+            lit, a0, a1, a2, p0 = 0.0, 0.0, 0.0, 0.0, 0
+            for j in range(b * block, min((b + 1) * block, listed.shape[0])):
+                i = listed[j]
+                if i // RUN_POINTS != run:
+                    run = i // RUN_POINTS
+                    run_flat = flat.shape[0] > 0 and flat[run]
+                    if run_flat:
+                        lit, a0, a1, a2, p0 = run_values(run * RUN_POINTS, pixel, normals, surface, albedos,
+                                                         sun_irradiance, sun_dir)
+                if run_flat:
+                    flat_point(i, hard[i], lit, a0, a1, a2, p0, ambient, light, image)
+                else:
+                    point(i, hard[i], pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, image)
 
     return shade, patch, shade_listed
 

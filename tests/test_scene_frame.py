@@ -606,6 +606,49 @@ def test_shading_in_two_parts_is_the_shading_in_one():
     np.testing.assert_array_equal(got, want)
 
 
+def test_flat_runs_shade_as_every_point():
+    """Runs with one normal, one surface and consecutive pixels (``_seen``'s flat runs: their
+    normal, surface and pixel read once) shade exactly as point by point; a run that breaks any
+    of the three is not flat."""
+    from softshadow.dense_plan import RUN_POINTS
+    from softshadow.scene_frame import _flat_runs_kernel, _shade, _shade_listed, _shade_others
+    rng = np.random.default_rng(11)
+    runs = 40
+    n = runs * RUN_POINTS + 17  # a short last run
+    pixel = np.arange(n) + 5
+    normals = np.tile([0.0, 0.0, 1.0], (n, 1))
+    surface = np.full(n, -1)
+    breaks = {"normal": 3, "surface": 7, "pixel": 12}
+    normals[breaks["normal"] * RUN_POINTS + 9] = [0.0, 0.6, 0.8]
+    surface[breaks["surface"] * RUN_POINTS + 30] = 0
+    pixel[breaks["pixel"] * RUN_POINTS + 40:] += 3  # a gap inside that run
+    mixed = slice(20 * RUN_POINTS, 24 * RUN_POINTS)  # an object's points: normals of their own
+    normals[mixed] = rng.normal(size=(4 * RUN_POINTS, 3))
+    normals[mixed] /= np.linalg.norm(normals[mixed], axis=1, keepdims=True)
+    surface[mixed] = 0
+    flat = ss.internal.PointBlocks.of(rng.normal(size=(n, 3)), normals).uniform.copy()
+    _flat_runs_kernel()(pixel, surface, flat)
+    assert not flat[[*breaks.values(), 20, 21, 22, 23]].any() and flat.sum() == runs + 1 - 7
+    h_w = int(pixel[-1]) + 4
+    shading = (pixel, normals, surface, rng.uniform(0.2, 0.9, (2, 3)), 0.2, 0.8, np.array([0.3, -0.2, 0.93]),
+               rng.integers(0, 2, n).astype(np.float64))
+    light = rng.uniform(0, 0.5, (n, 3))
+    band = np.sort(rng.choice(n, 200, replace=False))
+    alpha = rng.uniform(0, 1, 200)
+    want = np.full((h_w, 3), np.nan)
+    _shade(shading, light, 0.25, want, band, alpha)
+    got = np.full((h_w, 3), np.nan)
+    _shade(shading, light, 0.25, got, band, alpha, flat)
+    np.testing.assert_array_equal(got, want)
+    listed = np.sort(rng.choice(n, 900, replace=False))
+    want = np.full((h_w, 3), np.nan)
+    _shade(shading, light, 0.25, want, np.zeros(0, np.int64), np.zeros(0))
+    got = np.full((h_w, 3), np.nan)
+    _shade_others(shading, light, 0.25, got, listed, flat)
+    _shade_listed(shading, light, got, listed, flat)
+    np.testing.assert_array_equal(got, want)
+
+
 @pytest.mark.parametrize("busy", [False, True])
 def test_dense_plan_shares_its_work_with_a_second_thread(monkeypatch, busy):
     """With a second thread packing the edges, testing half the points near the outline and
