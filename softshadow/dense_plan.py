@@ -759,6 +759,7 @@ def _candidates_kernel():
             first = edge_label[row, col]
             edge_id[j, 0] = first
             count = 1
+            last = first  # the label seen last: the samples repeat it more often than not
             for c in range(n_columns):
                 if count >= k_max:
                     break
@@ -767,8 +768,9 @@ def _candidates_kernel():
                 else:
                     o = c - 2 if has_neighbours else c
                     v = edge_label[min(max(row + offsets[o, 0], 0), h - 1), min(max(col + offsets[o, 1], 0), w - 1)]
-                if v < 0:
+                if v < 0 or v == last:
                     continue
+                last = v
                 fresh = True
                 for s in range(count):
                     if edge_id[j, s] == v:
