@@ -566,35 +566,27 @@ def _shade_kernel():
     penumbra formula's alpha (after a shading with an empty band: the same image as one shading
     with it); shade_listed the points in an ascending list with their hard shadow (after
     ``shade`` skipping them: every point shaded once). shade and shade_listed take the flat runs
-    (``_seen``; empty: none), whose normal, surface and pixel they read once a run."""
+    (``_seen``; empty: none), whose terms (normal, surface, pixel) they read once a run."""
     numba = parallel_numba()
 
     @loop_helper(inline=True)
-    def point(i, alpha, pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, image):
-        cos = normals[i, 0] * sun_dir[0] + normals[i, 1] * sun_dir[1] + normals[i, 2] * sun_dir[2]
-        sun = sun_irradiance * max(cos, 0.0) * (1.0 - alpha)
-        p = pixel[i]
-        s = surface[i] + 1  # the ground (-1) first
-        for c in range(3):
-            image[p, c] = albedos[s, c] * (ambient + light[i, c] + sun)
+    def terms(k, pixel, normals, surface, albedos, sun_irradiance, sun_dir):
+        """Point k's sun term before its shadow, E max(0, n . s), its albedo (3) and its pixel
+        less k (at a flat run's first point: every point's of the run)."""
+        cos = normals[k, 0] * sun_dir[0] + normals[k, 1] * sun_dir[1] + normals[k, 2] * sun_dir[2]
+        s = surface[k] + 1  # the ground (-1) first
+        return sun_irradiance * max(cos, 0.0), albedos[s, 0], albedos[s, 1], albedos[s, 2], pixel[k] - k
 
     @loop_helper(inline=True)
-    def run_values(start, pixel, normals, surface, albedos, sun_irradiance, sun_dir):
-        """A flat run's (first point start) sun term before its shadow, albedo and pixel offset."""
-        cos = normals[start, 0] * sun_dir[0] + normals[start, 1] * sun_dir[1] + normals[start, 2] * sun_dir[2]
-        s = surface[start] + 1
-        return sun_irradiance * max(cos, 0.0), albedos[s, 0], albedos[s, 1], albedos[s, 2], pixel[start] - start
-
-    @loop_helper(inline=True)
-    def flat_point(i, alpha, lit, a0, a1, a2, p0, ambient, light, image):
-        """``point`` at a point of a flat run, from ``run_values`` (the same arithmetic)."""
+    def point(i, alpha, lit, a0, a1, a2, p0, ambient, light, image):
+        """Point i shaded, from its ``terms``."""
         sun = lit * (1.0 - alpha)
         image[p0 + i, 0] = a0 * (ambient + light[i, 0] + sun)
         image[p0 + i, 1] = a1 * (ambient + light[i, 1] + sun)
         image[p0 + i, 2] = a2 * (ambient + light[i, 2] + sun)
 
-    # Parallel over blocks of points, each starting at its first listed point; a flat run's normal,
-    # surface and pixel read once.
+    # Parallel over blocks of points, each starting at its first listed point; a flat run's terms
+    # read once.
     @numba.njit(cache=True, nogil=True, parallel=True)
     def shade(pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, hard, listed, alpha_listed,
               skip_listed, flat, image):
@@ -605,29 +597,25 @@ def _shade_kernel():
             lo, hi = b * block, min((b + 1) * block, n)
             j = np.searchsorted(listed, lo)
             for start in range(lo, hi, RUN_POINTS):
-                end = min(start + RUN_POINTS, hi)
                 run_flat = flat.shape[0] > 0 and flat[start // RUN_POINTS]
-                lit, a0, a1, a2, p0 = 0.0, 0.0, 0.0, 0.0, 0
-                if run_flat:
-                    lit, a0, a1, a2, p0 = run_values(start, pixel, normals, surface, albedos, sun_irradiance, sun_dir)
-                for i in range(start, end):
+                lit, a0, a1, a2, p0 = terms(start, pixel, normals, surface, albedos, sun_irradiance, sun_dir)
+                for i in range(start, min(start + RUN_POINTS, hi)):
                     alpha = hard[i] if has_sun else 1.0  # no sun: E is 0
                     if j < listed.shape[0] and listed[j] == i:
                         j += 1
                         if skip_listed:
                             continue
                         alpha = alpha_listed[j - 1]
-                    if run_flat:
-                        flat_point(i, alpha, lit, a0, a1, a2, p0, ambient, light, image)
-                    else:
-                        point(i, alpha, pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir,
-                              image)
+                    if not run_flat:
+                        lit, a0, a1, a2, p0 = terms(i, pixel, normals, surface, albedos, sun_irradiance, sun_dir)
+                    point(i, alpha, lit, a0, a1, a2, p0, ambient, light, image)
 
     @numba.njit(cache=True, nogil=True, parallel=True)
     def patch(pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, band, alpha_band, image):
         for j in numba.prange(band.shape[0]):
-            point(band[j], alpha_band[j], pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir,
-                  image)
+            i = band[j]
+            lit, a0, a1, a2, p0 = terms(i, pixel, normals, surface, albedos, sun_irradiance, sun_dir)
+            point(i, alpha_band[j], lit, a0, a1, a2, p0, ambient, light, image)
 
     @numba.njit(cache=True, nogil=True, parallel=True)
     def shade_listed(pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, hard, listed, flat,
@@ -643,12 +631,11 @@ def _shade_kernel():
                     run = i // RUN_POINTS
                     run_flat = flat.shape[0] > 0 and flat[run]
                     if run_flat:
-                        lit, a0, a1, a2, p0 = run_values(run * RUN_POINTS, pixel, normals, surface, albedos,
-                                                         sun_irradiance, sun_dir)
-                if run_flat:
-                    flat_point(i, hard[i], lit, a0, a1, a2, p0, ambient, light, image)
-                else:
-                    point(i, hard[i], pixel, normals, surface, albedos, light, ambient, sun_irradiance, sun_dir, image)
+                        lit, a0, a1, a2, p0 = terms(run * RUN_POINTS, pixel, normals, surface, albedos,
+                                                    sun_irradiance, sun_dir)
+                if not run_flat:
+                    lit, a0, a1, a2, p0 = terms(i, pixel, normals, surface, albedos, sun_irradiance, sun_dir)
+                point(i, hard[i], lit, a0, a1, a2, p0, ambient, light, image)
 
     return shade, patch, shade_listed
 
