@@ -32,7 +32,6 @@ from .raster import rasterise_shadow
 from .scratch import Scratch, scratch_array
 from .shadowmap import (BIAS_PX, FACING_TOL, PRECISION_ULPS, SLOPE_PX, TAN_MAX, LightFrame, face_depth_at, faces_away,
                         shadow_map)
-from .threads import share
 
 __all__ = ["DensePlan", "PointBlocks", "plan_dense_points"]
 
@@ -149,9 +148,9 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
     the shadow's reach), with the points within it (ascending) and the plan's ``hard`` (n,),
     final already at every point not among them (written at those later): another thread may
     shade those points while this one goes on. pool: a second thread that makes half the
-    raster's distance transform, packs the silhouette's edges and tests half the points near the
-    outline (after what it was given before) while this one goes on: the same plan. blocks: ``PointBlocks.of(points,
-    normals)``, kept while the points stay (a camera's): the runs of points out of the shadow's
+    raster's distance transform, the band and its candidate edges (while this one tests the
+    points near the outline) and packs the silhouette's edges (after what it was given before)
+    while this one goes on: the same plan. blocks: ``PointBlocks.of(points, normals)``, kept while the points stay (a camera's): the runs of points out of the shadow's
     reach are then skipped (the same plan).
     """
     if posed is None:
@@ -251,19 +250,13 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
     band_args = (cand, d_p, label, dist, att, uv_p, edge_depth, float(light_band_widths(np.float64(1.0), range_k_max)),
                  np.zeros(1) if frac is None else np.asarray(frac, np.float64), frac is not None, margin_px * pixel_m,
                  1.5 * pixel_m, grid.origin_m, pixel_m, raster, scratch)
-    banded: Future | tuple | None = None
-
-    def band_plan() -> None:  # queued after the second thread's half of the near-outline test
-        nonlocal banded
-        banded = _submit(pool, _band_plan, *band_args)
-
+    banded: Future | tuple = _submit(pool, _band_plan, *band_args)
     try:
         if n_near:
+            # Here, while the second thread makes the band: sharing these points too (half each)
+            # made both frames slower (measured in one process, alternated).
             near = index[:n_near].copy()
-            in_view[near] = _shared_test(pool, lambda q: posed.hard_shadow_at(uv_p[q], projected=uv_v), near,
-                                         then=band_plan)
-        else:
-            band_plan()
+            in_view[near] = posed.hard_shadow_at(uv_p[near], projected=uv_v)
         # The silhouette's edges for the penumbra, made on the second thread (if any) meanwhile (from
         # this frame's raster and silhouette only: left running on an error, it touches no buffer).
         edges = _submit(pool, _pack_edges, occ, sil, raster=raster)
@@ -352,24 +345,6 @@ def _threads(n: int | None):
 def _submit(pool: ThreadPoolExecutor | None, fn, *args, **kwargs):
     """fn(...) on the pool's thread (a Future), or here and now without a pool."""
     return fn(*args, **kwargs) if pool is None else pool.submit(fn, *args, **kwargs)
-
-
-#: Fewer points than this are tested on one thread (handing half to another costs more).
-_SHARED_MIN = 1024
-
-
-def _shared_test(pool: ThreadPoolExecutor | None, test: Callable[[np.ndarray], np.ndarray],
-                 points: np.ndarray, then: Callable[[], None] | None = None) -> np.ndarray:
-    """test(points), a test point by point, with the first half of the points tested on the
-    pool's thread while this one tests the rest (the same values); this one tests both halves
-    when the pool has not started its half by then (busy with work given before). then(),
-    optional: called once that half is handed over (before this one tests), to queue more."""
-    if pool is None or len(points) < _SHARED_MIN:
-        if then is not None:
-            then()
-        return test(points)
-    half = len(points) // 2
-    return np.concatenate(share(pool, lambda: test(points[:half]), lambda: test(points[half:]), then))
 
 
 def _spacing(uv: np.ndarray, cell_m: float, lo: np.ndarray, hi: np.ndarray) -> float:
