@@ -150,8 +150,9 @@ def plan_dense_points(occ: Occluder, pose: Pose, sun: Sun, points: np.ndarray, r
     shade those points while this one goes on. pool: a second thread that makes half the
     raster's distance transform, the band and its candidate edges (while this one tests the
     points near the outline) and packs the silhouette's edges (after what it was given before)
-    while this one goes on: the same plan. blocks: ``PointBlocks.of(points, normals)``, kept while the points stay (a camera's): the runs of points out of the shadow's
-    reach are then skipped (the same plan).
+    while this one goes on: the same plan. blocks: ``PointBlocks.of(points, normals)``, kept
+    while the points stay (a camera's): the runs of points out of the shadow's reach are then
+    skipped (the same plan).
     """
     if posed is None:
         posed = PosedOccluder.make(occ, pose, sun)
