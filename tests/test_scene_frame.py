@@ -668,6 +668,10 @@ def test_dense_plan_shares_its_work_with_a_second_thread(monkeypatch, busy):
     band_plan = dense_plan._band_plan
     monkeypatch.setattr(dense_plan, "_band_plan", lambda *a: banded.append(threading.current_thread().name)
                         or band_plan(*a))
+    tested = []
+    hard_shadow_at = ss.internal.PosedOccluder.hard_shadow_at
+    monkeypatch.setattr(ss.internal.PosedOccluder, "hard_shadow_at", lambda self, uv, **kw: tested.append(
+        (len(uv), threading.current_thread().name)) or hard_shadow_at(self, uv, **kw))
     free = threading.Event()
     with ThreadPoolExecutor(1, thread_name_prefix="second") as pool:
         if busy:
@@ -680,4 +684,6 @@ def test_dense_plan_shares_its_work_with_a_second_thread(monkeypatch, busy):
     # Made once; by this thread when the second is busy (when it is free, by whichever gets to it
     # first: this one makes it when the second has not started it by then).
     assert len(banded) == 1 and not (busy and banded[0].startswith("second")), banded
+    # The points near the outline, all tested at once on this thread.
+    assert len(tested) == 1 and tested[0][0] >= 4 and not tested[0][1].startswith("second"), tested
     _plans_equal(ref, dense.point_plan())
