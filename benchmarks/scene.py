@@ -18,7 +18,8 @@ the full dragon is timed warm beside it (the median of its third to sixth calls)
 
 The levels' two-thread frames (``frame_ms``, the figure the levels are compared by) are timed
 interleaved: each level keeps its own renderer, and the levels take turns, ``BLOCK`` frames
-each, in one order and then the reverse, round after round, so that all of them see the same
+each, in one order and then the reverse, round after round (``INTERLEAVED_FRAMES`` frames of
+each level, the sun turning as above), so that all of them see the same
 state of a shared machine (timed one level after the other, the 2-core test machine's speed
 drifted by up to a fifth between levels; in the same order every round, the first level and the
 last, a round apart, still read it at different times). The other settings are timed level by
@@ -48,6 +49,10 @@ SCENE_LEVELS = (20000, 10000, 5000, 2500, 1000, 300)
 #: Frames a level draws in its turn of the interleaved timing.
 BLOCK = 8
 
+#: Frames each level draws in the interleaved timing (``frame_ms``): 16 rounds of ``BLOCK``,
+#: about 12 s for the seven levels on the 2-core test machine.
+INTERLEAVED_FRAMES = 128
+
 
 def bench_scene(quick: bool = False, progress=None) -> dict:
     from softshadow import FrameRenderer, MaskingScene, Pose, SoftShadowModel, lod_series, one_blas_thread, \
@@ -55,7 +60,10 @@ def bench_scene(quick: bool = False, progress=None) -> dict:
 
     from .environment import load_average
     from .meshes import mit_dragon
-    frames, warmup = (8, 3) if quick else (48, 5)  # frames: an even number of BLOCKs (rounds both ways)
+    frames, warmup = (8, 3) if quick else (48, 5)
+    # The interleaved frames: an even number of BLOCKs (rounds both ways), over a longer span than
+    # the machine's slow spells (a second or more at a time), so that they fall in few rounds.
+    interleaved = frames if quick else INTERLEAVED_FRAMES
     scene = MaskingScene()
     mesh = mit_dragon(full=True)
     levels = lod_series(mesh, (len(mesh.faces), *SCENE_LEVELS))
@@ -88,7 +96,7 @@ def bench_scene(quick: bool = False, progress=None) -> dict:
             for renderer, model in zip(renderers, models):
                 for i in range(warmup):
                     draw(renderer, model, i)
-            rounds = -(-frames // BLOCK)
+            rounds = -(-interleaved // BLOCK)
             for r in range(rounds):
                 for j in (range(len(levels)) if r % 2 == 0 else reversed(range(len(levels)))):
                     for b in range(BLOCK):
@@ -130,7 +138,7 @@ def bench_scene(quick: bool = False, progress=None) -> dict:
     coarse = min(rows, key=lambda r: r["level"])
     # The second call still settles (tens of ms slower than the later ones): the last ones count.
     return {"scene": rows, "render_scene_ms": round(float(np.median(times[1 if quick else 2:])), 1),
-            "settings": {"frames": frames, "warmup": warmup, "sun": scene.sun_description(),
+            "settings": {"frames": frames, "interleaved_frames": interleaved, "block": BLOCK, "warmup": warmup, "sun": scene.sun_description(),
                          "range_k": float(lights.range_k), "slide": "sine, 15 cycles, amplitude 1",
                          "shadow_px": int(proj.shadow_px)},
             "summary": {"full_frame_ms": full["frame_ms"], "coarsest_level": coarse["level"],
