@@ -26,9 +26,9 @@ last, a round apart, still read it at different times). The other settings are t
 level.
 
 Rows (key ``scene``): faces (the full mesh's), level (the face count drawn), width, height,
-frame_ms (median wall time per frame, two threads), frame_min_ms, frame_max_ms (the worst frame
-after warm-up), frame_cpu_ms (median CPU time of the process per frame, all threads), the same
-with one thread (``..._one_thread``), with the projector moving (``..._projector_moves``, two
+frame_ms (median wall time per frame, two threads), frame_ms_rounds (its median in each round of
+the interleaved timing), frame_min_ms, frame_max_ms (the worst frame after warm-up), frame_cpu_ms
+(median CPU time of the process per frame, all threads), the same with one thread (``..._one_thread``), with the projector moving (``..._projector_moves``, two
 threads) and with the camera moving (``..._camera_moves``, two threads), steps_ms and
 steps_ms_camera_moves (the steps' median wall times, ``softshadow.internal.FRAME_STEPS``), and
 the load average before and after the level.
@@ -109,6 +109,9 @@ def bench_scene(quick: bool = False, progress=None) -> dict:
         for row, samples in zip(rows, timed):
             row["load_before"], row["load_after_interleaved"] = load_before, load_after
             _summarise(row, "frame_ms", samples)
+            # Each round's median: a slow spell of the machine shows as rounds slower than the rest.
+            row["frame_ms_rounds"] = [round(float(np.median([w for w, _, _ in samples[a:a + BLOCK]])), 2)
+                                      for a in range(0, len(samples), BLOCK)]
             row["steps_ms"] = _median_steps(samples)
         for row, level, model in zip(rows, levels, models):
             for threads, moving in ((1, None), (2, "projector"), (2, "camera")):
@@ -145,6 +148,8 @@ def bench_scene(quick: bool = False, progress=None) -> dict:
                         "worst_frame_ms": max(r[k] for r in rows for k in r if k.startswith("frame_max_ms")),
                         "coarsest_frame_ms": coarse["frame_ms"],
                         "coarsest_over_full": round(coarse["frame_ms"] / full["frame_ms"], 3),
+                        "coarsest_over_full_rounds": [round(c / f, 3) for c, f in zip(coarse["frame_ms_rounds"],
+                                                                                      full["frame_ms_rounds"])],
                         "coarsest_over_full_cpu": round(coarse["frame_cpu_ms"] / full["frame_cpu_ms"], 3),
                         "full_frame_ms_camera_moves": full["frame_ms_camera_moves"],
                         "coarsest_frame_ms_camera_moves": coarse["frame_ms_camera_moves"],

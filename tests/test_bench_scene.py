@@ -27,5 +27,11 @@ def test_scene_bench_writes_a_row_per_level(tmp_path, monkeypatch, capsys):
     summary = result["summary"]
     assert summary["full_frame_ms"] == rows[0]["frame_ms"] and summary["coarsest_level"] == 300
     assert summary["coarsest_over_full"] == round(rows[1]["frame_ms"] / rows[0]["frame_ms"], 3)
+    interleaved = result["settings"]["interleaved_frames"]
+    for row in rows:  # a median per round of the interleaved timing
+        assert len(row["frame_ms_rounds"]) == interleaved // result["settings"]["block"]
+        assert min(row["frame_ms_rounds"]) <= row["frame_ms"] <= max(row["frame_ms_rounds"])
+    assert summary["coarsest_over_full_rounds"] == [round(c / f, 3) for c, f in
+                                                    zip(rows[1]["frame_ms_rounds"], rows[0]["frame_ms_rounds"])]
     assert result["render_scene_ms"] > 0
     assert "scene" in capsys.readouterr().out  # the tables on stdout
