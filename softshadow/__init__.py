@@ -25,6 +25,12 @@ if not _os.environ.get("NUMBA_CACHE_DIR"):
     if "numba.core.config" in _sys.modules:  # numba read its settings already
         _sys.modules["numba.core.config"].CACHE_DIR = _os.environ["NUMBA_CACHE_DIR"]
 
+# numba's OpenMP threads sleep when idle instead of spinning (``parallel_loops``): set before any
+# parallel loop of the process starts them, which may be the user's own.
+from .parallel_loops import sleep_idle_threads as _sleep_idle_threads  # noqa: E402
+
+_sleep_idle_threads()
+
 # The public names are listed in ``__init__.pyi`` (which type checkers and the API reference read too).
 # Each module is imported when one of its names is first used (PEP 562, ``lazy_loader``): a process
 # that needs only the NumPy/OpenCV steps (a photo without geometry, ``--help``) never loads JAX or

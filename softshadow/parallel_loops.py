@@ -5,21 +5,39 @@ spin for a while after each loop before they sleep. On a small, shared machine t
 takes the cores from the renderer's other thread and from other processes: measured on the
 2-core test machine at load ~4, a scene frame took twice the CPU time and twice the wall time.
 ``OMP_WAIT_POLICY=PASSIVE`` (unless already set) makes them sleep at once. OpenMP reads it when
-it is loaded, which numba does at the first parallel loop, so every factory of a parallel loop
-gets numba from here. A loop's helpers are ``loop_helper``s, so that numba's cache holds the loop
-from one process to the next (see there).
+numba starts its threads, at the first parallel loop of the process, whoever runs it: so
+``import softshadow`` sets it (``sleep_idle_threads``), and warns when numba's OpenMP threads
+started before without it. Every factory of a parallel loop gets numba from ``parallel_numba``.
+A loop's helpers are ``loop_helper``s, so that numba's cache holds the loop from one process to
+the next (see there).
 """
 
 from __future__ import annotations
 
 import os
+import sys
+import warnings
 
-__all__ = ["loop_helper", "parallel_numba"]
+__all__ = ["loop_helper", "parallel_numba", "sleep_idle_threads"]
+
+
+def sleep_idle_threads() -> None:
+    """Sets ``OMP_WAIT_POLICY=PASSIVE`` unless it is set; warns (``RuntimeWarning``) when numba's
+    OpenMP threads already run without it: they spin after each loop, and OpenMP does not read the
+    setting again (a scene frame then took 1.5 times as long on the 2-core test machine)."""
+    if "OMP_WAIT_POLICY" in os.environ:
+        return
+    parallel = sys.modules.get("numba.np.ufunc.parallel")  # loaded, not imported here: numba is slow to import
+    if getattr(parallel, "_is_initialized", False) and sys.modules["numba"].threading_layer() == "omp":
+        warnings.warn("numba's OpenMP threads started before softshadow was imported, without OMP_WAIT_POLICY: "
+                      "they spin after each parallel loop and slow softshadow's loops (import softshadow first, or "
+                      "set OMP_WAIT_POLICY=PASSIVE in the environment)", RuntimeWarning, stacklevel=2)
+    os.environ["OMP_WAIT_POLICY"] = "PASSIVE"
 
 
 def parallel_numba():
     """The numba module, with OpenMP's idle threads set to sleep rather than spin (see above)."""
-    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+    sleep_idle_threads()
     import numba
     return numba
 
