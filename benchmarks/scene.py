@@ -19,17 +19,17 @@ the full dragon is timed warm beside it (the median of its third to sixth calls)
 The levels' two-thread frames (``frame_ms``, the figure the levels are compared by) are timed
 interleaved: each level keeps its own renderer, and the levels take turns, ``BLOCK`` frames
 each, in one order and then the reverse, round after round (``INTERLEAVED_FRAMES`` frames of
-each level, the sun turning as above), so that all of them see the same
-state of a shared machine (timed one level after the other, the 2-core test machine's speed
-drifted by up to a fifth between levels; in the same order every round, the first level and the
-last, a round apart, still read it at different times). The other settings are timed level by
-level.
+each level, the sun turning as above), so that all of them see the same state of a shared
+machine (timed one level after the other, the 2-core test machine's speed drifted by up to a
+fifth between levels; in the same order every round, the first level and the last, a round
+apart, still read it at different times). The other settings are timed level by level.
 
 Rows (key ``scene``): faces (the full mesh's), level (the face count drawn), width, height,
 frame_ms (median wall time per frame, two threads), frame_ms_rounds (its median in each round of
 the interleaved timing), frame_min_ms, frame_max_ms (the worst frame after warm-up), frame_cpu_ms
-(median CPU time of the process per frame, all threads), the same with one thread (``..._one_thread``), with the projector moving (``..._projector_moves``, two
-threads) and with the camera moving (``..._camera_moves``, two threads), steps_ms and
+(median CPU time of the process per frame, all threads), the same with one thread
+(``..._one_thread``), with the projector moving (``..._projector_moves``, two threads) and with
+the camera moving (``..._camera_moves``, two threads), steps_ms and
 steps_ms_camera_moves (the steps' median wall times, ``softshadow.internal.FRAME_STEPS``), and
 the load average before and after the level.
 """
@@ -141,8 +141,8 @@ def bench_scene(quick: bool = False, progress=None) -> dict:
     coarse = min(rows, key=lambda r: r["level"])
     # The second call still settles (tens of ms slower than the later ones): the last ones count.
     return {"scene": rows, "render_scene_ms": round(float(np.median(times[1 if quick else 2:])), 1),
-            "settings": {"frames": frames, "interleaved_frames": interleaved, "block": BLOCK, "warmup": warmup, "sun": scene.sun_description(),
-                         "range_k": float(lights.range_k), "slide": "sine, 15 cycles, amplitude 1",
+            "settings": {"frames": frames, "interleaved_frames": interleaved, "block": BLOCK, "warmup": warmup,
+                         "sun": scene.sun_description(), "range_k": float(lights.range_k), "slide": "sine, 15 cycles, amplitude 1",
                          "shadow_px": int(proj.shadow_px)},
             "summary": {"full_frame_ms": full["frame_ms"], "coarsest_level": coarse["level"],
                         "worst_frame_ms": max(r[k] for r in rows for k in r if k.startswith("frame_max_ms")),
