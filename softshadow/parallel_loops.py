@@ -36,8 +36,8 @@ def sleep_idle_threads() -> None:
 
 
 def parallel_numba():
-    """The numba module, with OpenMP's idle threads set to sleep rather than spin (see above)."""
-    sleep_idle_threads()
+    """The numba module, for the parallel loops (their idle threads set to sleep by ``import
+    softshadow``, which runs before any of this package's modules: see above)."""
     import numba
     return numba
 
