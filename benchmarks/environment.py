@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import datetime
+import functools
 import os
 import platform
+import time
 from importlib import metadata
 
-__all__ = ["environment", "load_average"]
+import numpy as np
+
+__all__ = ["environment", "load_average", "two_thread_slowdown"]
 
 _PACKAGES = ("softshadow", "jax", "jaxlib", "numpy", "scipy", "opencv-contrib-python-headless", "trimesh",
              "embreex", "fast-simplification", "equinox", "optimistix", "matplotlib")
@@ -37,6 +41,54 @@ def load_average() -> list[float] | None:
         return [round(x, 2) for x in os.getloadavg()]
     except (OSError, AttributeError):
         return None
+
+
+def two_thread_slowdown(repeats: int = 3) -> float:
+    """How much of a second core the machine gives now: the time of the same small arithmetic
+    (L1-resident, about 2 ms) done by two threads at once, each all of it, over its time on one
+    thread (the median of ``repeats`` pairs). About 1 when two cores are free; towards 2 when
+    the two threads share one core's worth (another process busy, a shared host's slow spell).
+    """
+    from softshadow.parallel_loops import parallel_numba
+
+    numba = parallel_numba()
+    kernel = _probe_kernel()
+    x = np.linspace(0.0, 1.0, 1024)
+    before = numba.get_num_threads()
+    ratios = []
+    try:
+        for _ in range(repeats):
+            seconds = []
+            for threads in (1, 2):
+                numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+                t = time.perf_counter()
+                kernel(x, 8000, threads)
+                seconds.append(time.perf_counter() - t)
+            ratios.append(seconds[1] / seconds[0])
+    finally:
+        numba.set_num_threads(before)
+    return round(float(np.median(ratios)), 2)
+
+
+@functools.cache
+def _probe_kernel():
+    from softshadow.parallel_loops import parallel_numba
+
+    numba = parallel_numba()
+
+    @numba.njit(cache=True, nogil=True, parallel=True)
+    def kernel(x, repeats, threads):
+        out = np.zeros(threads)
+        for t in numba.prange(threads):
+            acc = np.zeros(x.shape[0])
+            for _ in range(repeats):
+                for i in range(x.shape[0]):
+                    acc[i] = acc[i] * 0.999 + x[i]
+            out[t] = acc.sum()
+        return out
+
+    kernel(np.zeros(8), 1, 1)  # compiled (or loaded) before any timing
+    return kernel
 
 
 def environment() -> dict:

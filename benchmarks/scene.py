@@ -31,7 +31,11 @@ the interleaved timing), frame_min_ms, frame_max_ms (the worst frame after warm-
 (``..._one_thread``), with the projector moving (``..._projector_moves``, two threads) and with
 the camera moving (``..._camera_moves``, two threads), steps_ms and
 steps_ms_camera_moves (the steps' median wall times, ``softshadow.internal.FRAME_STEPS``), and
-the load average before and after the level.
+the load average before and after the level. The summary gives the 300-face level's frame over the
+full dragon's (``coarsest_over_full``: medians; ``..._rounds``: round by round; ``..._cpu``: CPU
+times) and what the machine gave of its second core after each round of the interleaved timing
+(``two_thread_slowdown_rounds``, ``benchmarks.environment.two_thread_slowdown``: about 1 with two
+cores free, towards 2 with one core's worth) and their median (``two_thread_slowdown``).
 """
 
 from __future__ import annotations
@@ -58,7 +62,7 @@ def bench_scene(quick: bool = False, progress=None) -> dict:
     from softshadow import FrameRenderer, MaskingScene, Pose, SoftShadowModel, lod_series, one_blas_thread, \
         render_scene
 
-    from .environment import load_average
+    from .environment import load_average, two_thread_slowdown
     from .meshes import mit_dragon
     frames, warmup = (8, 3) if quick else (48, 5)
     # The interleaved frames: an even number of BLOCKs (rounds both ways), over a longer span than
@@ -91,16 +95,19 @@ def bench_scene(quick: bool = False, progress=None) -> dict:
             progress(f"bench scene: {len(levels)} levels interleaved, 2 threads")
         renderers = [FrameRenderer(threads=2) for _ in levels]
         timed = [[] for _ in levels]
+        slowdown = []  # the machine's second core, after each round (``two_thread_slowdown``)
         load_before = load_average()
         try:
             for renderer, model in zip(renderers, models):
                 for i in range(warmup):
                     draw(renderer, model, i)
+            two_thread_slowdown()  # its loop compiled or loaded before the rounds
             rounds = -(-interleaved // BLOCK)
             for r in range(rounds):
                 for j in (range(len(levels)) if r % 2 == 0 else reversed(range(len(levels)))):
                     for b in range(BLOCK):
                         timed[j].append(draw(renderers[j], models[j], warmup + r * BLOCK + b))
+                slowdown.append(two_thread_slowdown())
         finally:
             for renderer in renderers:
                 renderer.close()
@@ -150,6 +157,8 @@ def bench_scene(quick: bool = False, progress=None) -> dict:
                         "coarsest_over_full": round(coarse["frame_ms"] / full["frame_ms"], 3),
                         "coarsest_over_full_rounds": [round(c / f, 3) for c, f in zip(coarse["frame_ms_rounds"],
                                                                                       full["frame_ms_rounds"])],
+                        "two_thread_slowdown": round(float(np.median(slowdown)), 2),
+                        "two_thread_slowdown_rounds": slowdown,
                         "coarsest_over_full_cpu": round(coarse["frame_cpu_ms"] / full["frame_cpu_ms"], 3),
                         "full_frame_ms_camera_moves": full["frame_ms_camera_moves"],
                         "coarsest_frame_ms_camera_moves": coarse["frame_ms_camera_moves"],

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
+
 from softshadow_cli.main import main
 
 
@@ -33,5 +35,9 @@ def test_scene_bench_writes_a_row_per_level(tmp_path, monkeypatch, capsys):
         assert min(row["frame_ms_rounds"]) <= row["frame_ms"] <= max(row["frame_ms_rounds"])
     assert summary["coarsest_over_full_rounds"] == [round(c / f, 3) for c, f in
                                                     zip(rows[1]["frame_ms_rounds"], rows[0]["frame_ms_rounds"])]
+    # What the machine gave of a second core, after each round: a time ratio, about 1 to 2.
+    assert len(summary["two_thread_slowdown_rounds"]) == interleaved // result["settings"]["block"]
+    assert all(0.5 < x < 10 for x in summary["two_thread_slowdown_rounds"])
+    assert summary["two_thread_slowdown"] == round(float(np.median(summary["two_thread_slowdown_rounds"])), 2)
     assert result["render_scene_ms"] > 0
     assert "scene" in capsys.readouterr().out  # the tables on stdout
