@@ -121,6 +121,8 @@ def _run_bench(args, progress) -> int:
         from .scene import bench_scene
         result = {"environment": environment(), **result, **bench_scene(quick=args.quick, progress=progress)}
         result["environment"]["load_average_at_end"] = load_average()
+        for warning in result["summary"]["warnings"]:
+            print(f"bench scene: {warning}", file=sys.stderr)
         _emit(result, args.json_path)
         return 0
     if args.what in ("lod", "lod-grid"):

@@ -39,5 +39,18 @@ def test_scene_bench_writes_a_row_per_level(tmp_path, monkeypatch, capsys):
     assert len(summary["two_thread_slowdown_rounds"]) == interleaved // result["settings"]["block"]
     assert all(0.5 < x < 10 for x in summary["two_thread_slowdown_rounds"])
     assert summary["two_thread_slowdown"] == round(float(np.median(summary["two_thread_slowdown_rounds"])), 2)
+    assert summary["warnings"] == scene.machine_warnings(summary["two_thread_slowdown_rounds"])
     assert result["render_scene_ms"] > 0
     assert "scene" in capsys.readouterr().out  # the tables on stdout
+
+
+def test_scene_bench_says_when_the_machine_gave_one_core():
+    """The bench's warnings from the core probe: none with two cores free, one naming the rounds
+    (or the whole run) with about one core's worth."""
+    from benchmarks.scene import machine_warnings
+
+    assert machine_warnings([1.04, 1.1, 1.3, 1.06]) == []
+    [some] = machine_warnings([1.04, 2.0, 1.1, 1.06])
+    assert "1 of 4 rounds" in some
+    [whole] = machine_warnings([2.0, 1.98, 1.1, 2.02])
+    assert "about one core's worth (two_thread_slowdown 1.99" in whole
