@@ -45,9 +45,10 @@ def load_average() -> list[float] | None:
 
 def two_thread_slowdown(repeats: int = 3) -> float:
     """How much of a second core the machine gives now: the time of the same small arithmetic
-    (L1-resident, about 2 ms) done by two threads at once, each all of it, over its time on one
-    thread (the median of ``repeats`` pairs). About 1 when two cores are free; towards 2 when
-    the two threads share one core's worth (another process busy, a shared host's slow spell).
+    (L1-resident, about a millisecond) done by two threads at once, each all of it, over its time
+    on one thread (the median of ``repeats`` pairs). About 1 when two cores are free; towards 2
+    when the two threads share one core's worth (another process busy, or one core only). A
+    slowdown of memory that both threads' work would feel alike does not show here.
     """
     from softshadow.parallel_loops import parallel_numba
 
