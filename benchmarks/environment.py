@@ -50,9 +50,8 @@ def two_thread_slowdown(repeats: int = 3) -> float:
     when the two threads share one core's worth (another process busy, or one core only). A
     slowdown of memory that both threads' work would feel alike does not show here.
     """
-    from softshadow.parallel_loops import parallel_numba
+    import numba
 
-    numba = parallel_numba()
     kernel = _probe_kernel()
     x = np.linspace(0.0, 1.0, 1024)
     before = numba.get_num_threads()
@@ -73,9 +72,9 @@ def two_thread_slowdown(repeats: int = 3) -> float:
 
 @functools.cache
 def _probe_kernel():
-    from softshadow.parallel_loops import parallel_numba
+    import numba
 
-    numba = parallel_numba()
+    import softshadow  # noqa: F401  (before numba's first parallel loop: its idle threads then sleep)
 
     @numba.njit(cache=True, nogil=True, parallel=True)
     def kernel(x, repeats, threads):
