@@ -46,27 +46,21 @@ def load_average() -> list[float] | None:
 def two_thread_slowdown(repeats: int = 3) -> float:
     """How much of a second core the machine gives now: the time of the same small arithmetic
     (L1-resident, about a millisecond) done by two threads at once, each all of it, over its time
-    on one thread (the median of ``repeats`` pairs). About 1 when two cores are free; towards 2
-    when the two threads share one core's worth (another process busy, or one core only). A
-    slowdown of memory that both threads' work would feel alike does not show here.
+    on one thread (the median of ``repeats`` pairs; both runs wake numba's threads alike). About 1
+    when two cores are free; towards 2 when the two threads share one core's worth (another
+    process busy, or one core only). A slowdown of memory that both threads' work would feel
+    alike does not show here.
     """
-    import numba
-
     kernel = _probe_kernel()
     x = np.linspace(0.0, 1.0, 1024)
-    before = numba.get_num_threads()
     ratios = []
-    try:
-        for _ in range(repeats):
-            seconds = []
-            for threads in (1, 2):
-                numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
-                t = time.perf_counter()
-                kernel(x, 8000, threads)
-                seconds.append(time.perf_counter() - t)
-            ratios.append(seconds[1] / seconds[0])
-    finally:
-        numba.set_num_threads(before)
+    for _ in range(repeats):
+        seconds = []
+        for threads in (1, 2):
+            t = time.perf_counter()
+            kernel(x, 8000, threads)
+            seconds.append(time.perf_counter() - t)
+        ratios.append(seconds[1] / seconds[0])
     return round(float(np.median(ratios)), 2)
 
 
