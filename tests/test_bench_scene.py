@@ -39,7 +39,8 @@ def test_scene_bench_writes_a_row_per_level(tmp_path, monkeypatch, capsys):
     assert len(summary["two_thread_slowdown_rounds"]) == interleaved // result["settings"]["block"]
     assert all(0.5 < x < 10 for x in summary["two_thread_slowdown_rounds"])
     assert summary["two_thread_slowdown"] == round(float(np.median(summary["two_thread_slowdown_rounds"])), 2)
-    assert summary["warnings"] == scene.machine_warnings(summary["two_thread_slowdown_rounds"])
+    assert summary["warnings"] == scene.machine_warnings(summary["two_thread_slowdown_rounds"]) \
+        + scene.spell_warnings(rows[1]["frame_ms_rounds"])
     assert result["render_scene_ms"] > 0
     assert "scene" in capsys.readouterr().out  # the tables on stdout
 
@@ -54,3 +55,13 @@ def test_scene_bench_says_when_the_machine_gave_one_core():
     assert "1 of 4 rounds" in some
     [whole] = machine_warnings([2.0, 1.98, 1.1, 2.02])
     assert "about one core's worth (two_thread_slowdown 1.99" in whole
+
+
+def test_scene_bench_says_when_a_slow_spell_covered_many_rounds():
+    """A slow spell (rounds of the coarsest level over SLOW_ROUND times its median) is named when it
+    covers a quarter of the rounds or more, not for a round or two."""
+    from benchmarks.scene import spell_warnings
+
+    assert spell_warnings([9.0, 9.2, 9.1, 13.5, 9.0, 9.3, 9.1, 9.2]) == []
+    [spell] = spell_warnings([9.0, 13.2, 14.0, 9.1, 9.0, 9.3, 13.8, 9.2])
+    assert spell.startswith("3 of 8 rounds were slow")
