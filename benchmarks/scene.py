@@ -113,6 +113,8 @@ def bench_scene(quick: bool = False, progress=None) -> dict:
                     for b in range(BLOCK):
                         timed[j].append(draw(renderers[j], models[j], warmup + r * BLOCK + b))
                 slowdown.append(two_thread_slowdown())
+                if progress:  # between rounds, outside the timed frames
+                    progress(f"bench scene: {len(levels)} levels interleaved, 2 threads, round {r + 1} of {rounds}")
         finally:
             for renderer in renderers:
                 renderer.close()
