@@ -58,7 +58,7 @@ def test_scene_bench_says_when_the_machine_gave_one_core():
 
 
 def test_scene_bench_says_when_a_slow_spell_covered_many_rounds():
-    """A slow spell (rounds of the coarsest level over SLOW_ROUND times its median) is named when it
+    """A slow spell (rounds of the coarsest level over SLOW_ROUND times its lower quartile) is named when it
     covers a quarter of the rounds or more, not for a round or two."""
     from benchmarks.scene import spell_warnings
 
