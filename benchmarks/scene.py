@@ -106,7 +106,6 @@ def bench_scene(quick: bool = False, progress=None) -> dict:
             for renderer, model in zip(renderers, models):
                 for i in range(warmup):
                     draw(renderer, model, i)
-            two_thread_slowdown()  # its loop compiled or loaded before the rounds
             rounds = -(-interleaved // BLOCK)
             for r in range(rounds):
                 for j in (range(len(levels)) if r % 2 == 0 else reversed(range(len(levels)))):
